@@ -1,0 +1,42 @@
+"""Figures of a run (matplotlib, Agg backend, written atomically)."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+
+def _save(fig, path) -> None:
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
+    fig.savefig(tmp, dpi=130)
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+def first_results_figure(bands, discharge, band_table, t_open: float, path) -> None:
+    """Pressure per band vs time (left), static/max-dynamic profile (middle), discharged mass (right)."""
+    fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(15, 4.5))
+    cmap = plt.get_cmap("viridis")
+    nb = max(1, bands.band.nunique())
+    for b, grp in bands.groupby("band"):
+        ax1.plot(grp.time, grp.pressure, lw=0.9, color=cmap(b / max(1, nb - 1)),
+                 label=f"band {b} (z = {grp.z_mid.iloc[0] * 100:.1f} cm)")
+    ax1.axvline(t_open, color="k", ls="--", lw=0.8)
+    ax1.set(xlabel="time (s)", ylabel="normal wall pressure (Pa)", title="wall pressure per band")
+    ax1.legend(fontsize=7)
+    ax2.plot(band_table.static_pressure, band_table.z_mid * 100, "o-", label="static (settled)")
+    ax2.plot(band_table.max_dynamic_pressure, band_table.z_mid * 100, "s--", label="max during discharge")
+    ax2.set(xlabel="normal wall pressure (Pa)", ylabel="height of band centre (cm)", title="pressure profile")
+    ax2.legend(fontsize=8)
+    ax3.plot(discharge.time, discharge.outlet_mass * 1000, label="through the outlet")
+    ax3.plot(discharge.time, discharge.mass_in_silo * 1000, label="in the silo")
+    ax3.axvline(t_open, color="k", ls="--", lw=0.8)
+    ax3.set(xlabel="time (s)", ylabel="mass (g)", title="discharge")
+    ax3.legend(fontsize=8)
+    fig.tight_layout()
+    _save(fig, path)

@@ -1,0 +1,77 @@
+"""Normal wall pressure of cylinder bands from the net force on each azimuthal sector mesh.
+
+A sector of a cylinder (radius R, height h, angular width dtheta centred on theta_c)
+under a uniform normal pressure p feels a net horizontal force of magnitude
+2 p R h sin(dtheta/2) along theta_c: the vector area of any surface spanned by the
+sector's two vertical edges is h times the chord, so this holds for the faceted mesh
+too. Projecting the sector force on theta_c, instead of taking |F_xy|, also removes
+azimuthal friction. A full ring has zero net radial force, hence sectors (>= 3).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+
+def sector_projected_area(radius: float, height: float, theta0: float, theta1: float) -> float:
+    """|vector area| of a cylinder sector in the horizontal plane, 2 R h sin(dtheta/2), m2."""
+    return 2.0 * radius * height * math.sin(0.5 * (theta1 - theta0))
+
+
+def sector_pressure(fx, fy, radius: float, height: float, theta0: float, theta1: float):
+    """Mean normal pressure (Pa) on a sector from the net force (N) the grains exert on it."""
+    tc = 0.5 * (theta0 + theta1)
+    radial = np.asarray(fx) * math.cos(tc) + np.asarray(fy) * math.sin(tc)
+    return radial / sector_projected_area(radius, height, theta0, theta1)
+
+
+def wall_force_columns(walls: list[dict]) -> list[str]:
+    """Column names of output/wall_forces.txt: step, then fx fy fz of each wall in deck order."""
+    names = ["step"]
+    for w in walls:
+        if w["role"] != "outlet":
+            names += [f"{w['name']}_fx", f"{w['name']}_fy", f"{w['name']}_fz"]
+    return names
+
+
+def band_pressures(forces: pd.DataFrame, walls: list[dict], force_sign: float = 1.0) -> pd.DataFrame:
+    """Tidy table of band pressure vs time.
+
+    Parameters
+    ----------
+    forces : table with ``step`` and ``<wall>_fx/fy/fz`` columns (N, force on the wall).
+    walls : the wall manifest of derived.json.
+    force_sign : +1 if the engine reports the force the grains exert on the wall.
+
+    Returns
+    -------
+    DataFrame with columns step, band, sector, z_mid (m), pressure (Pa), shear_force (N,
+    downward load the sector carries by wall friction).
+    """
+    rows = []
+    for w in walls:
+        if w["role"] != "band":
+            continue
+        h = w["z1"] - w["z0"]
+        p = sector_pressure(force_sign * forces[f"{w['name']}_fx"], force_sign * forces[f"{w['name']}_fy"],
+                            w["radius"], h, w["theta0"], w["theta1"])
+        rows.append(pd.DataFrame({"step": forces["step"].to_numpy(), "band": w["band"], "sector": w["sector"],
+                                  "z_mid": 0.5 * (w["z0"] + w["z1"]), "pressure": np.asarray(p),
+                                  "shear_force": -force_sign * forces[f"{w['name']}_fz"].to_numpy()}))
+    sectors = pd.concat(rows, ignore_index=True)
+    return sectors
+
+
+def band_mean(sectors: pd.DataFrame) -> pd.DataFrame:
+    """Average the sectors of each band at each step (pressure mean, shear summed)."""
+    return (sectors.groupby(["step", "band"], as_index=False)
+            .agg(z_mid=("z_mid", "first"), pressure=("pressure", "mean"),
+                 shear_force=("shear_force", "sum")))
+
+
+def vertical_load(forces: pd.DataFrame, walls: list[dict], force_sign: float = 1.0) -> pd.Series:
+    """Total downward force (N) the grains exert on all walls, per sample."""
+    cols = [f"{w['name']}_fz" for w in walls if w["role"] != "outlet"]
+    return -force_sign * forces[cols].sum(axis=1)

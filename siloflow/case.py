@@ -1,0 +1,410 @@
+"""The case file: a pydantic model of everything a silo simulation needs.
+
+All quantities are SI (m, kg, s, Pa, N/m). Unknown keys are errors, numbers must
+be finite, and every string that can reach a deck or a file name is restricted
+to a safe alphabet. ``load_case`` turns a YAML file into a validated ``Case`` or
+raises ``CaseError`` listing every problem with its field path.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Literal, Optional, Union
+
+import yaml
+from pydantic import (BaseModel, ConfigDict, Field, StringConstraints, ValidationError,
+                      model_validator)
+
+from .errors import CaseError
+
+#: Names that reach decks and file names: letters, digits, ``_ . -``, not starting with ``.`` or ``-``.
+SAFE_NAME_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$"
+SafeName = Annotated[str, StringConstraints(pattern=SAFE_NAME_PATTERN)]
+
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Fraction = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
+
+
+class Strict(BaseModel):
+    """Base of every section: unknown keys are errors, NaN/inf refused."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True)
+
+
+# --------------------------------------------------------------------------- geometry
+class CylinderGeometry(Strict):
+    """Cylindrical silo with a flat bottom and a centred circular orifice (z = 0 at the bottom)."""
+
+    kind: Literal["cylinder"]
+    radius: Positive = Field(description="inner radius of the cylinder, m", le=100)
+    height: Positive = Field(description="height of the cylinder wall, m", le=1000)
+    orifice_radius: Positive = Field(description="radius of the centred orifice, m")
+    mesh_segments: int = Field(64, ge=16, le=1024, description="facets around the circumference")
+
+    @model_validator(mode="after")
+    def _orifice_fits(self):
+        if self.orifice_radius >= self.radius:
+            raise ValueError(f"orifice_radius ({self.orifice_radius} m) must be smaller than "
+                             f"radius ({self.radius} m)")
+        return self
+
+    @property
+    def outlet_radius(self) -> float:
+        return self.orifice_radius
+
+    @property
+    def hopper_height(self) -> float:
+        return 0.0
+
+
+class HopperGeometry(Strict):
+    """Cylinder on a conical hopper whose outlet (radius ``outlet_radius``) is at z = 0."""
+
+    kind: Literal["hopper"]
+    radius: Positive = Field(description="inner radius of the cylinder, m", le=100)
+    height: Positive = Field(description="height of the cylinder wall above the cone, m", le=1000)
+    half_angle_deg: float = Field(description="hopper half angle from the vertical, degrees",
+                                  gt=0, lt=90, allow_inf_nan=False)
+    outlet_radius: Positive = Field(description="radius of the hopper outlet, m")
+    mesh_segments: int = Field(64, ge=16, le=1024)
+
+    @model_validator(mode="after")
+    def _outlet_fits(self):
+        if self.outlet_radius >= self.radius:
+            raise ValueError(f"outlet_radius ({self.outlet_radius} m) must be smaller than "
+                             f"radius ({self.radius} m)")
+        return self
+
+    @property
+    def hopper_height(self) -> float:
+        """Height of the cone, m."""
+        return (self.radius - self.outlet_radius) / math.tan(math.radians(self.half_angle_deg))
+
+
+class PlanarGeometry(Strict):
+    """Quasi-2D slab silo (paper A): width x thickness section, 60 deg hopper (deck in a later issue)."""
+
+    kind: Literal["planar"]
+    width: Positive = Field(description="inner width, m", le=100)
+    height: Positive = Field(description="height of the vertical walls, m", le=1000)
+    thickness: Positive = Field(description="thickness in the thin direction, m", le=100)
+    half_angle_deg: float = Field(60.0, gt=0, lt=90, allow_inf_nan=False)
+    outlet_width: Positive = Field(description="outlet width, m")
+
+    @model_validator(mode="after")
+    def _outlet_fits(self):
+        if self.outlet_width >= self.width:
+            raise ValueError(f"outlet_width ({self.outlet_width} m) must be smaller than "
+                             f"width ({self.width} m)")
+        return self
+
+
+Geometry = Annotated[Union[CylinderGeometry, HopperGeometry, PlanarGeometry],
+                     Field(discriminator="kind")]
+
+
+# --------------------------------------------------------------------------- sensors
+class WallSensors(Strict):
+    """Horizontal bands up the cylinder wall, each split into ``sectors`` azimuthal meshes."""
+
+    bands: Optional[int] = Field(None, ge=1, le=100, description="number of equal bands")
+    heights: Optional[list[NonNegative]] = Field(
+        None, description="band boundaries in m above the cylinder's base, increasing", max_length=101)
+    sectors: int = Field(4, ge=3, le=32, description="azimuthal sectors per band (>= 3: a full "
+                         "ring's radial forces cancel)")
+
+    @model_validator(mode="after")
+    def _one_of(self):
+        if (self.bands is None) == (self.heights is None):
+            raise ValueError("give exactly one of 'bands' (a count) or 'heights' (boundaries)")
+        if self.heights is not None:
+            if len(self.heights) < 2:
+                raise ValueError("'heights' needs at least two boundaries")
+            if any(b <= a for a, b in zip(self.heights, self.heights[1:])):
+                raise ValueError("'heights' must be strictly increasing")
+        return self
+
+
+# --------------------------------------------------------------------------- materials
+class ParticleMaterial(Strict):
+    density: Positive = Field(description="solid density, kg/m3", le=1e5)
+    youngs_modulus: Optional[Positive] = Field(None, description="Pa (Hertz model)", ge=5e6, le=1e13)
+    poisson_ratio: float = Field(0.3, gt=-1, lt=0.5, allow_inf_nan=False)
+
+
+class WallMaterial(Strict):
+    youngs_modulus: Optional[Positive] = Field(None, description="Pa (Hertz model)", ge=5e6, le=1e13)
+    poisson_ratio: float = Field(0.3, gt=-1, lt=0.5, allow_inf_nan=False)
+
+
+class PairContact(Strict):
+    """Contact parameters of one material pair."""
+
+    friction: NonNegative = Field(description="Coulomb sliding friction coefficient", le=10)
+    restitution: float = Field(0.5, gt=0, le=1, allow_inf_nan=False,
+                               description="normal coefficient of restitution")
+    rolling_friction: NonNegative = Field(0.0, le=10, description="rolling friction coefficient (cdt)")
+    kn: Optional[Positive] = Field(None, description="normal spring stiffness, N/m (linear model)", le=1e12)
+    kt: Optional[Positive] = Field(None, description="tangential spring stiffness, N/m (linear model)", le=1e12)
+
+
+class Materials(Strict):
+    """Particle and wall materials and the contact law of each pair."""
+
+    model: Literal["hertz", "linear"] = Field(
+        "hertz", description="hertz: Hertz-Mindlin from Young's modulus; linear: PFC-style kn/kt springs")
+    particle: ParticleMaterial
+    wall: WallMaterial = WallMaterial()
+    particle_particle: PairContact
+    particle_wall: PairContact
+    tangential_damping_ratio: float = Field(
+        0.1, ge=0, le=1, allow_inf_nan=False, description="gamma_t / gamma_n (linear model)")
+
+    @model_validator(mode="after")
+    def _model_parameters(self):
+        problems = []
+        pairs = {"particle_particle": self.particle_particle, "particle_wall": self.particle_wall}
+        if self.model == "hertz":
+            if self.particle.youngs_modulus is None:
+                problems.append("particle.youngs_modulus is required by model 'hertz'")
+            if self.wall.youngs_modulus is None:
+                problems.append("wall.youngs_modulus is required by model 'hertz'")
+            for name, pair in pairs.items():
+                if pair.kn is not None or pair.kt is not None:
+                    problems.append(f"{name}: kn/kt belong to model 'linear', not 'hertz'")
+        else:
+            for name, pair in pairs.items():
+                if pair.kn is None or pair.kt is None:
+                    problems.append(f"{name}: kn and kt are required by model 'linear'")
+        if problems:
+            raise ValueError("; ".join(problems))
+        return self
+
+
+# --------------------------------------------------------------------------- particles
+class MonodisperseSpheres(Strict):
+    """Spheres of one radius (polydisperse and clumps come as further kinds)."""
+
+    kind: Literal["spheres"]
+    radius: Positive = Field(description="sphere radius, m", le=1.0)
+
+
+Particles = Annotated[Union[MonodisperseSpheres], Field(discriminator="kind")]
+
+
+# --------------------------------------------------------------------------- stages
+class Settle(Strict):
+    """Settling ends when kinetic / potential energy (above the outlet) drops below ``ke_pe_ratio``."""
+
+    ke_pe_ratio: float = Field(1e-5, gt=0, lt=1, allow_inf_nan=False)
+    check_interval: Positive = Field(0.02, description="time between checks, s", le=10)
+    max_time: Positive = Field(2.0, description="cap on settling time, s", le=1e4)
+    static_window: Positive = Field(0.02, description="time the settled bed is sampled for static "
+                                    "wall loads before the orifice opens, s", le=100)
+
+
+class Fill(Strict):
+    """How the silo is filled: a particle count, or a fill height converted with ``packing_fraction``."""
+
+    count: Optional[int] = Field(None, ge=1, le=50_000_000)
+    height: Optional[Positive] = Field(None, description="target bed height above the outlet, m")
+    packing_fraction: Fraction = Field(0.6, description="solid fraction used to convert height to count")
+    insertion_z_min: Optional[Positive] = Field(None, description="bottom of the insertion region, m "
+                                                "(default: upper quarter of the silo)")
+    insertion_z_max: Optional[Positive] = Field(None, description="top of the insertion region, m")
+    batch_volume_fraction: float = Field(0.15, gt=0, le=0.4, allow_inf_nan=False,
+                                         description="solid fraction of one insertion batch in the region")
+    settle: Settle = Settle()
+
+    @model_validator(mode="after")
+    def _one_of(self):
+        if (self.count is None) == (self.height is None):
+            raise ValueError("give exactly one of 'count' or 'height'")
+        return self
+
+
+class Opening(Strict):
+    """The orifice plate is moved down, away from the outlet (robust with wall-contact computes)."""
+
+    method: Literal["move_plate"] = "move_plate"
+    speed: Positive = Field(1.0, description="plate speed, m/s", le=100)
+
+
+class Discharge(Strict):
+    """After settling the orifice opens; the run lasts ``duration`` or until the silo is empty."""
+
+    duration: Optional[Positive] = Field(None, description="discharge time after opening, s", le=1e5)
+    until_empty: bool = False
+    empty_fraction: float = Field(0.01, gt=0, lt=1, allow_inf_nan=False,
+                                  description="'empty' when less than this fraction of the mass remains")
+    max_time: Positive = Field(60.0, description="cap on an until_empty discharge, s", le=1e5)
+    opening: Opening = Opening()
+
+    @model_validator(mode="after")
+    def _one_of(self):
+        if (self.duration is None) == (not self.until_empty):
+            raise ValueError("give either 'duration' or 'until_empty: true'")
+        return self
+
+
+class Outputs(Strict):
+    """What the run writes."""
+
+    sample_interval: Positive = Field(0.005, description="wall forces and flow sampled this often, s", le=100)
+    dump_interval: Optional[Positive] = Field(None, description="particle dumps this often, s (none if unset)")
+    vtk: bool = Field(False, description="also write VTK particle files for ParaView")
+    figures: bool = True
+
+
+class EngineSettings(Strict):
+    name: Literal["liggghts"] = "liggghts"
+    ranks: int = Field(1, ge=1, le=1024, description="MPI ranks")
+    timestep_fraction: Fraction = Field(0.15, description="time step as a fraction of the critical "
+                                        "(contact) time")
+
+
+class Case(Strict):
+    """A complete, validated silo case."""
+
+    name: SafeName
+    description: str = Field("", max_length=2000, description="free text, never written into a deck")
+    gravity: Positive = Field(9.81, le=1000, description="m/s2, acting along -z")
+    geometry: Geometry
+    sensors: WallSensors
+    materials: Materials
+    particles: Particles
+    fill: Fill
+    discharge: Discharge
+    outputs: Outputs = Outputs()
+    engine: EngineSettings = EngineSettings()
+    seed: int = Field(12345, ge=0, le=2**31 - 1)
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        g, p, f = self.geometry, self.particles, self.fill
+        problems = []
+        if g.kind != "planar":
+            d = 2 * p.radius
+            if p.radius >= g.outlet_radius:
+                problems.append(f"particles.radius ({p.radius} m) must be smaller than the outlet "
+                                f"radius ({g.outlet_radius} m): nothing could leave")
+            if 3 * d > g.radius:
+                problems.append(f"particles.radius ({p.radius} m) is too large for a silo of radius "
+                                f"{g.radius} m (need radius >= 3 particle diameters)")
+            top = g.hopper_height + g.height
+            if f.height is not None and f.height >= top:
+                problems.append(f"fill.height ({f.height} m) must be below the top of the silo ({top:.6g} m)")
+            zmin = f.insertion_z_min if f.insertion_z_min is not None else None
+            zmax = f.insertion_z_max if f.insertion_z_max is not None else None
+            if zmax is not None and zmax > top:
+                problems.append(f"fill.insertion_z_max ({zmax} m) is above the top of the silo ({top:.6g} m)")
+            if zmin is not None and zmin < g.hopper_height:
+                problems.append(f"fill.insertion_z_min ({zmin} m) must be above the hopper "
+                                f"({g.hopper_height:.6g} m)")
+            if zmin is not None and zmax is not None and zmax - zmin < 2 * d:
+                problems.append("fill.insertion_z_max must exceed insertion_z_min by 2 particle diameters")
+            if self.sensors.heights is not None and self.sensors.heights[-1] > g.height:
+                problems.append(f"sensors.heights: last boundary ({self.sensors.heights[-1]} m) is above "
+                                f"the cylinder wall ({g.height} m)")
+        if problems:
+            raise ValueError("; ".join(problems))
+        return self
+
+
+# --------------------------------------------------------------------------- loading
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """Safe YAML loader that refuses duplicate keys and aliases (no 'billion laughs')."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.events.AliasEvent):
+            _refuse_alias(self)
+        return super().compose_node(parent, index)
+
+
+def _construct_mapping(loader, node, deep=False):
+    seen = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r}", key_node.start_mark)
+        seen.add(key)
+    return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
+
+
+def _refuse_alias(loader, *args, **kwargs):
+    event = loader.peek_event()
+    raise yaml.composer.ComposerError(None, None, "YAML aliases (*name) are not allowed in case files",
+                                      event.start_mark)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+MAX_CASE_BYTES = 1_000_000
+
+
+def _field_path(loc) -> str:
+    parts = []
+    for item in loc:
+        if isinstance(item, int):
+            parts.append(f"[{item}]")
+        elif item in ("cylinder", "hopper", "planar", "spheres") and parts:
+            continue  # discriminator tag pydantic inserts into the path
+        else:
+            parts.append(("." if parts else "") + str(item))
+    return "".join(parts) or "(top level)"
+
+
+def validation_problems(error: ValidationError) -> list[tuple[str, str]]:
+    """Turn a pydantic ValidationError into ``(field path, plain sentence)`` pairs."""
+    problems = []
+    for err in error.errors():
+        msg = err["msg"]
+        if err["type"] == "extra_forbidden":
+            msg = "unknown key (not part of the case schema)"
+        elif err["type"] == "string_pattern_mismatch":
+            msg = ("only letters, digits and _ . - are allowed (max 64 characters, not starting "
+                   f"with . or -); got {str(err.get('input'))[:80]!r}")
+        elif err["type"] == "finite_number":
+            msg = "must be a finite number (NaN and infinity are refused)"
+        msg = msg.removeprefix("Value error, ")
+        problems.append((_field_path(err["loc"]), msg))
+    return problems
+
+
+def case_from_dict(data, source: str = "case") -> Case:
+    """Validate a mapping; raise ``CaseError`` listing every problem."""
+    if not isinstance(data, dict):
+        raise CaseError([("(top level)", "the case file must be a YAML mapping of sections")], source)
+    try:
+        return Case.model_validate(data)
+    except ValidationError as exc:
+        raise CaseError(validation_problems(exc), source) from None
+
+
+def load_case(path) -> Case:
+    """Read and validate a YAML case file, raising ``CaseError`` on any problem."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise CaseError([("(file)", f"cannot read {path}: {exc.strerror}")], str(path)) from None
+    if len(raw) > MAX_CASE_BYTES:
+        raise CaseError([("(file)", f"larger than {MAX_CASE_BYTES} bytes")], str(path))
+    try:
+        text = raw.decode("utf-8")
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
+    except UnicodeDecodeError:
+        raise CaseError([("(file)", "not UTF-8 text")], str(path)) from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise CaseError([("(yaml)", f"{where}{problem}")], str(path)) from None
+    return case_from_dict(data, str(path))
+
+
+def case_to_yaml(case: Case) -> str:
+    """The validated case as YAML (every default filled in)."""
+    return yaml.safe_dump(case.model_dump(mode="json"), sort_keys=False)

@@ -1,0 +1,138 @@
+"""Command line: ``siloflow validate | schema | render | run | post``.
+
+The only module that prints, exits or sets up logging; everything else raises
+siloflow's named errors, mapped here to a message and exit code 1.
+"""
+from __future__ import annotations
+
+import json
+import signal
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from .case import Case, load_case
+from .errors import CaseError, SiloflowError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="Silo discharge DEM simulations: case file -> LIGGGHTS deck -> run -> results.")
+err = Console(stderr=True)
+out = Console()
+
+
+def _fail(exc: SiloflowError) -> None:
+    kind = "invalid case" if isinstance(exc, CaseError) else type(exc).__name__
+    err.print(f"[bold red]siloflow: {kind}[/bold red]")
+    err.print(str(exc), markup=False, highlight=False)
+    raise typer.Exit(1)
+
+
+@app.command()
+def validate(case_file: Path = typer.Argument(..., help="YAML case file")) -> None:
+    """Check a case file; report every problem with its field path."""
+    try:
+        case = load_case(case_file)
+    except SiloflowError as exc:
+        _fail(exc)
+    out.print(f"{case_file}: valid case '{case.name}' ({case.geometry.kind}, {case.materials.model})")
+
+
+@app.command()
+def schema() -> None:
+    """Print the JSON schema of case files (for editors)."""
+    print(json.dumps(Case.model_json_schema(), indent=2))
+
+
+@app.command()
+def render(case_file: Path = typer.Argument(..., help="YAML case file"),
+           output: Path = typer.Option(..., "-o", "--output", help="deck folder to create"),
+           force: bool = typer.Option(False, "--force", help="replace an existing folder")) -> None:
+    """Write a self-contained LIGGGHTS deck folder (deck, meshes, case copy, derived parameters)."""
+    from .deck import render as render_deck
+    from .derived import derive
+    try:
+        case = load_case(case_file)
+        folder = render_deck(case, output, force=force)
+        d = derive(case)
+    except SiloflowError as exc:
+        _fail(exc)
+    out.print(f"deck written to {folder}: {d.particle_count} particles, dt = {d.timestep:.3g} s "
+              f"({case.engine.timestep_fraction} x {d.critical_time_source} {d.critical_time:.3g} s)")
+
+
+def _interrupt(signum, frame):
+    """SIGTERM stops a run like Ctrl-C: the engine is stopped and the folder marked."""
+    raise KeyboardInterrupt
+
+
+def _progress_bar():
+    return Progress(TextColumn("[bold]{task.fields[stage]:>9}"), BarColumn(), TaskProgressColumn(),
+                    TextColumn("step {task.fields[step]}"), TimeElapsedColumn(),
+                    TextColumn("ETA"), TimeRemainingColumn(), console=err, transient=False)
+
+
+@app.command()
+def run(case_file: Path = typer.Argument(..., help="YAML case file"),
+        output: Path = typer.Option(..., "-o", "--output", help="run folder to create"),
+        force: bool = typer.Option(False, "--force", help="replace an existing run folder"),
+        liggghts: Optional[str] = typer.Option(None, "--liggghts", envvar="SILOFLOW_LIGGGHTS",
+                                               help="LIGGGHTS binary (default: liggghts on PATH)"),
+        post_process: bool = typer.Option(True, "--post/--no-post", help="compute first results")) -> None:
+    """Render, run LIGGGHTS with a progress bar, check the run, and compute first results."""
+    from .engine import get_engine
+    try:
+        case = load_case(case_file)
+        engine = get_engine(case.engine.name, executable=liggghts)
+        engine.command(case.engine.ranks)  # binary and launcher present before anything is written
+        folder = engine.prepare(case, output, force=force)
+    except SiloflowError as exc:
+        _fail(exc)
+    signal.signal(signal.SIGTERM, _interrupt)
+    out.print(f"run folder: {folder}")
+    with _progress_bar() as bar:
+        task = bar.add_task("run", total=None, stage="start", step=0)
+
+        def progress(stage: str, step: int, total: int) -> None:
+            bar.update(task, completed=step, total=total, stage=stage, step=f"{step}/{total}")
+
+        try:
+            engine.execute(folder, progress=progress)
+            record = engine.collect(folder)
+            bar.update(task, completed=bar.tasks[0].total, stage="done")
+        except KeyboardInterrupt:
+            err.print(f"[yellow]interrupted: the engine was stopped; the run folder {folder} is kept "
+                      "and marked interrupted[/yellow]")
+            raise typer.Exit(130)
+        except SiloflowError as exc:
+            bar.stop()
+            _fail(exc)
+    out.print(f"engine finished in {record.wall_time:.1f} s")
+    if post_process:
+        _post(folder)
+
+
+def _post(folder: Path) -> None:
+    from postprocess.first_results import analyse
+    try:
+        summary = analyse(folder)
+    except SiloflowError as exc:
+        _fail(exc)
+    fb, fr = summary["force_balance"], summary["flow_rate"]
+    out.print(f"force balance of the settled bed: walls+bottom carry {fb['ratio']:.4f} x the weight "
+              f"({fb['wall_friction_share']:.2f} of it by wall friction)")
+    out.print(f"steady flow rate: {fr['rate'] * 1000:.2f} +/- {fr['stderr'] * 1000:.2f} g/s; "
+              f"discharged {summary['discharged_mass_kg'] * 1000:.1f} g")
+    out.print(f"results: {Path(folder) / 'results'} (summary.json, *.csv, first_results.png)")
+
+
+@app.command()
+def post(folder: Path = typer.Argument(..., help="a finished run folder")) -> None:
+    """(Re)compute the results of a finished run folder."""
+    _post(folder)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    app()

@@ -1,0 +1,182 @@
+"""Render a validated case into a self-contained LIGGGHTS deck folder.
+
+The folder holds ``in.liggghts`` (Jinja, StrictUndefined), ``meshes/*.stl``, the validated
+``case.yaml`` and ``derived.json`` (derived parameters and the wall manifest that
+post-processing reads). Every value is checked on its way into the deck: numbers
+must be finite, names must match the safe alphabet, and the rendered deck may only
+contain the commands siloflow itself writes.
+"""
+from __future__ import annotations
+
+import math
+import re
+from importlib import resources
+from pathlib import Path
+
+import jinja2
+
+from . import __version__
+from .atomic_files import new_folder, write_json, write_text
+from .case import SAFE_NAME_PATTERN, Case, case_to_yaml
+from .derived import Derived, derive
+from .errors import SiloflowError
+from .meshes import silo_meshes, write_stl
+
+DECK_NAME = "in.liggghts"
+DERIVED_NAME = "derived.json"
+CASE_NAME = "case.yaml"
+
+#: The only commands a siloflow deck may contain (no shell, include, python, ...).
+ALLOWED_COMMANDS = frozenset("""
+atom_style atom_modify boundary newton communicate units processors region create_box neighbor
+neigh_modify hard_particles fix pair_style pair_coeff timestep compute variable thermo_style thermo
+thermo_modify dump dump_modify print run unfix label next jump if
+""".split())
+FORBIDDEN_WORDS = re.compile(r"\b(shell|include|python|system|popen)\b", re.IGNORECASE)
+_SAFE = re.compile(SAFE_NAME_PATTERN.replace("{0,63}", "{0,127}").replace("_.-", "_./-"))
+
+
+class DeckError(SiloflowError):
+    """Raised when a value cannot be placed in a deck safely (non-finite number, unsafe name)."""
+
+
+def _num(value) -> str:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DeckError(f"deck value {value!r} is not a number")
+    if not math.isfinite(value):
+        raise DeckError(f"deck value {value!r} is not finite")
+    return f"{float(value):.10g}"
+
+
+def _integer(value) -> str:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise DeckError(f"deck value {value!r} is not an integer")
+    return str(value)
+
+
+def _safe_name(value) -> str:
+    if not isinstance(value, str) or not _SAFE.match(value):
+        raise DeckError(f"deck name {value!r} is not in the safe alphabet")
+    return value
+
+
+def template_environment(engine: str = "liggghts") -> jinja2.Environment:
+    """Jinja environment of an engine's templates: StrictUndefined, strict filters, no autoescape."""
+    root = resources.files("siloflow.templates") / engine
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(root)), undefined=jinja2.StrictUndefined,
+                             keep_trailing_newline=True, autoescape=False)
+    env.filters.update(num=_num, int=_integer, safe_name=_safe_name)
+    return env
+
+
+def check_deck(text: str) -> None:
+    """Refuse a rendered deck that holds a command siloflow does not write (defence in depth)."""
+    for lineno, line in enumerate(text.splitlines(), 1):
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        command = stripped.split()[0]
+        if command not in ALLOWED_COMMANDS or FORBIDDEN_WORDS.search(stripped):
+            raise DeckError(f"rendered deck line {lineno} is not allowed: {stripped[:120]!r}")
+
+
+def _properties(case: Case, d: Derived) -> list[dict]:
+    """``fix property/global`` entries (type 1 particles, type 2 walls; the 2-2 pair is unused)."""
+    pp, pw = d.pairs["particle_particle"], d.pairs["particle_wall"]
+
+    def pair(attr):
+        a, b = getattr(pp, attr), getattr(pw, attr)
+        return [a, b, b, b]
+
+    m = case.materials
+    props = []
+    if m.model == "hertz":
+        props += [("youngsModulus", "peratomtype", [m.particle.youngs_modulus, m.wall.youngs_modulus]),
+                  ("poissonsRatio", "peratomtype", [m.particle.poisson_ratio, m.wall.poisson_ratio]),
+                  ("coefficientRestitution", "peratomtypepair", pair("restitution"))]
+    else:
+        props += [("kn", "peratomtypepair", pair("kn")), ("kt", "peratomtypepair", pair("kt")),
+                  ("gamman", "peratomtypepair", pair("gamman")), ("gammat", "peratomtypepair", pair("gammat"))]
+    props.append(("coefficientFriction", "peratomtypepair", pair("friction")))
+    if uses_rolling_friction(case):
+        props.append(("coefficientRollingFriction", "peratomtypepair", pair("rolling_friction")))
+    return [{"id": f"material{i + 1}", "name": n, "style": s, "numbers": v}
+            for i, (n, s, v) in enumerate(props)]
+
+
+def uses_rolling_friction(case: Case) -> bool:
+    m = case.materials
+    return m.particle_particle.rolling_friction > 0 or m.particle_wall.rolling_friction > 0
+
+
+def deck_context(case: Case, d: Derived, walls) -> dict:
+    """Everything the LIGGGHTS template places, already computed and checked."""
+    m = case.materials
+    youngs = [e for e in (m.particle.youngs_modulus, m.wall.youngs_modulus) if e is not None]
+    return {
+        "name": case.name, "box": d.box, "skin": d.skin,
+        "hard_particles": any(e > 1e9 for e in youngs),
+        "properties": _properties(case, d),
+        "contact_model": "hertz" if m.model == "hertz" else "hooke/stiffness",
+        "rolling": uses_rolling_friction(case),
+        "timestep": d.timestep, "gravity": case.gravity,
+        "walls": [w for w in walls if w.role != "outlet"],
+        "seeds": d.seeds, "density": m.particle.density, "radius": d.particle_radius,
+        "insertion_region": d.insertion_region, "particle_count": d.particle_count,
+        "particle_rate": d.insertion_batch / (d.insert_every * d.timestep),
+        "insert_every": d.insert_every, "insertion_speed": d.insertion_speed,
+        "check_timestep": m.model == "hertz",
+        "thermo_every": d.thermo_every, "sample_every": d.sample_every,
+        "sample_repeat": d.sample_repeat, "sample_freq": d.sample_freq,
+        "dump_every": d.dump_every, "vtk": case.outputs.vtk,
+        "empty_mass": case.discharge.empty_fraction * d.total_mass,
+        "planned": d.planned_steps, "fill_steps": d.fill_steps,
+        "settle_max_chunks": d.settle_max_chunks, "settle_chunk_steps": d.settle_chunk_steps,
+        "settle_ratio": case.fill.settle.ke_pe_ratio, "static_steps": d.static_steps,
+        "opening_speed": case.discharge.opening.speed, "open_steps": d.open_steps,
+        "discharge_max_chunks": d.discharge_max_chunks, "discharge_chunk_steps": d.discharge_chunk_steps,
+    }
+
+
+def render_deck_text(case: Case, d: Derived, walls) -> str:
+    """The rendered, checked ``in.liggghts`` text."""
+    try:
+        text = template_environment("liggghts").get_template("in.liggghts.j2").render(
+            deck_context(case, d, walls))
+    except jinja2.UndefinedError as exc:
+        raise DeckError(f"template needs a value siloflow did not provide: {exc}") from exc
+    check_deck(text)
+    return text
+
+
+def write_deck(case: Case, folder: Path) -> Derived:
+    """Write the deck files of ``case`` into the existing, empty ``folder``."""
+    d = derive(case)
+    walls = silo_meshes(case, d.outlet_z, d.outlet_disc_radius)
+    text = render_deck_text(case, d, walls)
+    (folder / "meshes").mkdir()
+    for sub in ["output"] + (["output/dumps"] if d.dump_every else []) + (
+            ["output/vtk"] if d.dump_every and case.outputs.vtk else []):
+        (folder / sub).mkdir()
+    for w in walls:
+        write_stl(w, folder / "meshes" / f"{w.name}.stl")
+    write_text(folder / DECK_NAME, text)
+    write_text(folder / CASE_NAME, case_to_yaml(case))
+    info = d.to_json()
+    info["siloflow_version"] = __version__
+    info["engine"] = case.engine.name
+    info["engine_ranks"] = case.engine.ranks
+    info["gravity"] = case.gravity
+    info["walls"] = [w.info() for w in walls]
+    info["sensors"] = {"sectors": case.sensors.sectors,
+                       "bands": len([w for w in walls if w.role == "band"]) // case.sensors.sectors}
+    write_json(folder / DERIVED_NAME, info)
+    return d
+
+
+def render(case: Case, folder, force: bool = False) -> Path:
+    """Render ``case`` into a new deck folder (atomically: all or nothing). Returns the folder."""
+    folder = Path(folder)
+    with new_folder(folder, force=force) as tmp:
+        write_deck(case, tmp)
+    return folder.absolute()

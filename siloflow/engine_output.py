@@ -1,0 +1,36 @@
+"""Readers of the tables the engine writes (``fix ave/time`` files), as pandas DataFrames."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from .errors import ReadError
+
+#: column names of output/flow.txt, in the order the deck writes them
+FLOW_COLUMNS = ["step", "atoms", "mass_total", "mass_silo", "outlet_mass", "outlet_count",
+                "deleted_mass", "deleted_count", "ke", "pe"]
+
+
+def read_ave_time(path, names: list[str] | None = None) -> pd.DataFrame:
+    """Read a scalar ``fix ave/time`` file (``#`` header lines, then one row per sample).
+
+    Column names come from the file's second header line unless ``names`` is given.
+    A row cut short by a killed run is dropped. Raises ``ReadError`` if the file is
+    missing or its column count does not match ``names``.
+    """
+    path = Path(path)
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            header = [next(fh) for _ in range(2)]
+    except (OSError, StopIteration) as exc:
+        raise ReadError(f"cannot read engine table {path}: {exc}") from None
+    file_names = header[1].lstrip("#").split()
+    if names is not None and len(names) != len(file_names):
+        raise ReadError(f"{path}: expected {len(names)} columns, the file has {len(file_names)}")
+    table = pd.read_csv(path, sep=r"\s+", comment="#", header=None, names=names or file_names,
+                        engine="c", on_bad_lines="skip")
+    table = table.apply(pd.to_numeric, errors="coerce").dropna()
+    table = table.drop_duplicates(subset=table.columns[0], keep="last")
+    table[table.columns[0]] = table[table.columns[0]].astype("int64")
+    return table.reset_index(drop=True)

@@ -1,0 +1,171 @@
+"""Wall meshes of a silo, generated as triangle arrays and written as ASCII STL.
+
+z = 0 is the outlet plane. Every cylinder band is split into ``sectors`` azimuthal
+meshes, so that each (band, sector) is a force sensor whose net radial force is
+not cancelled by the opposite side of the ring (ENGINE_NOTES.md).
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+from stl import mesh as stl_mesh
+from stl import Mode
+
+from .case import Case, CylinderGeometry, HopperGeometry
+
+
+#: longest/shortest side of the cylinder facets
+MAX_FACET_ASPECT = 10.0
+
+
+@dataclass
+class WallMesh:
+    """One STL wall.
+
+    ``role`` is ``band`` (a wall sensor), ``wall`` (cylinder wall not sensed),
+    ``bottom``, ``cone``, ``plate`` (the orifice plate) or ``outlet`` (the counting disc,
+    not a wall). Bands carry their height range z0..z1 (m, absolute) and angular range
+    theta0..theta1 (rad) on a cylinder of ``radius`` (m).
+    """
+
+    name: str
+    role: str
+    triangles: np.ndarray = field(repr=False)
+    band: int | None = None
+    sector: int | None = None
+    z0: float | None = None
+    z1: float | None = None
+    theta0: float | None = None
+    theta1: float | None = None
+    radius: float | None = None
+
+    @property
+    def area(self) -> float:
+        """Sum of triangle areas, m2."""
+        t = self.triangles
+        return float(0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum())
+
+    def info(self) -> dict:
+        """JSON-ready description (no triangles)."""
+        keys = ("name", "role", "band", "sector", "z0", "z1", "theta0", "theta1", "radius")
+        out = {k: getattr(self, k) for k in keys}
+        out["area"] = self.area
+        out["file"] = f"meshes/{self.name}.stl"
+        out["n_triangles"] = int(len(self.triangles))
+        return out
+
+
+def _grid_triangles(points: np.ndarray) -> np.ndarray:
+    """Triangulate a structured (nu+1, nv+1, 3) grid of points into 2 nu nv triangles."""
+    a = points[:-1, :-1].reshape(-1, 3)
+    b = points[1:, :-1].reshape(-1, 3)
+    c = points[1:, 1:].reshape(-1, 3)
+    d = points[:-1, 1:].reshape(-1, 3)
+    return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def surface_of_revolution(r0: float, z0: float, r1: float, z1: float, theta0: float, theta1: float,
+                          n_theta: int, n_axial: int) -> np.ndarray:
+    """Triangles of the surface swept by the segment (r0, z0)-(r1, z1) over theta0..theta1."""
+    theta = np.linspace(theta0, theta1, n_theta + 1)
+    s = np.linspace(0.0, 1.0, n_axial + 1)
+    r = r0 + (r1 - r0) * s
+    z = z0 + (z1 - z0) * s
+    pts = np.stack([r[:, None] * np.cos(theta)[None, :],
+                    r[:, None] * np.sin(theta)[None, :],
+                    np.broadcast_to(z[:, None], (len(s), len(theta)))], axis=-1)
+    return _grid_triangles(pts)
+
+
+def disc(radius: float, z: float, n_theta: int, inner_radius: float = 0.0) -> np.ndarray:
+    """Triangles of a horizontal disc (or annulus when ``inner_radius`` > 0) at height z.
+
+    Radial rings keep the triangles' aspect ratio near 1.
+    """
+    h = 2 * math.pi * radius / n_theta
+    if inner_radius > 0:
+        n_r = max(1, math.ceil((radius - inner_radius) / h))
+        return surface_of_revolution(inner_radius, z, radius, z, 0.0, 2 * math.pi, n_theta, n_r)
+    # centre fan plus rings
+    n_r = max(1, math.ceil(radius / h))
+    r_in = radius / n_r
+    theta = np.linspace(0.0, 2 * math.pi, n_theta + 1)
+    ring = np.stack([r_in * np.cos(theta), r_in * np.sin(theta), np.full_like(theta, z)], -1)
+    centre = np.array([0.0, 0.0, z])
+    fan = np.stack([np.broadcast_to(centre, (n_theta, 3)), ring[:-1], ring[1:]], 1)
+    if n_r == 1:
+        return fan
+    rest = surface_of_revolution(r_in, z, radius, z, 0.0, 2 * math.pi, n_theta, n_r - 1)
+    return np.concatenate([fan, rest])
+
+
+def band_boundaries(case: Case) -> list[float]:
+    """Band boundaries in m above the cylinder's base (the top of the hopper, if any)."""
+    s = case.sensors
+    if s.heights is not None:
+        return list(s.heights)
+    h = case.geometry.height
+    return [h * i / s.bands for i in range(s.bands + 1)]
+
+
+def silo_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallMesh]:
+    """All meshes of a cylindrical silo or hopper, in the order the deck lists them.
+
+    ``outlet_z``, ``outlet_radius``: position and size of the counting disc below the orifice.
+    """
+    g = case.geometry
+    if not isinstance(g, (CylinderGeometry, HopperGeometry)):
+        raise NotImplementedError(f"no meshes for geometry kind {g.kind!r}")
+    R = g.radius
+    base = g.hopper_height
+    n_seg = g.mesh_segments
+    sectors = case.sensors.sectors
+    per_sector = max(1, math.ceil(n_seg / sectors))
+    n_ring = per_sector * sectors
+    h_facet = 2 * math.pi * R / n_ring
+    meshes: list[WallMesh] = []
+
+    def cylinder_piece(name, role, z_lo, z_hi, th0, th1, n_th, **kw):
+        # the wall is straight along z: tall facets are exact and keep the triangle count
+        # (which dominates LIGGGHTS' mesh-wall cost) low
+        n_ax = max(1, math.ceil((z_hi - z_lo) / (MAX_FACET_ASPECT * h_facet)))
+        tris = surface_of_revolution(R, z_lo, R, z_hi, th0, th1, n_th, n_ax)
+        meshes.append(WallMesh(name, role, tris, z0=z_lo, z1=z_hi, theta0=th0, theta1=th1,
+                               radius=R, **kw))
+
+    bounds = band_boundaries(case)
+    if bounds[0] > 0:
+        cylinder_piece("wall_below", "wall", base, base + bounds[0], 0.0, 2 * math.pi, n_ring)
+    for b, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
+        for s in range(sectors):
+            th0, th1 = 2 * math.pi * s / sectors, 2 * math.pi * (s + 1) / sectors
+            cylinder_piece(f"band{b:02d}_s{s:02d}", "band", base + lo, base + hi, th0, th1,
+                           per_sector, band=b, sector=s)
+    if bounds[-1] < g.height:
+        cylinder_piece("wall_above", "wall", base + bounds[-1], base + g.height, 0.0, 2 * math.pi, n_ring)
+
+    r_out = g.outlet_radius
+    if isinstance(g, HopperGeometry):
+        slant = math.hypot(R - r_out, base)
+        n_ax = max(1, math.ceil(slant / h_facet))
+        meshes.append(WallMesh("cone", "cone", surface_of_revolution(r_out, 0.0, R, base, 0.0,
+                                                                    2 * math.pi, n_ring, n_ax)))
+    else:
+        meshes.append(WallMesh("bottom", "bottom", disc(R, 0.0, n_ring, inner_radius=r_out)))
+    meshes.append(WallMesh("plate", "plate", disc(r_out, 0.0, n_ring)))
+    meshes.append(WallMesh("outlet", "outlet", disc(outlet_radius, outlet_z, n_ring)))
+    return meshes
+
+
+def write_stl(wall: WallMesh, path) -> None:
+    """Write ``wall`` as ASCII STL (LIGGGHTS 3.8 reads ASCII), atomically."""
+    m = stl_mesh.Mesh(np.zeros(len(wall.triangles), dtype=stl_mesh.Mesh.dtype))
+    m.vectors[:] = wall.triangles
+    m.update_normals()
+    tmp = f"{path}.tmp{os.getpid()}"
+    with open(tmp, "wb") as fh:
+        m.save(wall.name, fh=fh, mode=Mode.ASCII, update_normals=False)
+    os.replace(tmp, path)
