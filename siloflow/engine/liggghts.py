@@ -81,6 +81,10 @@ class LiggghtsEngine(Engine):
     def execute(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
         folder = Path(folder)
         derived = _read_derived(folder)
+        missing = [w["file"] for w in derived["walls"] if not (folder / w["file"]).is_file()]
+        if missing or not (folder / DECK_NAME).is_file():
+            raise SetupError(f"{folder} is incomplete: missing {', '.join(missing) or DECK_NAME}; "
+                             "re-render it with 'siloflow render'")
         cmd = self.command(int(derived["engine_ranks"]))
         planned = {k: int(v) for k, v in derived["planned_steps"].items()}
         state = LogState()
@@ -109,7 +113,7 @@ class LiggghtsEngine(Engine):
                            warnings=state.warnings)
         (folder / RECORD_NAME).write_text(json.dumps(record.to_json(), indent=2))
         if returncode != 0 or state.errors:
-            message, cause, fix = diagnose(state.errors, state.warnings, returncode)
+            message, cause, fix = diagnose(state.errors, state.warnings, returncode, tuple(tail))
             write_status(folder, "failed", reason=message)
             raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder,
                                  cause=cause, fix=fix, log_tail="\n".join(tail))

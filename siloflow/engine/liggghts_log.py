@@ -114,15 +114,19 @@ _KNOWN = [
     (re.compile(r"not enough slots|There are not enough slots", re.I),
      "more MPI ranks than cores",
      "lower engine.ranks to the number of cores"),
+    (re.compile(r"MPI_ABORT was invoked", re.I),
+     "LIGGGHTS aborted without an ERROR line (in 3.8 this happens when a mesh file is missing or "
+     "unreadable)", "re-render the deck with 'siloflow render' and check the meshes/ folder"),
     (re.compile(r"Less insertions than requested|insertion", re.I),
      "the insertion region could not hold the requested particles",
      "enlarge the silo above the bed, or lower fill.batch_volume_fraction"),
 ]
 
 
-def diagnose(errors: list[str], warnings: list[str], returncode: Optional[int]) -> tuple[str, str, str]:
-    """(message, likely cause, fix) for a failed run."""
-    text = "\n".join(errors + warnings)
+def diagnose(errors: list[str], warnings: list[str], returncode: Optional[int],
+             extra: tuple[str, ...] = ()) -> tuple[str, str, str]:
+    """(message, likely cause, fix) for a failed run; ``extra``: other output lines to search."""
+    text = "\n".join(errors + warnings + list(extra))
     if errors:
         message = f"LIGGGHTS stopped with an error: {errors[0]}"
     elif returncode is not None and returncode < 0:

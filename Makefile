@@ -1,0 +1,41 @@
+# siloflow: the two commands of the README are `make demo` and `make test`.
+PYTHON ?= python3
+VENV   ?= .venv
+PY      = $(VENV)/bin/python
+PIP     = $(VENV)/bin/pip
+SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: demo test test-fast install install-engine bench clean
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	$(PIP) install -q -e '.[test]'
+	touch $@
+
+install: $(VENV)/.installed install-engine
+
+# LIGGGHTS 3.8 from Debian (pulls Open MPI); skipped when already installed
+install-engine:
+	@command -v liggghts >/dev/null 2>&1 || { \
+	  echo "installing LIGGGHTS (apt-get install liggghts)"; \
+	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq liggghts >/dev/null; }
+	@command -v liggghts >/dev/null 2>&1 || { echo "LIGGGHTS is still missing"; exit 1; }
+
+# the main job on the small default case (about 2-3 minutes on 2 cores)
+demo: install
+	$(VENV)/bin/siloflow run decks/quick.yaml -o runs/quick --force
+
+# every test, the engine tests included
+test: install
+	$(PY) -m pytest -q
+
+# without the LIGGGHTS runs
+test-fast: $(VENV)/.installed
+	$(PY) -m pytest -q -m "not engine"
+
+bench: install
+	$(PY) benchmarks/wrapper_overhead.py
+
+clean:
+	rm -rf runs .pytest_cache

@@ -1,0 +1,33 @@
+"""Shared fixtures: the quick case as a dict, and writing case dicts to YAML files."""
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+QUICK = ROOT / "decks" / "quick.yaml"
+
+
+@pytest.fixture
+def quick_dict():
+    return copy.deepcopy(yaml.safe_load(QUICK.read_text()))
+
+
+@pytest.fixture
+def write_case(tmp_path):
+    def _write(data, name="case.yaml"):
+        path = tmp_path / name
+        path.write_text(data if isinstance(data, str) else yaml.safe_dump(data))
+        return path
+    return _write
+
+
+def set_path(data: dict, dotted: str, value):
+    """Set ``a.b.c`` in a nested dict (creating nothing: the path must exist up to its last key)."""
+    keys = dotted.split(".")
+    for k in keys[:-1]:
+        data = data[k]
+    data[keys[-1]] = value

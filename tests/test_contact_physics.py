@@ -1,0 +1,109 @@
+"""Derived physics against independent numerical integration and known formulas."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from siloflow import contact_physics as cp
+from siloflow.case import case_from_dict
+from siloflow.derived import bed_height, bed_volume, derive, is_prime
+
+
+def _impact(force, m, v0):
+    """Integrate a head-on impact m x'' = -force(x, v) from x = 0, v = v0 until separation.
+    Returns (contact time, rebound speed)."""
+    def rhs(t, y):
+        return [y[1], -force(max(y[0], 0.0), y[1]) / m]
+
+    def out(t, y):
+        return y[0]
+    out.terminal, out.direction = True, -1
+    sol = solve_ivp(rhs, (0, 1.0), [0.0, v0], events=out, rtol=1e-10, atol=1e-14, max_step=1e-6)
+    return sol.t_events[0][0], -sol.y_events[0][0][1]
+
+
+@pytest.mark.parametrize("e", [0.3, 0.5, 0.88, 1.0])
+def test_linear_spring_dashpot_restitution_and_contact_time(e):
+    kn, m = 3.2e5, 1e-4
+    gamma = cp.linear_gamma(kn, m, e)            # LIGGGHTS: damping force gamma_n * m_eff * v
+    t_c, v_out = _impact(lambda x, v: kn * x + gamma * m * v, m, 1.0)
+    assert v_out == pytest.approx(e, rel=1e-4)
+    assert t_c == pytest.approx(cp.linear_contact_time(kn, m, e), rel=1e-4)
+
+
+def test_hertz_contact_time_formula():
+    m, r, y, v = 1e-4, 1e-3, 3e6, 1.0
+    t_c, v_out = _impact(lambda x, vel: 4.0 / 3.0 * y * math.sqrt(r) * x ** 1.5, m, v)
+    assert v_out == pytest.approx(v, rel=1e-4)
+    assert cp.hertz_contact_time(m, r, y, v) == pytest.approx(t_c, rel=0.01)
+
+
+def test_restitution_round_trip_and_limits():
+    assert cp.damping_ratio_from_restitution(1.0) == 0.0
+    for e in (0.1, 0.5, 0.9):
+        assert cp.restitution_from_damping_ratio(cp.damping_ratio_from_restitution(e)) == pytest.approx(e)
+    with pytest.raises(ValueError):
+        cp.damping_ratio_from_restitution(0.0)
+
+
+def test_rayleigh_time_known_value():
+    # r = 1.5 mm, rho = 2500, E = 5e6, nu = 0.3: G = 1.923e6 Pa
+    g = 5e6 / 2.6
+    expected = math.pi * 1.5e-3 * math.sqrt(2500 / g) / (0.1631 * 0.3 + 0.8766)
+    assert cp.rayleigh_time(1.5e-3, 2500, 5e6, 0.3) == pytest.approx(expected, rel=1e-12)
+    assert expected == pytest.approx(1.8358e-4, rel=1e-3)
+
+
+def test_masses_and_moduli():
+    assert cp.sphere_mass(0.5, 1000) == pytest.approx(1000 * 4 / 3 * math.pi / 8)
+    assert cp.effective_modulus(5e6, 0.3, 5e6, 0.3) == pytest.approx(5e6 / (2 * 0.91))
+    assert cp.reduced(2.0, 2.0) == 1.0 and cp.reduced(2.0, None) == 2.0
+
+
+def test_derived_timestep_is_fraction_of_smallest_time(quick_dict):
+    case = case_from_dict(quick_dict)
+    d = derive(case)
+    times = [p.contact_time for p in d.pairs.values()] + [d.rayleigh_time]
+    assert d.critical_time == min(times)
+    assert d.timestep == pytest.approx(case.engine.timestep_fraction * min(times))
+    assert d.particle_mass * d.particle_count == pytest.approx(d.total_mass)
+    assert all(is_prime(s) and s > 10000 for s in d.seeds.values())
+    assert d.sample_freq % d.sample_every == 0
+    # the insertion region sits above the expected bed
+    assert d.insertion_region["z_min"] > d.bed_height_estimate
+
+
+def test_linear_model_derivation(quick_dict):
+    quick_dict["materials"] = {
+        "model": "linear", "particle": {"density": 1000.0}, "wall": {},
+        "particle_particle": {"friction": 0.43, "kn": 3.2e5, "kt": 1.6e5, "restitution": 0.5},
+        "particle_wall": {"friction": 0.62, "kn": 3.2e6, "kt": 1.6e6, "restitution": 0.5}}
+    d = derive(case_from_dict(quick_dict))
+    pw = d.pairs["particle_wall"]
+    assert pw.contact_time == pytest.approx(math.pi * math.sqrt(d.particle_mass / 3.2e6))
+    assert d.critical_time == pw.contact_time          # the stiff wall limits the step
+    assert pw.gammat == pytest.approx(0.1 * pw.gamman)
+
+
+def test_fill_height_converts_to_count(quick_dict):
+    quick_dict["fill"].pop("count")
+    quick_dict["fill"]["height"] = 0.1
+    case = case_from_dict(quick_dict)
+    d = derive(case)
+    expected = 0.6 * math.pi * 0.015 ** 2 * 0.1 / d.particle_volume
+    assert abs(d.particle_count - expected) <= 1
+    assert d.bed_height_estimate == pytest.approx(0.1, rel=1e-3)
+
+
+def test_hopper_volume_is_cone_plus_cylinder(quick_dict):
+    quick_dict["geometry"] = {"kind": "hopper", "radius": 0.015, "height": 0.3,
+                              "half_angle_deg": 45.0, "outlet_radius": 0.008}
+    case = case_from_dict(quick_dict)
+    hh = case.geometry.hopper_height
+    assert hh == pytest.approx(0.007)
+    cone = math.pi * hh / 3 * (0.008 ** 2 + 0.008 * 0.015 + 0.015 ** 2)
+    assert bed_volume(case, hh + 0.05) == pytest.approx(cone + math.pi * 0.015 ** 2 * 0.05)
+    assert bed_height(case, bed_volume(case, 0.04)) == pytest.approx(0.04, rel=1e-6)

@@ -1,0 +1,73 @@
+"""A failing engine is explained: message, likely cause, exit code, log kept."""
+from __future__ import annotations
+
+import os
+import stat
+
+import pytest
+
+from siloflow.case import case_from_dict
+from siloflow.engine import LiggghtsEngine
+from siloflow.engine.base import read_status
+from siloflow.engine.liggghts_log import LogState, diagnose
+from siloflow.errors import EngineRunError, SetupError
+
+
+def _fake_engine(tmp_path, script: str) -> str:
+    exe = tmp_path / "fake-liggghts"
+    exe.write_text("#!/bin/sh\n" + script)
+    exe.chmod(exe.stat().st_mode | stat.S_IEXEC)
+    return str(exe)
+
+
+def test_error_line_becomes_explained_failure(tmp_path, quick_dict):
+    quick_dict["engine"]["ranks"] = 1
+    exe = _fake_engine(tmp_path, "echo 'SILOFLOW_STAGE fill 100'\necho '   50 0.1 10 0 0 0 0 0'\n"
+                                 "printf 'ERROR: Lost atoms: original 10 current 9\\n\\377\\376'\nexit 1\n")
+    engine = LiggghtsEngine(executable=exe)
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    with pytest.raises(EngineRunError) as info:
+        engine.execute(folder)
+    msg = str(info.value)
+    assert "Lost atoms" in msg and "likely cause" in msg and "timestep_fraction" in msg
+    assert info.value.returncode == 1
+    assert read_status(folder)["state"] == "failed"
+    assert (folder / "screen.txt").read_bytes().endswith(b"\xff\xfe")
+
+
+def test_segfault_is_named(tmp_path, quick_dict):
+    quick_dict["engine"]["ranks"] = 1
+    exe = _fake_engine(tmp_path, "kill -SEGV $$\n")
+    engine = LiggghtsEngine(executable=exe)
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    with pytest.raises(EngineRunError, match="SIGSEGV"):
+        engine.execute(folder)
+
+
+def test_missing_binary_is_a_setup_error():
+    with pytest.raises(SetupError, match="make install-engine"):
+        LiggghtsEngine(executable="no-such-liggghts-binary").command(1)
+
+
+def test_too_many_ranks_is_refused():
+    with pytest.raises(SetupError, match="engine.ranks"):
+        LiggghtsEngine(executable="sh").command((os.cpu_count() or 1) + 1)
+
+
+def test_log_state_tracks_stages_and_total():
+    s = LogState()
+    planned = {"fill": 100, "settle": 1000, "static": 10, "open": 5, "discharge": 200}
+    for line in ["SILOFLOW_STAGE fill 100", "100 0.1 50 0 0 0 0 0", "SILOFLOW_INSERTED 50",
+                 "SILOFLOW_STAGE settle 1000", "150 0.15 50 0 0 0 0 0", "SILOFLOW_SETTLED 1e-9",
+                 "SILOFLOW_STAGE static 10"]:
+        s.feed(line)
+    assert s.stage_steps == {"fill": 0, "settle": 100, "static": 150}
+    assert s.inserted == 50 and s.settled_ke_pe == 1e-9
+    assert s.total_steps(planned) == 150 + 10 + 5 + 200   # settle ended early: total shrinks
+
+
+def test_diagnose_known_messages():
+    msg, cause, fix = diagnose(["ERROR: Cannot open mesh file meshes/x.stl"], [], 1)
+    assert "mesh file" in cause
+    msg, cause, fix = diagnose([], [], -9)
+    assert "SIGKILL" in msg
