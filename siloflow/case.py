@@ -33,6 +33,13 @@ class Strict(BaseModel):
 
 
 # --------------------------------------------------------------------------- geometry
+def _smaller(model, small: str, large: str):
+    """Validator body: field ``small`` (an outlet) must be smaller than field ``large``."""
+    a, b = getattr(model, small), getattr(model, large)
+    if a >= b:
+        raise ValueError(f"{small} ({a} m) must be smaller than {large} ({b} m)")
+    return model
+
 class CylinderGeometry(Strict):
     """Cylindrical silo with a flat bottom and a centred circular orifice (z = 0 at the bottom)."""
 
@@ -42,12 +49,7 @@ class CylinderGeometry(Strict):
     orifice_radius: Positive = Field(description="radius of the centred orifice, m")
     mesh_segments: int = Field(64, ge=16, le=1024, description="facets around the circumference")
 
-    @model_validator(mode="after")
-    def _orifice_fits(self):
-        if self.orifice_radius >= self.radius:
-            raise ValueError(f"orifice_radius ({self.orifice_radius} m) must be smaller than "
-                             f"radius ({self.radius} m)")
-        return self
+    _orifice_fits = model_validator(mode="after")(lambda self: _smaller(self, "orifice_radius", "radius"))
 
     @property
     def outlet_radius(self) -> float:
@@ -69,12 +71,7 @@ class HopperGeometry(Strict):
     outlet_radius: Positive = Field(description="radius of the hopper outlet, m")
     mesh_segments: int = Field(64, ge=16, le=1024)
 
-    @model_validator(mode="after")
-    def _outlet_fits(self):
-        if self.outlet_radius >= self.radius:
-            raise ValueError(f"outlet_radius ({self.outlet_radius} m) must be smaller than "
-                             f"radius ({self.radius} m)")
-        return self
+    _outlet_fits = model_validator(mode="after")(lambda self: _smaller(self, "outlet_radius", "radius"))
 
     @property
     def hopper_height(self) -> float:
@@ -92,12 +89,7 @@ class PlanarGeometry(Strict):
     half_angle_deg: float = Field(60.0, gt=0, lt=90, allow_inf_nan=False)
     outlet_width: Positive = Field(description="outlet width, m")
 
-    @model_validator(mode="after")
-    def _outlet_fits(self):
-        if self.outlet_width >= self.width:
-            raise ValueError(f"outlet_width ({self.outlet_width} m) must be smaller than "
-                             f"width ({self.width} m)")
-        return self
+    _outlet_fits = model_validator(mode="after")(lambda self: _smaller(self, "outlet_width", "width"))
 
 
 Geometry = Annotated[Union[CylinderGeometry, HopperGeometry, PlanarGeometry],
