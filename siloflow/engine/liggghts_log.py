@@ -76,7 +76,6 @@ class LogState:
 
         Stages already finished count as they ran; the current and later ones as planned.
         """
-        total = self.step
         if self.stage is None:
             return sum(planned_all.values())
         idx = STAGE_ORDER.index(self.stage) if self.stage in STAGE_ORDER else 0
