@@ -40,6 +40,7 @@ def _smaller(model, small: str, large: str):
         raise ValueError(f"{small} ({a} m) must be smaller than {large} ({b} m)")
     return model
 
+
 class CylinderGeometry(Strict):
     """Cylindrical silo with a flat bottom and a centred circular orifice (z = 0 at the bottom)."""
 

@@ -116,7 +116,7 @@ _KNOWN = [
     (re.compile(r"MPI_ABORT was invoked", re.I),
      "LIGGGHTS aborted without an ERROR line (in 3.8 this happens when a mesh file is missing or "
      "unreadable)", "re-render the deck with 'siloflow render' and check the meshes/ folder"),
-    (re.compile(r"Less insertions than requested|insertion", re.I),
+    (re.compile(r"Less insertions than requested", re.I),
      "the insertion region could not hold the requested particles",
      "enlarge the silo above the bed, or lower fill.batch_volume_fraction"),
 ]
