@@ -40,3 +40,22 @@ def first_results_figure(bands, discharge, band_table, t_open: float, path) -> N
     ax3.legend(fontsize=8)
     fig.tight_layout()
     _save(fig, path)
+
+
+def line_figure(table, x: str, y, path, hue: str | None = None, xlabel: str = "", ylabel: str = "",
+                title: str = "", logy: bool = False):
+    """One line per ``hue`` group (or per column when ``y`` is a list); returns the path."""
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    if hue is not None:
+        for key, grp in table.groupby(hue):
+            ax.plot(grp[x], grp[y], marker=".", lw=1, label=str(key))
+    else:
+        for col in ([y] if isinstance(y, str) else y):
+            ax.plot(table[x], table[col], marker=".", lw=1, label=col)
+    if logy:
+        ax.set_yscale("log")
+    ax.set(xlabel=xlabel or x, ylabel=ylabel or str(y), title=title)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    _save(fig, path)
+    return Path(path)

@@ -19,6 +19,8 @@ from siloflow.engine_output import FLOW_COLUMNS, read_ave_time
 from siloflow.errors import ReadError
 
 from .discharge import discharge_table, steady_flow_rate
+from .dump_results import analyse_dumps
+from .janssen import compare_with_measurement
 from .wall_pressure import band_mean, band_pressures, vertical_load, wall_force_columns
 
 #: LIGGGHTS' f_<mesh>[1..3] of mesh/surface/stress is the force the grains exert on the mesh
@@ -62,8 +64,12 @@ def static_window(forces: pd.DataFrame, run: RunOutputs) -> pd.Series:
     return (forces.step > lo) & (forces.step <= hi)
 
 
-def analyse(folder) -> dict:
-    """Compute the first results of a run folder; return the summary (also written to results/)."""
+def analyse(folder, measured_pressure=None) -> dict:
+    """Compute the results of a run folder; return the summary (also written to results/).
+
+    ``measured_pressure``: optional CSV (``time`` s since opening, ``band_<k>`` Pa) compared
+    band by band with the run (paper A's Table 3 and Eq. 34), written to pressure_comparison.csv.
+    """
     run = RunOutputs(folder)
     out = run.folder / RESULTS
     out.mkdir(exist_ok=True)
@@ -128,6 +134,18 @@ def analyse(folder) -> dict:
         "engine_wall_time_s": run.record.get("wall_time"),
         "engine_warnings": run.record.get("warnings", []),
     }
+    summary["frame_analyses"] = analyse_dumps(run, out, table, dis, rate)
+    if measured_pressure is not None:
+        try:
+            measured = pd.read_csv(measured_pressure)
+        except (OSError, ValueError) as exc:
+            raise ReadError(f"cannot read measured pressures {measured_pressure}: {exc}") from None
+        try:
+            comparison = compare_with_measurement(bands, measured, t_open)
+        except ValueError as exc:
+            raise ReadError(f"{measured_pressure}: {exc}") from None
+        write_text(out / "pressure_comparison.csv", comparison.to_csv(index=False))
+        summary["pressure_comparison"] = comparison.to_dict(orient="records")
     write_json(out / "summary.json", summary)
     from .figures import first_results_figure  # matplotlib only when figures are drawn
     first_results_figure(bands, dis, table, t_open, out / "first_results.png")

@@ -247,6 +247,8 @@ class Outputs(Strict):
     sample_interval: Positive = Field(0.005, description="wall forces and flow sampled this often, s", le=100)
     dump_interval: Optional[Positive] = Field(None, description="particle dumps this often, s (none if unset)")
     vtk: bool = Field(False, description="also write VTK particle files for ParaView")
+    contacts: bool = Field(True, description="with dumps: also dump pair contacts (positions, ids, "
+                           "forces) for coordination numbers and force chains")
     figures: bool = True
 
 

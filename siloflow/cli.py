@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import signal
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 from rich.console import Console
@@ -114,10 +114,10 @@ def run(case_file: Path = typer.Argument(..., help="YAML case file"),
         _post(folder)
 
 
-def _post(folder: Path) -> None:
+def _post(folder: Path, measured: Path | None = None) -> None:
     from postprocess.first_results import analyse
     try:
-        summary = analyse(folder)
+        summary = analyse(folder, measured)
     except SiloflowError as exc:
         _fail(exc)
     fb, fr = summary["force_balance"], summary["flow_rate"]
@@ -125,13 +125,49 @@ def _post(folder: Path) -> None:
               f"({fb['wall_friction_share']:.2f} of it by wall friction)")
     out.print(f"steady flow rate: {fr['rate'] * 1000:.2f} +/- {fr['stderr'] * 1000:.2f} g/s; "
               f"discharged {summary['discharged_mass_kg'] * 1000:.1f} g")
-    out.print(f"results: {Path(folder) / 'results'} (summary.json, *.csv, first_results.png)")
+    fa = summary.get("frame_analyses", {})
+    if "bulk_solid_fraction" in fa:
+        line = f"settled bulk solid fraction {fa['bulk_solid_fraction']:.3f}"
+        if "coordination_settled" in fa:
+            line += f", coordination number {fa['coordination_settled']['z_mean']:.2f}"
+        out.print(line + f"; free-surface flow rate / outlet flow rate = {fa['flow_rate_surface_over_outlet']:.3f}")
+    out.print(f"results: {Path(folder) / 'results'} (summary.json, *.csv, *.parquet, *.png)")
 
 
 @app.command()
-def post(folder: Path = typer.Argument(..., help="a finished run folder")) -> None:
-    """(Re)compute the results of a finished run folder."""
-    _post(folder)
+def post(source: str = typer.Argument(..., help="a finished run folder, or dump file(s): a file, glob or folder"),
+         contacts: Optional[str] = typer.Option(None, help="dump local file(s) of pair contacts for a dump source"),
+         contact_keywords: Optional[str] = typer.Option(
+             None, help="keywords of the pair/gran/local compute that wrote --contacts, e.g. pos,id,force "
+                        "(names its columns)"),
+         sphere: List[str] = typer.Option([], help="measurement sphere x,y,z,R in m (repeatable)"),
+         every: int = typer.Option(1, min=1, help="analyse every n-th frame of a dump source"),
+         measured: Optional[Path] = typer.Option(None, help="measured wall pressure CSV (time, band_<k> in Pa) "
+                                                 "to compare a run with"),
+         output: Optional[Path] = typer.Option(None, "-o", "--output",
+                                               help="results folder for a dump source (default: <dumps>/siloflow_post)")) -> None:
+    """(Re)compute the results of a run folder, or analyse dump files written by any LIGGGHTS/LAMMPS run."""
+    path = Path(source)
+    if path.is_dir() and (path / "derived.json").is_file():
+        _post(path, measured)
+        return
+    from postprocess.any_dump import analyse_any, parse_sphere
+    from siloflow.engine_output import local_columns
+    try:
+        columns = local_columns(contact_keywords.split(",")) if contact_keywords else None
+        regions = [parse_sphere(s, k + 1) for k, s in enumerate(sphere)] or None
+        base = path if path.is_dir() else (path.parent if path.exists() else Path(source.split("*")[0]).parent)
+        target = output or base / "siloflow_post"
+        summary = analyse_any(source, target, contacts, columns, regions, every)
+    except SiloflowError as exc:
+        _fail(exc)
+    out.print(f"{summary['frames']} frames; last step {summary['last_step']} with {summary['particles_last']} particles")
+    if "porosity_last" in summary:
+        out.print("porosity (last frame): " + ", ".join(f"{k} {v:.4f}" for k, v in summary["porosity_last"].items()))
+    if "coordination_last" in summary:
+        c = summary["coordination_last"]
+        out.print(f"coordination number (last frame, from {c['source']}): {c['z_mean']:.3f} (mechanical {c['z_mech']:.3f})")
+    out.print(f"results: {target}")
 
 
 if __name__ == "__main__":  # pragma: no cover

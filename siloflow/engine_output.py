@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Sequence
 
 import pandas as pd
 
@@ -34,3 +35,35 @@ def read_ave_time(path, names: list[str] | None = None) -> pd.DataFrame:
     table = table.drop_duplicates(subset=table.columns[0], keep="last")
     table[table.columns[0]] = table[table.columns[0]].astype("int64")
     return table.reset_index(drop=True)
+
+
+#: column names a LIGGGHTS ``compute pair/gran/local`` writes, per keyword, in LIGGGHTS' fixed
+#: output order (which does not depend on the order the keywords were given in)
+PAIR_LOCAL_LAYOUT = {
+    "pos": ["x1", "y1", "z1", "x2", "y2", "z2"],
+    "vel": ["vx1", "vy1", "vz1", "vx2", "vy2", "vz2"],
+    "id": ["id1", "id2", "periodic"],
+    "force": ["fx", "fy", "fz"],
+    "force_normal": ["fnx", "fny", "fnz"],
+    "force_tangential": ["ftx", "fty", "ftz"],
+    "torque": ["tx", "ty", "tz"],
+    "history": ["h1", "h2", "h3"],
+    "contactArea": ["area"],
+    "delta": ["delta"],
+}
+#: ``compute wall/gran/local`` uses the same order, but ``id`` is (mesh id, triangle id, particle id)
+WALL_LOCAL_ID = ["mesh", "triangle", "id1"]
+#: what siloflow decks ask of pair/gran/local
+CONTACT_KEYWORDS = ("pos", "id", "force", "force_normal")
+
+
+def local_columns(keywords: Sequence[str], wall: bool = False) -> list[str]:
+    """Column names of a LIGGGHTS pair/gran/local (or wall/gran/local) compute with these keywords."""
+    unknown = [k for k in keywords if k not in PAIR_LOCAL_LAYOUT]
+    if unknown:
+        raise ReadError(f"unknown pair/gran/local keyword(s) {unknown}; known: {list(PAIR_LOCAL_LAYOUT)}")
+    names: list[str] = []
+    for key, cols in PAIR_LOCAL_LAYOUT.items():
+        if key in keywords:
+            names += WALL_LOCAL_ID if (wall and key == "id") else cols
+    return names

@@ -1,0 +1,112 @@
+"""The one shape every frame analysis has (after MDAnalysis' AnalysisBase):
+
+    analysis = Porosity(regions=...)
+    analysis.run(frames, contacts=None)     # _prepare(); _single_frame(f, c) per frame; _conclude()
+    analysis.table                          # tidy pandas DataFrame, one row per frame (and region/...)
+    analysis.save(folder)                   # <name>.csv, <name>.parquet and <name>.png, atomically
+
+``frames`` is any iterable of :class:`postprocess.dumps.Frame` (a dump path is read with
+:func:`postprocess.dumps.read_frames`); ``contacts`` optionally gives the matching dump local
+frames (paired by timestep), so the analyses run on any LIGGGHTS/LAMMPS output.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import pandas as pd
+
+from siloflow.atomic_files import write_text
+from siloflow.errors import ReadError
+
+from .dumps import Frame, read_frames
+
+
+def _as_frames(source) -> Iterable[Frame] | None:
+    if source is None:
+        return None
+    if isinstance(source, (str, Path)):
+        return read_frames(source)
+    return source
+
+
+def paired(frames: Iterable[Frame], contacts: Iterable[Frame] | None) -> Iterator[tuple[Frame, Frame | None]]:
+    """Pair atom frames with contact frames of the same timestep (both in increasing step order);
+    atom frames with no contact frame get None when ``contacts`` is None, else are skipped."""
+    if contacts is None:
+        for f in frames:
+            yield f, None
+        return
+    it = iter(contacts)
+    c = next(it, None)
+    for f in frames:
+        while c is not None and c.timestep < f.timestep:
+            c = next(it, None)
+        if c is not None and c.timestep == f.timestep:
+            yield f, c
+
+
+class FrameAnalysis:
+    """Base class: subclasses set ``name`` and implement ``_single_frame`` (returning a list of
+    row dicts or None); ``_prepare``/``_conclude`` are optional. ``needs_contacts`` analyses
+    refuse to run without contact frames unless they can derive contacts themselves."""
+
+    name = "analysis"
+    needs_contacts = False
+
+    def __init__(self):
+        self.rows: list[dict] = []
+        self.table = pd.DataFrame()
+        self.n_frames = 0
+
+    def run(self, frames, contacts=None, start: int = 0, stop: int | None = None, step: int = 1):
+        frames = _as_frames(frames)
+        contacts = _as_frames(contacts)
+        if self.needs_contacts and contacts is None:
+            raise ReadError(f"{self.name} needs contact (dump local) frames")
+        self.rows = []
+        self.n_frames = 0
+        self._prepare()
+        for k, (frame, cframe) in enumerate(paired(frames, contacts)):
+            if k < start or (stop is not None and k >= stop) or (k - start) % step:
+                continue
+            out = self._single_frame(frame, cframe)
+            self.n_frames += 1
+            if out:
+                for row in out:
+                    self.rows.append({"step": frame.timestep, **row})
+        if self.n_frames == 0:
+            raise ReadError(f"{self.name}: no frames to analyse")
+        self.table = pd.DataFrame(self.rows)
+        self._conclude()
+        return self
+
+    def _prepare(self) -> None:
+        pass
+
+    def _single_frame(self, frame: Frame, contacts: Frame | None) -> list[dict] | None:
+        raise NotImplementedError
+
+    def _conclude(self) -> None:
+        pass
+
+    def figure(self, path: Path) -> Path | None:
+        """Draw the analysis' figure to ``path``; None if it has none."""
+        return None
+
+    def save(self, folder, figure: bool = True) -> list[Path]:
+        """Write ``<name>.csv`` (and ``.parquet``) and the figure into ``folder``."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        written = [folder / f"{self.name}.csv"]
+        write_text(written[0], self.table.to_csv(index=False))
+        parquet = folder / f"{self.name}.parquet"
+        tmp = parquet.with_name(f".{parquet.name}.tmp")
+        self.table.to_parquet(tmp, index=False)
+        tmp.replace(parquet)
+        written.append(parquet)
+        if figure and not self.table.empty:
+            fig = self.figure(folder / f"{self.name}.png")
+            if fig is not None:
+                written.append(fig)
+        return written

@@ -1,0 +1,121 @@
+"""Analyses of dump files written by any LIGGGHTS/LAMMPS run (not only siloflow's):
+per-frame counts and energies, porosity in measurement spheres, coordination number (from
+a contact dump local, else from overlaps) and the force-chain figure of the last frame."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from siloflow.atomic_files import write_json, write_text
+from siloflow.errors import ReadError
+
+from .analysis_base import FrameAnalysis
+from .coordination import Coordination
+from .dumps import dump_files, last_frame, read_frames
+from .force_chains import force_chain_figure
+from .porosity import MeasureRegion, Porosity
+
+
+class FrameSummary(FrameAnalysis):
+    """Particle count, solid volume (m3), mass (kg, when a mass column exists), kinetic energy
+    (J, with mass and velocities), mean speed (m/s) and the height of the highest grain (m)."""
+
+    name = "frames"
+
+    def _single_frame(self, frame, contacts):
+        row = {"particles": frame.n}
+        if frame.n == 0:
+            return [row]
+        pos = frame.positions()
+        row["z_max"] = float(pos[:, 2].max())
+        if "radius" in frame.data or "diameter" in frame.data:
+            row["solid_volume"] = float((4.0 / 3.0 * np.pi * frame.radii() ** 3).sum())
+        if "vx" in frame.data:
+            v2 = (frame.velocities() ** 2).sum(axis=1)
+            row["mean_speed"] = float(np.sqrt(v2).mean())
+            if "mass" in frame.data:
+                row["kinetic_energy"] = float(0.5 * (frame.column("mass") * v2).sum())
+        if "mass" in frame.data:
+            row["mass"] = float(frame.column("mass").sum())
+        if contacts is not None:
+            row["contacts"] = contacts.n
+        return [row]
+
+    def figure(self, path):
+        from .figures import line_figure
+        return line_figure(self.table, x="step", y="particles", path=path, xlabel="timestep",
+                           ylabel="particles")
+
+
+def default_sphere(frame) -> MeasureRegion:
+    """A measurement sphere about the grains' median position, radius a quarter of the
+    smallest extent of their bounding box (inside the packing for a compact bed)."""
+    pos = frame.positions()
+    lo, hi = np.percentile(pos, 2, axis=0), np.percentile(pos, 98, axis=0)
+    radius = 0.25 * float((hi - lo).min())
+    if not radius > 2.0 * float(frame.radii().mean()):
+        raise ReadError(f"{frame.source}: the packing is too thin for a default measurement sphere; "
+                        "give one with --sphere x,y,z,R")
+    return MeasureRegion("sphere_1", "sphere", tuple(float(c) for c in np.median(pos, axis=0)), radius)
+
+
+def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, every: int = 1) -> dict:
+    """Analyse the dumps ``source`` (file, glob or folder); write tables, figures and summary.json to ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    files = dump_files(source)
+    contact_frames = list(read_frames(contacts, columns=contact_columns, every=1)) if contacts else None
+    last = last_frame(files)
+    summary: dict = {"source": [str(f) for f in files][:3] + (["..."] if len(files) > 3 else []),
+                     "files": len(files)}
+
+    frames = FrameSummary().run(read_frames(files, every=every), contact_frames or None)
+    frames.save(out)
+    summary["frames"] = frames.n_frames
+    summary["last_step"] = int(last.timestep)
+    summary["particles_last"] = int(last.n)
+
+    if "radius" in last.data or "diameter" in last.data:
+        regions = spheres
+        if regions is None:
+            try:
+                regions = [default_sphere(last)]
+            except ReadError as exc:
+                summary["porosity_skipped"] = str(exc)
+        if regions:
+            por = Porosity(regions).run(read_frames(files, every=every))
+            por.save(out)
+            final = por.table[por.table.step == por.table.step.max()]
+            summary["porosity_last"] = dict(zip(final.region, final.porosity.astype(float)))
+            summary["regions"] = [{"name": r.name, "shape": r.shape, "center": list(r.center), "radius": r.radius}
+                                  for r in regions]
+        coord = Coordination().run(read_frames(files, every=every), contact_frames)
+        coord.save(out)
+        table = coord.table[coord.table.species == "all"]
+        row = table[table.step == table.step.max()].iloc[0]
+        summary["coordination_last"] = {"step": int(row.step), "z_mean": float(row.z_mean),
+                                        "z_mech": float(row.z_mech), "source": row.source,
+                                        "convention": row.convention,
+                                        "note": "all grains; grains at walls lack their wall contacts"}
+    if contact_frames:
+        match = [c for c in contact_frames if c.timestep == last.timestep]
+        if match and any(c in match[0].data for c in ("fnx", "fx")):
+            force_chain_figure(last, match[0], out / "force_chains_last.png")
+    write_json(out / "summary.json", summary)
+    write_text(out / "README.txt", "siloflow post on dump files: frames.csv (counts, energy), porosity.csv "
+               "(exact overlap volumes in measurement spheres), coordination.csv, summary.json\n")
+    return summary
+
+
+def parse_sphere(text: str, k: int) -> MeasureRegion:
+    """``x,y,z,R`` (m) -> a measurement sphere named sphere_<k>."""
+    try:
+        x, y, z, r = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ReadError(f"--sphere {text!r}: expected x,y,z,R in metres") from None
+    try:
+        return MeasureRegion(f"sphere_{k}", "sphere", (x, y, z), r)
+    except ValueError as exc:
+        raise ReadError(f"--sphere {text!r}: {exc}") from None
+

@@ -1,0 +1,139 @@
+"""Frame analyses of a siloflow run folder's dumps: bulk solid fraction, coordination number,
+force chains, free surface and Wr vs Wf, and the Janssen fit of the settled wall-pressure
+profile. Called by :func:`postprocess.first_results.analyse` when the run wrote dumps.
+
+Everything is read from the folder (case.yaml, derived.json, output/dumps); the geometry only
+places the measurement regions (the bulk core: two grain diameters from the wall, three
+from the bottom and the free surface).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict
+
+import numpy as np
+import pandas as pd
+
+from siloflow.atomic_files import write_text
+from siloflow.case import load_case
+from siloflow.errors import ReadError
+
+from .coordination import Coordination
+from .dumps import Frame, dump_files, read_frames
+from .flow_rate import FreeSurface, rate_series, surface_flow_rate
+from .force_chains import force_chain_figure
+from .janssen import fit_janssen
+from .porosity import MeasureRegion, Porosity
+
+
+def _dump_sources(folder):
+    dumps = folder / "output" / "dumps"
+    try:
+        atoms = dump_files(str(dumps / "dump.*.txt"))
+    except ReadError:
+        return None, None
+    try:
+        contacts = dump_files(str(dumps / "contacts.*.txt"))
+    except ReadError:
+        contacts = None
+    return atoms, contacts
+
+
+def bed_regions(case, surface: float, d: float) -> list[MeasureRegion]:
+    """Measurement cylinders about the silo axis in the settled bed, three grain diameters
+    from the bottom and the free surface: ``bulk_core`` (two diameters from the wall: the
+    bulk solid fraction) and ``cross_section`` (the whole radius, wall layers included: the
+    solid fraction that converts a free-surface speed into a mass flow rate)."""
+    g = case.geometry
+    z0 = g.hopper_height + 3.0 * d
+    z1 = surface - 3.0 * d
+    if z1 - z0 < 2.0 * d:
+        raise ReadError(f"the settled bed ({surface:.4g} m) is too shallow for a bulk measurement region")
+    return [MeasureRegion("bulk_core", "cylinder", (0.0, 0.0, 0.0), g.radius - 2.0 * d, axis=2, t0=z0, t1=z1),
+            MeasureRegion("cross_section", "cylinder", (0.0, 0.0, 0.0), g.radius, axis=2, t0=z0, t1=z1)]
+
+
+def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_rate) -> dict:
+    """Run the frame analyses of a run folder; write tables and figures to ``out``; return a summary."""
+    atoms_files, contact_files = _dump_sources(run.folder)
+    if atoms_files is None:
+        return {"dumps": "none written (outputs.dump_interval unset): frame analyses skipped"}
+    case = load_case(run.folder / "case.yaml")
+    dt = run.dt
+    open_step = run.stage_steps["open"]
+    columns = run.derived.get("contact_columns") or None
+    contacts = list(read_frames(contact_files, columns=columns)) if contact_files and columns else None
+
+    settled: Frame | None = None
+    for frame in read_frames(atoms_files):
+        if frame.timestep <= open_step:
+            settled = frame
+    if settled is None:
+        raise ReadError(f"{run.folder}: no particle dump at or before the outlet opened (step {open_step})")
+    d = 2.0 * float(np.mean(settled.radii()))
+    R = case.geometry.radius
+    summary: dict = {"dump_frames": len(atoms_files), "grain_diameter_m": d}
+
+    # free surface over all frames (a dump per file)
+    surface = FreeSurface(radius=R, z_min=case.geometry.hopper_height, timestep=dt).run(read_frames(atoms_files))
+    surface.save(out)
+    h_settled = float(surface.table.loc[surface.table.step == settled.timestep, "surface_height"].iloc[0])
+
+    # bulk solid fraction of the settled bed
+    por = Porosity(bed_regions(case, h_settled, d)).run([settled])
+    por.save(out, figure=False)
+    phi = dict(zip(por.table.region, por.table.solid_fraction.astype(float)))
+    phi_bulk, phi_section = phi["bulk_core"], phi["cross_section"]
+    rho_p = case.materials.particle.density
+    summary["settled_surface_height_m"] = h_settled
+    summary["bulk_solid_fraction"] = phi_bulk
+    summary["bulk_density_kg_m3"] = phi_bulk * rho_p
+    summary["cross_section_solid_fraction"] = phi_section
+
+    # coordination number in the core, every contact frame
+    def core(frame: Frame) -> np.ndarray:
+        p = frame.positions()
+        top = float(p[:, 2].max()) if frame.n else 0.0
+        return ((np.hypot(p[:, 0], p[:, 1]) < R - 2 * d) & (p[:, 2] > case.geometry.hopper_height + 2 * d)
+                & (p[:, 2] < top - 2 * d))
+
+    if contacts:
+        coord = Coordination(select=core).run(read_frames(atoms_files), contacts)
+        coord.save(out)
+        row = coord.table[(coord.table.step == settled.timestep) & (coord.table.species == "all")]
+        if not row.empty:
+            summary["coordination_settled"] = {k: float(row[k].iloc[0]) for k in ("z_mean", "z_mech")}
+            summary["coordination_convention"] = str(row.convention.iloc[0])
+        by_step = {c.timestep: c for c in contacts}
+        last = None
+        for frame in read_frames(atoms_files):
+            if frame.timestep > open_step and frame.timestep in by_step:
+                last = frame
+        figs = [(settled, "force_chains_settled.png")] + ([(last, "force_chains_discharge.png")] if last else [])
+        for frame, name in figs:
+            if frame.timestep in by_step:
+                force_chain_figure(frame, by_step[frame.timestep], out / name, axis=1, center=0.0, thickness=d)
+
+    # Wr (free-surface speed) against Wf (outlet count) in Wf's steady window
+    area = math.pi * R * R
+    st = surface.table
+    in_window = (st.time >= flow_rate.t_start) & (st.time <= flow_rate.t_end) & (st.surface_height > case.geometry.hopper_height + 3 * d)
+    wr = surface_flow_rate(st.time[in_window], st.surface_height[in_window], area, rho_p, phi_section)
+    summary["flow_rate_surface"] = asdict(wr)
+    summary["flow_rate_surface_over_outlet"] = wr.rate / flow_rate.rate if flow_rate.rate else float("nan")
+    wf_t = rate_series(discharge.time, discharge.outlet_mass)
+    flows = pd.DataFrame({"time": discharge.time, "Wf_kg_s": wf_t})
+    wr_t = -rate_series(st.time, st.surface_height) * area * rho_p * phi_section
+    flows = pd.merge_asof(flows.sort_values("time"), pd.DataFrame({"time": st.time, "Wr_kg_s": wr_t}).sort_values("time"),
+                          on="time", direction="nearest", tolerance=0.5 * dt * run.sample_steps)
+    write_text(out / "flow_rates.csv", flows.to_csv(index=False))
+
+    # Janssen fit of the settled profile
+    static = bands_table[bands_table.z_mid < h_settled]
+    try:
+        fit = fit_janssen(h_settled - static.z_mid, static.static_pressure, phi_section * rho_p, 2 * R,
+                          float(run.derived["gravity"]))
+        summary["janssen_static"] = asdict(fit)
+    except ValueError as exc:
+        summary["janssen_static"] = {"error": str(exc)}
+    return summary

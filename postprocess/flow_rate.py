@@ -1,0 +1,181 @@
+"""Flow rate two ways (paper B) and the Beverloo fit.
+
+* Wf(t): the rate at which mass leaves through the outlet, from the discharged mass (kg) vs
+  time (s) (LIGGGHTS massflow/mesh, or any cumulative count).
+* Wr(t) = -dh/dt * A * rho_p * phi_bulk: from the speed of the free surface h(t) (m) in the
+  cylinder section (area A, m2), with the bulk solid fraction phi_bulk.
+* Steady state: the longest stretch in which the rate stays within a tolerance of its median.
+* Beverloo: W = C rho_b sqrt(g) (D0 - k d)^(5/2), C and k fitted across runs, with standard errors.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import curve_fit
+
+from .analysis_base import FrameAnalysis
+
+
+def rate_series(time, cumulative, window: int = 5) -> np.ndarray:
+    """d(cumulative)/dt (units/s) by a least-squares slope over ``window`` samples centred on each one."""
+    t = np.asarray(time, float)
+    m = np.asarray(cumulative, float)
+    half = max(1, window // 2)
+    out = np.full(len(t), np.nan)
+    for k in range(len(t)):
+        lo, hi = max(0, k - half), min(len(t), k + half + 1)
+        if hi - lo >= 3:
+            tt = t[lo:hi] - t[lo:hi].mean()
+            out[k] = float((tt * (m[lo:hi] - m[lo:hi].mean())).sum() / (tt * tt).sum())
+    return out
+
+
+def steady_window(rate, tolerance: float = 0.15) -> tuple[int, int]:
+    """Index range [i0, i1) of the longest run of samples whose rate is within ``tolerance``
+    (relative) of the median of the positive rates; (0, 0) if there is none."""
+    rate = np.asarray(rate, float)
+    good = np.isfinite(rate) & (rate > 0)
+    if not good.any():
+        return 0, 0
+    med = float(np.median(rate[good]))
+    ok = good & (np.abs(rate - med) <= tolerance * med)
+    best, start = (0, 0), None
+    for k, flag in enumerate(np.append(ok, False)):
+        if flag and start is None:
+            start = k
+        elif not flag and start is not None:
+            if k - start > best[1] - best[0]:
+                best = (start, k)
+            start = None
+    return best
+
+
+@dataclass
+class LinearRate:
+    """Slope of a straight-line fit (units/s) with its standard error, over [t_start, t_end] s."""
+
+    rate: float
+    stderr: float
+    t_start: float
+    t_end: float
+    n_samples: int
+
+
+def linear_rate(time, values) -> LinearRate:
+    t = np.asarray(time, float)
+    v = np.asarray(values, float)
+    if len(t) < 3:
+        return LinearRate(float("nan"), float("nan"), float("nan"), float("nan"), len(t))
+    (slope, icpt), cov = np.polyfit(t, v, 1, cov=True)
+    return LinearRate(float(slope), float(np.sqrt(cov[0, 0])), float(t[0]), float(t[-1]), len(t))
+
+
+class FreeSurface(FrameAnalysis):
+    """Height (m) of the free surface per frame, averaged over the whole cross-section.
+
+    The cross-section (radius ``radius`` about (``x0``, ``y0``)) is cut into ``annuli`` rings
+    of equal area (default: about 8 (R/d)^2 / 64, at least 2). In each ring the solid
+    fraction profile phi(z) is binned (bins of one grain diameter, grain volume at its
+    centre) and the surface is where phi falls below half the ring's bulk value (the median
+    of its filled bins), interpolated between bins. The surface height is the mean over the
+    rings: for a crater or a heap this tracks the volume of the bed, unlike the highest grain.
+    Grains below ``z_min`` (the hopper, the outlet) are ignored.
+    """
+
+    name = "free_surface"
+
+    def __init__(self, radius: float, x0: float = 0.0, y0: float = 0.0, z_min: float = 0.0,
+                 annuli: int | None = None, timestep: float = 1.0):
+        super().__init__()
+        self.radius, self.x0, self.y0, self.z_min, self.annuli, self.dt = radius, x0, y0, z_min, annuli, timestep
+
+    def _single_frame(self, frame, contacts):
+        pos, rad = frame.positions(), frame.radii()
+        r = np.hypot(pos[:, 0] - self.x0, pos[:, 1] - self.y0)
+        keep = (r < self.radius) & (pos[:, 2] > self.z_min)
+        row = {"time": frame.timestep * self.dt, "surface_height": np.nan, "grains": int(keep.sum())}
+        if keep.sum() < 10:
+            return [row]
+        d = 2.0 * float(rad[keep].mean())
+        n = self.annuli or int(np.clip(round((self.radius / d) ** 2 / 8.0), 2, 20))
+        ring = np.minimum((n * (r[keep] / self.radius) ** 2).astype(int), n - 1)
+        z = pos[keep, 2]
+        vol = 4.0 / 3.0 * np.pi * rad[keep] ** 3
+        edges = np.arange(self.z_min, z.max() + 2 * d, d)
+        heights = []
+        for k in range(n):
+            m = ring == k
+            phi = np.histogram(z[m], edges, weights=vol[m])[0] / (np.pi * self.radius ** 2 / n * d)
+            filled = phi[phi > 0]
+            if len(filled) < 2:
+                continue
+            half = 0.5 * float(np.median(filled))
+            above = np.flatnonzero(phi >= half)
+            top = above[-1]
+            centres = 0.5 * (edges[:-1] + edges[1:])
+            if top + 1 < len(phi):   # interpolate the crossing between bin top and top + 1
+                f = (phi[top] - half) / (phi[top] - phi[top + 1])
+                heights.append(centres[top] + f * d)
+            else:
+                heights.append(centres[top])
+        if heights:
+            row["surface_height"] = float(np.mean(heights))
+            row["rings"] = len(heights)
+            row["surface_spread"] = float(np.max(heights) - np.min(heights))
+        return [row]
+
+    def figure(self, path):
+        from .figures import line_figure
+        return line_figure(self.table, x="time", y="surface_height", path=path, xlabel="time (s)",
+                           ylabel="free-surface height (m)")
+
+
+def surface_flow_rate(time, height, area: float, particle_density: float, bulk_solid_fraction: float) -> LinearRate:
+    """Wr (kg/s) from a straight-line fit of the free-surface height: -dh/dt A rho_p phi_bulk."""
+    fit = linear_rate(time, height)
+    scale = area * particle_density * bulk_solid_fraction
+    return LinearRate(-fit.rate * scale, fit.stderr * scale, fit.t_start, fit.t_end, fit.n_samples)
+
+
+def beverloo(D0, d, C: float, k: float, rho_b, g: float = 9.81):
+    """Beverloo mass flow rate (kg/s) of a circular orifice of diameter D0 (m), grains of diameter d (m)."""
+    span = np.maximum(np.asarray(D0, float) - k * np.asarray(d, float), 0.0)
+    return C * np.asarray(rho_b, float) * np.sqrt(g) * span ** 2.5
+
+
+@dataclass
+class BeverlooFit:
+    C: float
+    C_stderr: float
+    k: float
+    k_stderr: float
+    n_runs: int
+    rms_relative_residual: float
+
+
+def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None) -> BeverlooFit:
+    """Fit C and k of Beverloo's law to flow rates ``W`` (kg/s) of runs with orifice diameters
+    ``D0`` (m), grain diameters ``d`` (m) and bulk densities ``rho_b`` (kg/m3); needs >= 3 runs
+    with at least 2 different D0/d. Standard errors from the fit covariance (scaled by the
+    residuals, or by ``W_stderr`` when given)."""
+    D0, d, W, rho_b = (np.asarray(a, float) * np.ones(len(np.atleast_1d(W))) for a in (D0, d, W, rho_b))
+    if len(W) < 3 or len(np.unique(np.round(D0 / d, 9))) < 2:
+        raise ValueError("a Beverloo fit needs at least 3 runs and 2 different orifice/grain size ratios")
+
+    # W^(2/5) is linear in D0 and d: (W / (C rho_b sqrt g))^(2/5) = D0 - k d; start from that
+    y = (W / (rho_b * np.sqrt(g))) ** 0.4
+    A = np.column_stack([D0, -d])
+    (a, b), *_ = np.linalg.lstsq(A, y, rcond=None)
+    c0, k0 = (max(a, 1e-6)) ** 2.5, b / max(a, 1e-6)
+
+    def model(X, C, k):
+        return beverloo(X[0], X[1], C, k, X[2], g)
+
+    sigma = None if W_stderr is None else np.asarray(W_stderr, float)
+    popt, pcov = curve_fit(model, np.vstack([D0, d, rho_b]), W, p0=[c0, k0], sigma=sigma,
+                           absolute_sigma=sigma is not None, maxfev=20000)
+    res = (W - model(np.vstack([D0, d, rho_b]), *popt)) / W
+    err = np.sqrt(np.diag(pcov)) if np.all(np.isfinite(pcov)) else np.array([np.nan, np.nan])
+    return BeverlooFit(float(popt[0]), float(err[0]), float(popt[1]), float(err[1]), len(W),
+                       float(np.sqrt(np.mean(res ** 2))))
