@@ -25,6 +25,8 @@ class FrameSummary(FrameAnalysis):
 
     def _single_frame(self, frame, contacts):
         row = {"particles": frame.n}
+        if contacts is not None:
+            row["contacts"] = contacts.n
         if frame.n == 0:
             return [row]
         pos = frame.positions()
@@ -38,8 +40,6 @@ class FrameSummary(FrameAnalysis):
                 row["kinetic_energy"] = float(0.5 * (frame.column("mass") * v2).sum())
         if "mass" in frame.data:
             row["mass"] = float(frame.column("mass").sum())
-        if contacts is not None:
-            row["contacts"] = contacts.n
         return [row]
 
     def figure(self, path):

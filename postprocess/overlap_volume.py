@@ -23,8 +23,9 @@ def sphere_sphere_overlap(R, r, d):
     out[inside] = sphere_volume(np.minimum(R, r)[inside])
     lens = (d < R + r) & ~inside
     Rl, rl, dl = R[lens], r[lens], d[lens]
-    out[lens] = (np.pi * (Rl + rl - dl) ** 2
-                 * (dl ** 2 + 2 * dl * rl - 3 * rl ** 2 + 2 * dl * Rl + 6 * Rl * rl - 3 * Rl ** 2) / (12 * dl))
+    # pi (R + r - d)^2 (d^2 + 2d(R + r) - 3(R - r)^2) / (12 d), written so that nothing cancels
+    # when d is tiny (then |R - r| < d is tinier still)
+    out[lens] = np.pi * (Rl + rl - dl) ** 2 * (dl + 2 * (Rl + rl) - 3 * (Rl - rl) ** 2 / dl) / 12.0
     return out
 
 

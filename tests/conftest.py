@@ -9,6 +9,22 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = ROOT / "decks" / "quick.yaml"
+SMALL = ROOT / "tests" / "data" / "small_silo.yaml"
+
+
+@pytest.fixture(scope="session")
+def small_run(tmp_path_factory):
+    """One real LIGGGHTS run of tests/data/small_silo.yaml (about a minute), shared by the
+    engine and post-processing tests: (case, folder, run record, results summary)."""
+    from postprocess.first_results import analyse
+    from siloflow.case import load_case
+    from siloflow.engine import LiggghtsEngine
+
+    case = load_case(SMALL)
+    folder = tmp_path_factory.mktemp("engine") / "small"
+    record = LiggghtsEngine().run(case, folder)
+    summary = analyse(folder)
+    return case, folder, record, summary
 
 
 @pytest.fixture

@@ -1,0 +1,256 @@
+"""Frame analyses on constructed data with known answers: lattices, cut spheres, Janssen
+columns, flow-rate series, Beverloo data."""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from postprocess.coordination import Coordination, coordination, local_pairs, overlap_pairs
+from postprocess.dumps import Frame
+from postprocess.flow_rate import (FreeSurface, beverloo, fit_beverloo, rate_series, steady_window,
+                                   surface_flow_rate)
+from postprocess.force_chains import chain_segments, force_chain_figure
+from postprocess.janssen import compare_with_measurement, fit_janssen, janssen_pressure, pressure_error_w
+from postprocess.overlap_volume import (circle_circle_overlap, sphere_cylinder_overlap, sphere_sphere_overlap,
+                                        sphere_volume)
+from postprocess.porosity import XI_A, MeasureRegion, Porosity, porosity_2d_to_3d, relative_density
+
+
+def frame_of(positions, radii, **extra) -> Frame:
+    n = len(positions)
+    data = pd.DataFrame({"id": np.arange(1, n + 1), "type": np.ones(n, int), "x": positions[:, 0],
+                         "y": positions[:, 1], "z": positions[:, 2], "radius": radii, **extra})
+    lo, hi = positions.min(axis=0) - radii.max(), positions.max(axis=0) + radii.max()
+    return Frame(0, np.column_stack([lo, hi]), data, source="constructed")
+
+
+def lattice(kind: str, cells: int, a: float = 1.0):
+    base = {"sc": [(0, 0, 0)], "fcc": [(0, 0, 0), (0.5, 0.5, 0), (0.5, 0, 0.5), (0, 0.5, 0.5)]}[kind]
+    cell = np.array(list(itertools.product(range(cells), repeat=3)), float)
+    pos = (cell[:, None, :] + np.array(base)[None, :, :]).reshape(-1, 3) * a
+    r = {"sc": 0.5 * a, "fcc": a / (2 * math.sqrt(2))}[kind]
+    return pos, np.full(len(pos), r)
+
+
+# ---------------------------------------------------------------- overlap volumes
+
+def monte_carlo_inside(rng, n, inside_fn, r=1.0):
+    p = rng.uniform(-r, r, (n, 3))
+    p = p[(p ** 2).sum(axis=1) < r * r]
+    return inside_fn(p).mean() * sphere_volume(r), 1.0 / math.sqrt(max(inside_fn(p).sum(), 1))
+
+
+@pytest.mark.parametrize("R,d", [(1.5, 1.0), (0.7, 0.9), (3.0, 2.5), (0.4, 0.2)])
+def test_sphere_sphere_overlap_against_monte_carlo(R, d):
+    rng = np.random.default_rng(5)
+    mc, rel = monte_carlo_inside(rng, 2_000_000, lambda p: ((p - [d, 0, 0]) ** 2).sum(axis=1) < R * R)
+    assert sphere_sphere_overlap(R, 1.0, d) == pytest.approx(mc, rel=4 * rel)
+
+
+def test_overlap_limits():
+    assert sphere_sphere_overlap(2.0, 1.0, 0.5) == pytest.approx(sphere_volume(1.0))   # inside
+    assert sphere_sphere_overlap(1.0, 1.0, 2.0) == 0.0                                  # touching
+    assert sphere_sphere_overlap(1.0, 1.0, 1e-12) == pytest.approx(sphere_volume(1.0))
+    assert circle_circle_overlap(1.0, 1.0, 0.0) == pytest.approx(math.pi)
+    assert circle_circle_overlap(1.0, 1.0, 1.0) == pytest.approx(2 * math.pi / 3 - math.sqrt(3) / 2)
+    # a sphere half in a half-space (huge cylinder through its centre), or cut by a plane
+    assert sphere_cylinder_overlap(3.0, 1.0, 0.0, -5.0, 0.0) == pytest.approx(0.5 * sphere_volume(1.0), rel=1e-12)
+    assert sphere_cylinder_overlap(3.0, 1.0, 0.5, -5.0, 5.0) == pytest.approx(sphere_volume(1.0), rel=1e-12)
+
+
+@pytest.mark.parametrize("Rc,d,t0,t1", [(1.2, 1.5, -0.3, 2.0), (0.5, 0.3, -2.0, 0.4), (0.9, 0.2, -0.5, 0.5)])
+def test_sphere_cylinder_overlap_against_monte_carlo(Rc, d, t0, t1):
+    rng = np.random.default_rng(6)
+    mc, rel = monte_carlo_inside(
+        rng, 3_000_000, lambda p: (np.hypot(p[:, 0] - d, p[:, 1]) < Rc) & (p[:, 2] > t0) & (p[:, 2] < t1))
+    assert sphere_cylinder_overlap(Rc, 1.0, d, t0, t1) == pytest.approx(mc, rel=4 * rel)
+
+
+# ---------------------------------------------------------------- porosity
+
+@pytest.mark.parametrize("kind,expected", [("sc", 1 - math.pi / 6), ("fcc", 1 - math.pi / (3 * math.sqrt(2)))])
+def test_lattice_porosity_in_sphere_and_cylinder(kind, expected):
+    pos, r = lattice(kind, 14)
+    c = (6.73, 7.11, 6.91)  # off the lattice symmetry: the boundary cuts grains
+    regions = [MeasureRegion("s", "sphere", c, 4.3),
+               MeasureRegion("c", "cylinder", c, 3.7, axis=2, t0=3.1, t1=10.4)]
+    table = Porosity(regions).run([frame_of(pos, r)]).table.set_index("region")
+    assert table.loc["s", "porosity"] == pytest.approx(expected, abs=0.004)
+    assert table.loc["c", "porosity"] == pytest.approx(expected, abs=0.004)
+
+
+def test_porosity_counts_the_part_of_a_cut_sphere_not_its_centre():
+    # one sphere of radius 1 whose centre lies just outside the measurement sphere
+    frame = frame_of(np.array([[2.2, 0.0, 0.0]]), np.array([1.0]))
+    region = MeasureRegion("m", "sphere", (0.0, 0.0, 0.0), 2.0)
+    phi = Porosity([region]).run([frame]).table.solid_fraction.iloc[0]
+    assert phi * region.measure == pytest.approx(sphere_sphere_overlap(2.0, 1.0, 2.2))
+    assert phi > 0
+
+
+def test_circle_porosity_of_a_hexagonal_layer_and_its_3d_conversion():
+    # a hexagonal layer of spheres (radius 1) cut through their centres: area fraction pi/(2 sqrt 3)
+    rows = np.array([(2 * i + (j % 2), math.sqrt(3) * j, 0.0) for i in range(30) for j in range(30)], float)
+    frame = frame_of(rows, np.ones(len(rows)))
+    region = MeasureRegion("c", "circle", (30.3, 25.7, 0.0), 9.0, axis=2, plane=0.0)
+    eps2 = Porosity([region]).run([frame]).table.porosity.iloc[0]
+    assert eps2 == pytest.approx(1 - math.pi / (2 * math.sqrt(3)), abs=0.006)
+    # the lattice-consistent reading maps hexagonal discs onto FCC spheres exactly
+    assert porosity_2d_to_3d(1 - math.pi / (2 * math.sqrt(3)), 0.0, "hexagonal") == pytest.approx(
+        1 - math.pi / (3 * math.sqrt(2)), rel=1e-12)
+
+
+def test_2d_to_3d_as_printed_limits():
+    assert porosity_2d_to_3d(0.2, 0.0) == pytest.approx(1 - XI_A * 0.8)
+    assert porosity_2d_to_3d(1.0, 1.0) == 1.0                       # no solid stays no solid
+    values = [porosity_2d_to_3d(0.3, dr) for dr in (0.0, 0.5, 1.0)]
+    assert values[0] > values[1] > values[2]                        # denser (higher Dr) -> lower porosity
+    with pytest.raises(ValueError, match="negative 3D porosity"):
+        porosity_2d_to_3d(0.05, 1.0)                                # outside the printed formula's range
+    with pytest.raises(ValueError, match="within"):
+        porosity_2d_to_3d(0.2, 1.5)
+    assert relative_density(0.6, 0.5, 0.9) == pytest.approx(0.75)
+
+
+# ---------------------------------------------------------------- coordination
+
+@pytest.mark.parametrize("kind,z", [("sc", 6), ("fcc", 12)])
+def test_lattice_coordination(kind, z):
+    pos, r = lattice(kind, 6)
+    inner = np.all((pos > 1.0) & (pos < 4.0), axis=1)
+    frame = frame_of(pos, r)
+    table = Coordination(select=lambda f: inner, tolerance=1e-6).run([frame]).table
+    row = table[table.species == "all"].iloc[0]
+    assert row.z_mean == z and row.z_mech == z and row.rattlers_0 == 0
+    assert row.source == "overlaps" and row.convention == "per_sphere"
+
+
+def test_rattler_correction_and_clumps_counted_per_body():
+    # chain 0-1-2-3-5 plus isolated 4: z = [1, 2, 2, 2, 0, 1]
+    i, j = np.array([0, 1, 2, 3]), np.array([1, 2, 3, 5])
+    res = coordination(6, i, j)
+    assert res["z_mean"] == pytest.approx(8 / 6)
+    assert (res["rattlers_0"], res["rattlers_1"]) == (1, 2)
+    assert res["z_mech"] == pytest.approx((8 - 2) / (6 - 1 - 2))
+    # two 3-sphere clumps (bodies 10 and 20) touching through two sub-sphere contacts, plus
+    # contacts inside each clump: one body-body contact
+    body = np.array([10, 10, 10, 20, 20, 20])
+    i, j = np.array([0, 1, 0, 2, 3]), np.array([1, 2, 3, 4, 4])
+    res = coordination(6, i, j, body=body)
+    assert res["contacts"] == 1 and res["grains"] == 2 and res["z_mean"] == 1.0
+
+
+def test_contacts_from_dump_local_match_overlaps():
+    pos, r = lattice("sc", 4)
+    frame = frame_of(pos, r)
+    i, j = overlap_pairs(pos, r, 1e-6)
+    ids = frame.column("id")
+    contacts = Frame(0, frame.box, pd.DataFrame({"id1": ids[i], "id2": ids[j], "periodic": 0,
+                                                  "fx": 0.0, "fy": 0.0, "fz": np.linspace(0.1, 1, len(i))}),
+                     kind="entries")
+    li, lj = local_pairs(frame, contacts)
+    assert sorted(zip(li, lj)) == sorted(zip(i, j))
+    table = Coordination().run([frame], [contacts]).table
+    assert table.source.iloc[0] == "dump_local"
+    assert table.contacts.iloc[0] == 3 * 4 * 4 * 3
+
+
+def test_force_chain_segments_and_figure(tmp_path):
+    pos, r = lattice("sc", 4)
+    frame = frame_of(pos, r)
+    i, j = overlap_pairs(pos, r, 1e-6)
+    ids = frame.column("id")
+    branch = pos[j] - pos[i]
+    fn = np.arange(1, len(i) + 1, dtype=float)
+    contacts = Frame(0, frame.box, pd.DataFrame({"id1": ids[i], "id2": ids[j], "periodic": 0,
+                                                  "fx": branch[:, 0] * fn, "fy": branch[:, 1] * fn,
+                                                  "fz": branch[:, 2] * fn}), kind="entries")
+    seg, force, _ = chain_segments(frame, contacts, axis=1, center=1.0, thickness=0.5)
+    assert len(seg) == 2 * 4 * 3              # the y = 1 layer: 4x4 grid, 24 in-plane bonds
+    bonds = {(int(a), int(b)): f for a, b, f in zip(i, j, fn)}
+    assert sorted(force) == sorted(f for (a, b), f in bonds.items() if pos[a, 1] == 1.0 and pos[b, 1] == 1.0)
+    path = force_chain_figure(frame, contacts, tmp_path / "chains.png", axis=1, center=1.0, thickness=0.5)
+    assert path.stat().st_size > 1000
+
+
+# ---------------------------------------------------------------- wall pressure
+
+def test_janssen_fit_recovers_the_k_and_wall_friction_that_generated_the_column():
+    rho_b, D = 1500.0, 0.05
+    depth = np.linspace(0.01, 0.4, 10)
+    p = janssen_pressure(depth, rho_b, 9.81, D, mu_w=0.45, K=0.55)
+    fit = fit_janssen(depth, p, rho_b, D)
+    assert fit.K == pytest.approx(0.55, rel=1e-6) and fit.mu_w == pytest.approx(0.45, rel=1e-6)
+    assert fit.saturated
+    noisy = p * (1 + 0.02 * np.random.default_rng(7).standard_normal(len(p)))
+    fit = fit_janssen(depth, noisy, rho_b, D)
+    assert fit.K == pytest.approx(0.55, rel=0.15) and fit.mu_w == pytest.approx(0.45, rel=0.1)
+    # a hydrostatic-like column (no wall friction mobilised): flagged as not saturated
+    fit = fit_janssen(depth, 0.55 * rho_b * 9.81 * depth, rho_b, D)
+    assert not fit.saturated and fit.K == pytest.approx(0.55, rel=0.05)
+
+
+def test_eq34_error_and_table3_comparison():
+    t = np.linspace(0, 10, 101)
+    measured = 1000 + 200 * np.sin(t)
+    assert pressure_error_w(t, 1.1 * measured, t, measured) == pytest.approx(0.1)
+    assert pressure_error_w(t, measured, t, measured) == 0.0
+    t_open = 2.0
+    bands = pd.DataFrame({"time": np.concatenate([t + t_open] * 2), "band": np.repeat([0, 1], len(t)),
+                          "pressure": np.concatenate([1.2 * measured, 0.5 * measured])})
+    table = compare_with_measurement(bands, pd.DataFrame({"time": t, "band_0": measured, "band_1": measured}),
+                                     t_open).set_index("band")
+    assert table.loc[0, "W"] == pytest.approx(0.2) and table.loc[1, "W"] == pytest.approx(0.5)
+    assert table.loc[0, "relative_difference"] == pytest.approx(0.2)
+    with pytest.raises(ValueError, match="band_<k>"):
+        compare_with_measurement(bands, pd.DataFrame({"time": t, "point 1": measured}), t_open)
+
+
+# ---------------------------------------------------------------- flow rates
+
+def test_rate_series_and_steady_window():
+    t = np.linspace(0, 10, 201)
+    rate = np.where(t < 2, 0.5 * t, 1.0) * np.where(t > 8, 0.3, 1.0)
+    mass = np.concatenate([[0], np.cumsum(0.5 * (rate[1:] + rate[:-1]) * np.diff(t))])
+    w = rate_series(t, mass, window=5)
+    i0, i1 = steady_window(w, tolerance=0.05)
+    assert t[i0] == pytest.approx(2.0, abs=0.2) and t[i1 - 1] == pytest.approx(8.0, abs=0.2)
+    assert np.nanmedian(w[i0:i1]) == pytest.approx(1.0, rel=1e-6)
+
+
+def test_free_surface_of_a_bed_with_a_crater_tracks_its_volume():
+    rng = np.random.default_rng(8)
+    R, r = 0.05, 0.002
+    n = 40000
+    # uniform random "grains" filling a cylinder up to h(rho) = 0.1 - 0.03 (1 - rho^2 / R^2) (a crater)
+    rho = R * np.sqrt(rng.random(n))
+    th = rng.uniform(0, 2 * np.pi, n)
+    top = 0.1 - 0.03 * (1 - (rho / R) ** 2)
+    z = rng.random(n) * top
+    frame = frame_of(np.column_stack([rho * np.cos(th), rho * np.sin(th), z]), np.full(n, r))
+    h = FreeSurface(radius=R, annuli=5).run([frame]).table.surface_height.iloc[0]
+    mean_height = 0.1 - 0.03 * 0.5                                     # volume / area of the bed
+    assert h == pytest.approx(mean_height, abs=2 * r)
+
+
+def test_surface_flow_rate_sign_and_scale():
+    t = np.linspace(0, 1, 11)
+    fit = surface_flow_rate(t, 0.3 - 0.01 * t, area=0.02, particle_density=2500, bulk_solid_fraction=0.6)
+    assert fit.rate == pytest.approx(0.01 * 0.02 * 2500 * 0.6)
+
+
+def test_beverloo_fit_recovers_c_and_k():
+    rng = np.random.default_rng(9)
+    D0 = np.array([0.02, 0.03, 0.04, 0.05, 0.06, 0.03, 0.05])
+    d = np.array([0.003, 0.003, 0.003, 0.004, 0.004, 0.002, 0.002])
+    W = beverloo(D0, d, 0.58, 1.5, 1500.0) * (1 + 0.01 * rng.standard_normal(len(D0)))
+    fit = fit_beverloo(D0, d, W, 1500.0)
+    assert fit.C == pytest.approx(0.58, abs=3 * fit.C_stderr + 1e-3)
+    assert fit.k == pytest.approx(1.5, abs=3 * fit.k_stderr + 1e-3)
+    assert 0 < fit.C_stderr < 0.05 and fit.rms_relative_residual < 0.02
+    with pytest.raises(ValueError, match="at least 3 runs"):
+        fit_beverloo(D0[:2], d[:2], W[:2], 1500.0)

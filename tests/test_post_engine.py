@@ -1,0 +1,114 @@
+"""Post-processing on real LIGGGHTS output: the small siloflow run (shared with
+test_engine_run.py) and two unmodified LIGGGHTS tutorials from liggghts-doc."""
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from postprocess.dumps import read_dump
+from siloflow.cli import app
+
+from test_dumps import compare_with_mdanalysis
+
+TUTORIALS = Path("/usr/share/doc/liggghts/examples/LIGGGHTS/Tutorials_public")
+pytestmark = [pytest.mark.engine,
+              pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS not installed "
+                                 "(make install-engine); CI installs it, so CI never skips this")]
+
+
+def test_settled_bed_solid_fraction_and_coordination(small_run):
+    case, folder, record, summary = small_run
+    fa = summary["frame_analyses"]
+    assert 0.55 < fa["bulk_solid_fraction"] < 0.65
+    # the cross-section, wall layers included, is looser than the core
+    assert fa["cross_section_solid_fraction"] < fa["bulk_solid_fraction"]
+    z = fa["coordination_settled"]
+    assert 3.0 < z["z_mean"] < 7.0 and z["z_mech"] >= z["z_mean"]
+    coord = pd.read_csv(folder / "results" / "coordination.csv")
+    assert coord.step.nunique() == fa["dump_frames"]                # contact count over time
+    for name in ("force_chains_settled.png", "force_chains_discharge.png", "coordination.png",
+                 "free_surface.png", "porosity.parquet", "flow_rates.csv"):
+        assert (folder / "results" / name).is_file(), name
+
+
+def test_outlet_and_free_surface_flow_rates_agree(small_run):
+    """Wf (mass through the outlet) and Wr (free-surface speed x area x rho_p x phi) in steady flow."""
+    case, folder, record, summary = small_run
+    wf = summary["flow_rate"]["rate"]
+    wr = summary["frame_analyses"]["flow_rate_surface"]["rate"]
+    assert wf > 0 and wr == pytest.approx(wf, rel=0.10)
+
+
+def test_janssen_fit_of_the_settled_profile_is_reported(small_run):
+    fit = small_run[3]["frame_analyses"]["janssen_static"]
+    assert "K" in fit, fit
+    assert math.isfinite(fit["K"]) and math.isfinite(fit["mu_w"]) and fit["n_points"] >= 3
+
+
+def test_post_on_the_run_dumps_as_foreign_files(small_run, tmp_path):
+    case, folder, record, summary = small_run
+    dumps = folder / "output" / "dumps"
+    result = CliRunner().invoke(app, ["post", str(dumps / "dump.*.txt"), "--contacts", str(dumps / "contacts.*.txt"),
+                                      "--contact-keywords", "pos,id,force,force_normal", "-o", str(tmp_path / "p")])
+    assert result.exit_code == 0, result.output
+    s = json.loads((tmp_path / "p" / "summary.json").read_text())
+    assert s["coordination_last"]["source"] == "dump_local"
+    frames = pd.read_csv(tmp_path / "p" / "frames.csv")
+    # grains deleted at the outlet: the count falls during the discharge
+    assert frames.particles.iloc[-1] < frames.particles.max()
+    assert frames.contacts.notna().all()
+
+
+def run_tutorial(tmp_path, name: str, deck: str) -> Path:
+    source = TUTORIALS / name
+    assert source.is_dir(), f"{source} missing: apt-get install liggghts-doc (make install-engine does)"
+    work = tmp_path / Path(name).name
+    shutil.copytree(source, work)
+    (work / "post" / "restart").mkdir(parents=True, exist_ok=True)
+    done = subprocess.run(["liggghts", "-in", deck], cwd=work, capture_output=True, timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:]
+    return work
+
+
+def test_post_on_an_unmodified_tutorial_text_dump(tmp_path):
+    """ParScale/fluidizedBedTempParScale's in.liggghts_init writes a plain dump custom."""
+    work = run_tutorial(tmp_path, "ParScale/fluidizedBedTempParScale", "in.liggghts_init")
+    dump = work / "post" / "dump.liggghts_init"
+    frames = read_dump(dump)
+    assert len(frames) == 50 and [f.timestep for f in frames[:2]] == [4000, 8000]
+    for f in frames:
+        p = f.positions()
+        # x, y periodic (a grain may sit a little outside until re-neighbouring); z walls
+        assert f.n == 10 and np.all((p[:, 2] >= f.box[2, 0]) & (p[:, 2] <= f.box[2, 1]))
+        assert np.all((p[:, :2] > f.box[:2, 0] - 1e-3) & (p[:, :2] < f.box[:2, 1] + 1e-3))
+        assert np.allclose(f.radii(), 1e-3)
+    assert compare_with_mdanalysis(dump) == 50
+    result = CliRunner().invoke(app, ["post", str(dump), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert s["frames"] == 50 and s["particles_last"] == 10
+    assert "porosity_skipped" in s                # ten grains: no meaningful measurement sphere
+
+
+def test_post_on_an_unmodified_tutorial_vtk_packing(tmp_path):
+    """packing/in.packing grows 2 sizes of grains to a volume fraction of 0.67 of its box
+    (0.1 x 0.1 x 0.15 m) and writes dump custom/vtk files."""
+    work = run_tutorial(tmp_path, "packing", "in.packing")
+    result = CliRunner().invoke(app, ["post", str(work / "post" / "packing_[0-9]*.vtk"), "--every", "10",
+                                      "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    frames = pd.read_csv(tmp_path / "out" / "frames.csv")
+    box = 0.1 * 0.1 * 0.15
+    assert frames.solid_volume.iloc[-1] / box == pytest.approx(0.67, rel=0.02)
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    phi = 1 - s["porosity_last"]["sphere_1"]
+    assert 0.62 < phi < 0.80                      # the interior, away from the box walls
+    assert 4.0 < s["coordination_last"]["z_mean"] < 9.0
