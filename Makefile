@@ -38,6 +38,7 @@ test-fast: $(VENV)/.installed
 
 bench: install
 	$(PY) benchmarks/wrapper_overhead.py
+	$(PY) benchmarks/dump_reader_speed.py
 
 clean:
 	rm -rf runs .pytest_cache

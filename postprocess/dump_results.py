@@ -53,6 +53,28 @@ def bed_regions(case, surface: float, d: float) -> list[MeasureRegion]:
             MeasureRegion("cross_section", "cylinder", (0.0, 0.0, 0.0), g.radius, axis=2, t0=z0, t1=z1)]
 
 
+def case_regions(case) -> list[MeasureRegion]:
+    """The case's own measurement regions (``analysis.porosity_regions``)."""
+    axes = {"x": 0, "y": 1, "z": 2}
+    return [MeasureRegion(r.name, r.shape, tuple(r.center), r.radius, axes[r.axis], r.t0, r.t1, r.plane)
+            for r in case.analysis.porosity_regions]
+
+
+def case_regions_porosity(case, atoms_files, settled: Frame, out) -> dict:
+    """Porosity in the case's regions over all frames (porosity_regions.csv); the settled values."""
+    a = case.analysis
+    conversion = None
+    if a.relative_density is not None:
+        conversion = {"relative_density": a.relative_density, "reading": a.porosity_conversion}
+    analysis = Porosity(case_regions(case), conversion)
+    analysis.name = "porosity_regions"
+    analysis.run(read_frames(atoms_files))
+    analysis.save(out)
+    at = analysis.table[analysis.table.step == settled.timestep].set_index("region")
+    cols = [c for c in ("porosity", "porosity_3d") if c in at]
+    return {name: {c: float(at.loc[name, c]) for c in cols} for name in at.index}
+
+
 def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_rate) -> dict:
     """Run the frame analyses of a run folder; write tables and figures to ``out``; return a summary."""
     atoms_files, contact_files = _dump_sources(run.folder)
@@ -89,6 +111,8 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     summary["bulk_solid_fraction"] = phi_bulk
     summary["bulk_density_kg_m3"] = phi_bulk * rho_p
     summary["cross_section_solid_fraction"] = phi_section
+    if case.analysis.porosity_regions:
+        summary["porosity_regions"] = case_regions_porosity(case, atoms_files, settled, out)
 
     # coordination number in the core, every contact frame
     def core(frame: Frame) -> np.ndarray:

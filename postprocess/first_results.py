@@ -147,6 +147,60 @@ def analyse(folder, measured_pressure=None) -> dict:
         write_text(out / "pressure_comparison.csv", comparison.to_csv(index=False))
         summary["pressure_comparison"] = comparison.to_dict(orient="records")
     write_json(out / "summary.json", summary)
+    write_text(out / "report.md", report_text(summary, run))
     from .figures import first_results_figure  # matplotlib only when figures are drawn
     first_results_figure(bands, dis, table, t_open, out / "first_results.png")
     return summary
+
+
+def _fmt(value, spec: str = ".4g") -> str:
+    try:
+        return format(float(value), spec)
+    except (TypeError, ValueError):
+        return "n/a"
+
+
+def report_text(summary: dict, run: RunOutputs) -> str:
+    """A short human-readable report of a run's results (Markdown)."""
+    fb, fr = summary["force_balance"], summary["flow_rate"]
+    lines = [f"# Run report: {run.folder.name}", "",
+             f"- particles inserted: {summary['particles_inserted']}, mass {_fmt(summary['initial_mass_kg'] * 1000)} g",
+             f"- settled at KE/PE = {_fmt(summary['settled_ke_pe'], '.2e')}; outlet opened at t = "
+             f"{_fmt(summary['time_open_s'])} s",
+             f"- force balance of the settled bed: walls + bottom carry {_fmt(fb['ratio'], '.4f')} x the weight "
+             f"({_fmt(fb['wall_friction_share'], '.2f')} of it by wall friction)",
+             f"- steady flow rate Wf = {_fmt(fr['rate'] * 1000)} +/- {_fmt(fr['stderr'] * 1000, '.2g')} g/s "
+             f"(t = {_fmt(fr['t_start'], '.3g')}-{_fmt(fr['t_end'], '.3g')} s, r2 {_fmt(fr['r2'], '.4f')})",
+             f"- discharged {_fmt(summary['discharged_mass_kg'] * 1000)} g; {_fmt(summary['mass_in_silo_end_kg'] * 1000)} g left"]
+    fa = summary.get("frame_analyses", {})
+    if "bulk_solid_fraction" in fa:
+        lines += [f"- settled bed: bulk solid fraction {_fmt(fa['bulk_solid_fraction'], '.3f')} (core), "
+                  f"{_fmt(fa['cross_section_solid_fraction'], '.3f')} (whole cross-section); free surface at "
+                  f"{_fmt(fa['settled_surface_height_m'] * 1000)} mm"]
+        if "coordination_settled" in fa:
+            c = fa["coordination_settled"]
+            lines += [f"- coordination number (core, {fa['coordination_convention']}): {_fmt(c['z_mean'], '.2f')}, "
+                      f"mechanical {_fmt(c['z_mech'], '.2f')}"]
+        wr = fa["flow_rate_surface"]
+        lines += [f"- free-surface flow rate Wr = {_fmt(wr['rate'] * 1000)} g/s = "
+                  f"{_fmt(fa['flow_rate_surface_over_outlet'], '.3f')} x Wf"]
+        j = fa.get("janssen_static", {})
+        if "K" in j:
+            lines += [f"- Janssen fit of the settled profile: K = {_fmt(j['K'], '.3f')}, mu_w = {_fmt(j['mu_w'], '.3f')} "
+                      f"({'saturated' if j['saturated'] else 'not saturated: only K near the surface is resolved'}, "
+                      f"r2 {_fmt(j['r2'], '.3f')})"]
+    else:
+        lines += [f"- frame analyses: {fa.get('dumps', 'none')}"]
+    lines += ["", "| band | z (m) | static p (Pa) | max dynamic p (Pa) | C_h |", "|---|---|---|---|---|"]
+    for b in summary["bands"]:
+        lines.append(f"| {b['band']} | {_fmt(b['z_mid'], '.3f')} | {_fmt(b['static_pressure'], '.1f')} | "
+                     f"{_fmt(b['max_dynamic_pressure'], '.1f')} | {_fmt(b['discharge_factor'], '.2f')} |")
+    if "pressure_comparison" in summary:
+        lines += ["", "| band | max measured (Pa) | max simulated (Pa) | difference | W (Eq. 34) |", "|---|---|---|---|---|"]
+        for r in summary["pressure_comparison"]:
+            lines.append(f"| {r['band']} | {_fmt(r['max_measured_Pa'], '.1f')} | {_fmt(r['max_simulated_Pa'], '.1f')} | "
+                         f"{_fmt(r['relative_difference'], '+.1%')} | {_fmt(r['W'], '.1%')} |")
+    warnings = summary.get("engine_warnings") or []
+    if warnings:
+        lines += ["", f"Engine warnings ({len(warnings)}): see summary.json"]
+    return "\n".join(lines) + "\n"

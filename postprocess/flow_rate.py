@@ -179,3 +179,36 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None) -> BeverlooFit
     err = np.sqrt(np.diag(pcov)) if np.all(np.isfinite(pcov)) else np.array([np.nan, np.nan])
     return BeverlooFit(float(popt[0]), float(err[0]), float(popt[1]), float(err[1]), len(W),
                        float(np.sqrt(np.mean(res ** 2))))
+
+
+def beverloo_table(folders) -> "pd.DataFrame":
+    """One row per analysed run folder: orifice diameter D0, grain diameter d (m), bulk density
+    rho_b (kg/m3, measured in the settled bed when dumps exist, else packing fraction x rho_p),
+    steady flow rate W and its standard error (kg/s), gravity (m/s2)."""
+    import json
+    from pathlib import Path
+
+    import pandas as pd
+
+    from siloflow.case import load_case
+    from siloflow.errors import ReadError
+
+    rows = []
+    for folder in folders:
+        folder = Path(folder)
+        try:
+            summary = json.loads((folder / "results" / "summary.json").read_text())
+        except (OSError, ValueError):
+            raise ReadError(f"{folder}: no results/summary.json (run `siloflow post {folder}` first)") from None
+        case = load_case(folder / "case.yaml")
+        if case.particles.kind != "spheres":
+            raise ReadError(f"{folder}: Beverloo's d needs monodisperse spheres")
+        fa = summary.get("frame_analyses", {})
+        rho_b = fa.get("bulk_density_kg_m3") or case.fill.packing_fraction * case.materials.particle.density
+        rate = summary["flow_rate"]
+        if not (rate["rate"] and np.isfinite(rate["rate"])):
+            raise ReadError(f"{folder}: no steady flow rate in its results")
+        rows.append({"run": str(folder), "D0": 2 * case.geometry.outlet_radius, "d": 2 * case.particles.radius,
+                     "rho_b": float(rho_b), "W": rate["rate"], "W_stderr": rate["stderr"], "g": case.gravity,
+                     "rho_b_source": "measured" if fa.get("bulk_density_kg_m3") else "case packing fraction"})
+    return pd.DataFrame(rows)

@@ -144,7 +144,11 @@ class Porosity(FrameAnalysis):
             phi = solid / region.measure
             row = {"region": region.name, "shape": region.shape, "solid_fraction": phi, "porosity": 1.0 - phi}
             if self.conversion and region.shape == "circle":
-                row["porosity_3d"] = float(porosity_2d_to_3d(1.0 - phi, **self.conversion))
+                try:
+                    row["porosity_3d"] = float(porosity_2d_to_3d(1.0 - phi, **self.conversion))
+                except ValueError as exc:   # outside the formula's range: say so in the table
+                    row["porosity_3d"] = float("nan")
+                    row["note"] = str(exc)
             rows.append(row)
         return rows
 

@@ -22,6 +22,7 @@ SAFE_NAME_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$"
 SafeName = Annotated[str, StringConstraints(pattern=SAFE_NAME_PATTERN)]
 
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False, ge=-1e6, le=1e6)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Fraction = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
 
@@ -259,6 +260,42 @@ class EngineSettings(Strict):
                                         "(contact) time")
 
 
+class MeasurementRegion(Strict):
+    """A porosity measurement region (post-processing only; never reaches a deck), m.
+
+    sphere: ``center``, ``radius``. cylinder: axis along ``axis`` from ``t0`` to ``t1``.
+    circle: a 2D measure circle in the plane ``axis`` = ``plane`` (planar silos, paper A).
+    """
+
+    name: SafeName
+    shape: Literal["sphere", "cylinder", "circle"]
+    center: tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+    radius: Positive = Field(le=100)
+    axis: Literal["x", "y", "z"] = "y"
+    t0: FiniteFloat = 0.0
+    t1: FiniteFloat = 0.0
+    plane: FiniteFloat = 0.0
+
+    @model_validator(mode="after")
+    def _extent(self):
+        if self.shape == "cylinder" and not self.t1 > self.t0:
+            raise ValueError("a cylinder region needs t1 > t0 (its extent along its axis, m)")
+        return self
+
+
+class Analysis(Strict):
+    """What the post-processing measures beyond the defaults."""
+
+    porosity_regions: list[MeasurementRegion] = Field(
+        default_factory=list, max_length=1000,
+        description="measurement regions (paper A: nine circles); default: the bulk core of the settled bed")
+    relative_density: Optional[float] = Field(
+        None, ge=0, le=1, allow_inf_nan=False,
+        description="Dr of the real material, for paper A's 2D -> 3D porosity conversion of circle regions")
+    porosity_conversion: Literal["as_printed", "hexagonal"] = Field(
+        "as_printed", description="reading of paper A's Eqs. 36-37 (see postprocess.porosity)")
+
+
 class Case(Strict):
     """A complete, validated silo case."""
 
@@ -273,6 +310,7 @@ class Case(Strict):
     discharge: Discharge
     outputs: Outputs = Outputs()
     engine: EngineSettings = EngineSettings()
+    analysis: Analysis = Analysis()
     seed: int = Field(12345, ge=0, le=2**31 - 1)
 
     @model_validator(mode="after")

@@ -15,7 +15,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from .case import Case, load_case
-from .errors import CaseError, SiloflowError
+from .errors import CaseError, ReadError, SiloflowError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Silo discharge DEM simulations: case file -> LIGGGHTS deck -> run -> results.")
@@ -168,6 +168,30 @@ def post(source: str = typer.Argument(..., help="a finished run folder, or dump 
         c = summary["coordination_last"]
         out.print(f"coordination number (last frame, from {c['source']}): {c['z_mean']:.3f} (mechanical {c['z_mech']:.3f})")
     out.print(f"results: {target}")
+
+
+@app.command()
+def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folders (different orifices or grains)"),
+             output: Path = typer.Option(Path("beverloo.csv"), "-o", "--output", help="table of the runs and the fit")) -> None:
+    """Fit Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) across runs: C and k with standard errors."""
+    from postprocess.flow_rate import beverloo_table, fit_beverloo
+    from .atomic_files import write_json, write_text
+    try:
+        table = beverloo_table(folders)
+        if table.g.nunique() > 1:
+            raise ReadError("the runs differ in gravity; one Beverloo fit needs one g")
+        fit = fit_beverloo(table.D0, table.d, table.W, table.rho_b, float(table.g.iloc[0]))
+    except SiloflowError as exc:
+        _fail(exc)
+    except ValueError as exc:
+        _fail(SiloflowError(str(exc)))
+    write_text(output, table.to_csv(index=False))
+    write_json(output.with_suffix(".json"), {"C": fit.C, "C_stderr": fit.C_stderr, "k": fit.k,
+                                             "k_stderr": fit.k_stderr, "runs": fit.n_runs,
+                                             "rms_relative_residual": fit.rms_relative_residual})
+    out.print(f"Beverloo over {fit.n_runs} runs: C = {fit.C:.3f} +/- {fit.C_stderr:.3f}, "
+              f"k = {fit.k:.2f} +/- {fit.k_stderr:.2f} (rms residual {fit.rms_relative_residual:.1%})")
+    out.print(f"table: {output}; fit: {output.with_suffix('.json')}")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -254,3 +254,34 @@ def test_beverloo_fit_recovers_c_and_k():
     assert 0 < fit.C_stderr < 0.05 and fit.rms_relative_residual < 0.02
     with pytest.raises(ValueError, match="at least 3 runs"):
         fit_beverloo(D0[:2], d[:2], W[:2], 1500.0)
+
+
+def test_beverloo_command_fits_across_run_folders(tmp_path, quick_dict):
+    """Run folders (case.yaml + results/summary.json) with flow rates from Beverloo's law."""
+    import json
+
+    import yaml
+    from typer.testing import CliRunner
+
+    from siloflow.cli import app
+
+    folders = []
+    for k, (orifice, radius) in enumerate([(0.006, 0.001), (0.008, 0.001), (0.010, 0.001), (0.012, 0.0015),
+                                           (0.009, 0.0008)]):
+        case = dict(quick_dict, name=f"run{k}")
+        case["geometry"] = dict(case["geometry"], orifice_radius=orifice)
+        case["particles"] = dict(case["particles"], radius=radius)
+        folder = tmp_path / f"run{k}"
+        (folder / "results").mkdir(parents=True)
+        (folder / "case.yaml").write_text(yaml.safe_dump(case))
+        W = float(beverloo(2 * orifice, 2 * radius, 0.6, 1.4, 1500.0, case.get("gravity", 9.81)))
+        (folder / "results" / "summary.json").write_text(json.dumps(
+            {"flow_rate": {"rate": W, "stderr": 0.01 * W}, "frame_analyses": {"bulk_density_kg_m3": 1500.0}}))
+        folders.append(str(folder))
+    out = tmp_path / "bev.csv"
+    result = CliRunner().invoke(app, ["beverloo", *folders, "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    fit = json.loads(out.with_suffix(".json").read_text())
+    assert fit["C"] == pytest.approx(0.6, rel=1e-4) and fit["k"] == pytest.approx(1.4, rel=1e-3)
+    result = CliRunner().invoke(app, ["beverloo", folders[0], str(tmp_path)])
+    assert result.exit_code == 1 and "summary.json" in result.output

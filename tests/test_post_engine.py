@@ -112,3 +112,36 @@ def test_post_on_an_unmodified_tutorial_vtk_packing(tmp_path):
     phi = 1 - s["porosity_last"]["sphere_1"]
     assert 0.62 < phi < 0.80                      # the interior, away from the box walls
     assert 4.0 < s["coordination_last"]["z_mean"] < 9.0
+
+
+def test_case_measurement_regions(small_run):
+    """The case's own regions: a sphere in the core and a mid-plane circle (2D area porosity,
+    which by Delesse's principle estimates the volume fraction), converted 2D -> 3D."""
+    case, folder, record, summary = small_run
+    fa = summary["frame_analyses"]
+    regions = fa["porosity_regions"]
+    bulk_porosity = 1 - fa["bulk_solid_fraction"]
+    assert regions["core_sphere"]["porosity"] == pytest.approx(bulk_porosity, abs=0.06)
+    assert regions["mid_circle"]["porosity"] == pytest.approx(bulk_porosity, abs=0.12)
+    assert "porosity_3d" in regions["mid_circle"]
+    table = pd.read_csv(folder / "results" / "porosity_regions.csv")
+    assert set(table.region) == {"core_sphere", "mid_circle"} and table.step.nunique() == fa["dump_frames"]
+
+
+def test_measured_pressure_comparison(small_run, tmp_path):
+    """A 'measurement' 10 % above the run's own band pressures gives W = 0.1/1.1 (Eq. 34)."""
+    case, folder, record, summary = small_run
+    p = pd.read_csv(folder / "results" / "wall_pressure.csv")
+    t_open = summary["time_open_s"]
+    after = p[p.time >= t_open]
+    wide = after.pivot_table(index="time", columns="band", values="pressure")[[1, 2]]
+    measured = pd.DataFrame({"time": wide.index - t_open, "band_1": 1.1 * wide[1].to_numpy(),
+                             "band_2": 1.1 * wide[2].to_numpy()})
+    path = tmp_path / "measured.csv"
+    measured.to_csv(path, index=False)
+    result = CliRunner().invoke(app, ["post", str(folder), "--measured", str(path)])
+    assert result.exit_code == 0, result.output
+    table = pd.read_csv(folder / "results" / "pressure_comparison.csv").set_index("band")
+    assert table.loc[1, "W"] == pytest.approx(0.1 / 1.1, rel=1e-6)
+    assert table.loc[2, "relative_difference"] == pytest.approx(1 / 1.1 - 1, rel=1e-6)
+    assert "W (Eq. 34)" in (folder / "results" / "report.md").read_text()
