@@ -20,6 +20,7 @@ from siloflow.errors import ReadError
 
 from .discharge import discharge_table, steady_flow_rate
 from .dump_results import analyse_dumps
+from .flow_rate import rate_series, steady_window
 from .janssen import compare_with_measurement
 from .wall_pressure import band_mean, band_pressures, vertical_load, wall_force_columns
 
@@ -82,6 +83,11 @@ def analyse(folder, measured_pressure=None) -> dict:
     after = dis[dis.step >= run.stage_steps["open"]]
     rate = steady_flow_rate(after.time, after.outlet_mass, t_open,
                             mass_in_silo=after.mass_in_silo, initial_mass=initial_mass)
+    # steady state detected from the rate itself (smoothed over a tenth of the discharge)
+    w = rate_series(after.time, after.outlet_mass, window=max(5, len(after) // 10))
+    i0, i1 = steady_window(w, tolerance=0.2)
+    steady = {"t_start": float(after.time.iloc[i0]), "t_end": float(after.time.iloc[i1 - 1]),
+              "median_rate": float(np.nanmedian(w[i0:i1])), "tolerance": 0.2} if i1 > i0 else None
 
     # wall pressure
     sectors = band_pressures(run.forces, run.walls, FORCE_SIGN)
@@ -128,6 +134,7 @@ def analyse(folder, measured_pressure=None) -> dict:
                           "ratio": wall_load / weight if weight > 0 else float("nan"),
                           "wall_friction_share": wall_shear / weight if weight > 0 else float("nan")},
         "flow_rate": asdict(rate),
+        "steady_window_detected": steady,
         "discharged_mass_kg": float(dis.outlet_mass.iloc[-1]),
         "mass_in_silo_end_kg": float(dis.mass_in_silo.iloc[-1]),
         "bands": table.to_dict(orient="records"),

@@ -45,6 +45,8 @@ def test_outlet_and_free_surface_flow_rates_agree(small_run):
     wf = summary["flow_rate"]["rate"]
     wr = summary["frame_analyses"]["flow_rate_surface"]["rate"]
     assert wf > 0 and wr == pytest.approx(wf, rel=0.10)
+    steady = summary["steady_window_detected"]
+    assert steady["t_start"] > summary["time_open_s"] and steady["median_rate"] == pytest.approx(wf, rel=0.1)
 
 
 def test_janssen_fit_of_the_settled_profile_is_reported(small_run):
