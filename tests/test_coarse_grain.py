@@ -1,0 +1,224 @@
+"""Coarse-graining: conservation, analytic fields, brute-force agreement, axisymmetric averaging."""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.integrate import quad
+
+from postprocess.cg_kernels import gaussian, kernel_value, lucy, make_kernel
+from postprocess.coarse_grain import (AxisymmetricGrid, CartesianGrid, CoarseGraining, coarse_grain_frame,
+                                      contact_points, fields_from_sums)
+from postprocess.dumps import Frame
+
+RNG = np.random.default_rng(11)
+
+
+def cloud(n, lo, hi, seed=0, drift=(0.3, -0.2, 1.0)):
+    rng = np.random.default_rng(seed)
+    pos = rng.uniform(lo, hi, (n, 3))
+    vel = rng.normal(size=(n, 3)) + np.asarray(drift)
+    mass = rng.uniform(1e-3, 2e-3, n)
+    return pos, vel, mass
+
+
+@pytest.mark.parametrize("kernel", [gaussian(0.004), lucy(0.012)], ids=["gaussian", "lucy"])
+def test_kernels_are_normalised(kernel):
+    integral = quad(lambda R: 4 * np.pi * R ** 2 * float(kernel(R)), 0, kernel.cutoff, epsabs=0, epsrel=1e-12)[0]
+    assert integral == pytest.approx(1.0, rel=1e-10)
+    assert kernel(kernel.cutoff * 1.0001) == 0.0
+
+
+def test_width_in_particle_radii():
+    assert make_kernel("gaussian", 2.0, "radius", radius=0.01).width == pytest.approx(0.02)
+    with pytest.raises(ValueError):
+        make_kernel("gaussian", -1.0)
+
+
+def test_mass_and_momentum_are_conserved_on_both_grids():
+    pos, vel, mass = cloud(3000, [-0.03, -0.03, 0.04], [0.03, 0.03, 0.12])
+    k = gaussian(0.003)
+    cart = CartesianGrid([-0.06, -0.06, 0.0], [0.06, 0.06, 0.16], (60, 60, 80))
+    s = coarse_grain_frame(cart, k, pos, vel, mass)["particles"]
+    assert s[..., 0].sum() * cart.cell_volume == pytest.approx(mass.sum(), rel=0.005)
+    np.testing.assert_allclose(s[..., 1:4].sum(axis=(0, 1, 2)) * cart.cell_volume, (mass[:, None] * vel).sum(0),
+                               rtol=0.005)
+    rz = AxisymmetricGrid(0.06, 0.0, 0.16, 40, 80)
+    s = coarse_grain_frame(rz, k, pos, vel, mass)["particles"]
+    assert (s[..., 0] * rz.cell_volumes()).sum() == pytest.approx(mass.sum(), rel=0.005)
+    # vertical momentum is a scalar under rotation about z: conserved in (r, z) too
+    assert (s[..., 3] * rz.cell_volumes()).sum() == pytest.approx((mass * vel[:, 2]).sum(), rel=0.005)
+
+
+def test_partial_fields_sum_to_total_fields():
+    pos, vel, mass = cloud(1500, [-0.02, -0.02, 0.04], [0.02, 0.02, 0.1], seed=1)
+    species = np.random.default_rng(2).integers(0, 7, len(pos))
+    for grid in (CartesianGrid([-0.04, -0.04, 0.0], [0.04, 0.04, 0.14], (20, 20, 35)),
+                 AxisymmetricGrid(0.04, 0.0, 0.14, 20, 35)):
+        f = fields_from_sums(coarse_grain_frame(grid, gaussian(0.004), pos, vel, mass, species, 7), 2500.0, 7)
+        scale = np.abs(f["kinetic_stress"]).max()
+        np.testing.assert_allclose(f["rho_species"].sum(axis=-1), f["rho"], rtol=1e-12, atol=1e-12 * f["rho"].max())
+        np.testing.assert_allclose(f["kinetic_stress_species"].sum(axis=-2), f["kinetic_stress"], atol=1e-10 * scale)
+
+
+def fcc(cells, a):
+    base = np.array([(0, 0, 0), (0.5, 0.5, 0), (0.5, 0, 0.5), (0, 0.5, 0.5)])
+    cell = np.array(list(itertools.product(range(cells), repeat=3)), float)
+    return ((cell[:, None, :] + base[None]) .reshape(-1, 3)) * a
+
+
+def test_uniform_lattice_gives_its_solid_fraction():
+    a = 0.004
+    pos = fcc(12, a)
+    r = a / (2 * math.sqrt(2))
+    rho_p = 2500.0
+    mass = np.full(len(pos), rho_p * 4 / 3 * math.pi * r ** 3)
+    grid = CartesianGrid([0.016, 0.016, 0.016], [0.032, 0.032, 0.032], (4, 4, 4))   # interior, > 4w from the edges
+    f = fields_from_sums(coarse_grain_frame(grid, gaussian(0.0035), pos, np.zeros_like(pos), mass), rho_p)
+    # flat to 0.3 %: the truncated kernel sampled on a lattice as coarse as w aliases slightly
+    np.testing.assert_allclose(f["solid_fraction"], math.pi / (3 * math.sqrt(2)), rtol=4e-3)
+    assert np.ptp(f["solid_fraction"]) < 2e-3
+
+
+def test_hydrostatic_column_contact_stress_is_the_weight_above():
+    """A simple cubic stack (spacing a) where each vertical contact carries the weight of the
+    grains above it: sigma_zz(z) = m g n_above(z) / a^2, away from the top and bottom."""
+    a, m, g, layers, n = 0.004, 1e-4, 9.81, 40, 14
+    ij = np.array(list(itertools.product(range(n), range(n))), float) * a
+    pos = np.concatenate([np.column_stack([ij, np.full(len(ij), k * a)]) for k in range(layers)])
+    upper = np.concatenate([np.column_stack([ij, np.full(len(ij), (k + 1) * a)]) for k in range(layers - 1)])
+    lower = upper - [0, 0, a]
+    above = np.repeat(np.arange(layers - 1, 0, -1), len(ij))        # grains at and above the upper one
+    force = np.column_stack([np.zeros((len(upper), 2)), m * g * above])
+    grid = CartesianGrid([0.02, 0.02, 0.0], [0.032, 0.032, layers * a], (3, 3, 2 * layers))
+    sums = coarse_grain_frame(grid, gaussian(0.003), pos, np.zeros_like(pos), np.full(len(pos), m),
+                              contacts=(upper, lower, force))
+    szz = fields_from_sums(sums)["contact_stress"][..., 8].mean(axis=(1, 2))
+    z = grid.axes()["z"]
+    expected = m * g * np.clip(layers - 1 - (z - 0.5 * a) / a, 0, None) / a ** 2
+    inner = (z > 6 * a) & (z < (layers - 6) * a)
+    np.testing.assert_allclose(szz[inner], expected[inner], rtol=0.05)
+    assert np.all(sums["contact"][..., 8] >= 0)                      # compressive positive
+
+
+def test_rigid_translation_has_no_kinetic_stress_and_random_velocities_give_rho_variance():
+    pos = fcc(10, 0.004)
+    mass = np.full(len(pos), 1e-4)
+    grid = CartesianGrid([0.014, 0.014, 0.014], [0.026, 0.026, 0.026], (3, 3, 3))
+    k = gaussian(0.003)
+    f = fields_from_sums(coarse_grain_frame(grid, k, pos, np.tile([0.4, -1.3, 2.0], (len(pos), 1)), mass))
+    assert np.abs(f["kinetic_stress"]).max() < 1e-12 * (f["rho"].max() * 4.0)
+    s = 0.7
+    vel = np.random.default_rng(3).normal(scale=s, size=pos.shape)
+    f = fields_from_sums(coarse_grain_frame(grid, k, pos, vel, mass))
+    np.testing.assert_allclose(f["kinetic_pressure"] / (f["rho"] * s * s), 1.0, atol=0.08)
+
+
+def brute_cartesian(kernel, nodes, pos, weights):
+    out = np.zeros((len(nodes), weights.shape[1]))
+    for n, x in enumerate(nodes):
+        for p, w in zip(pos, weights):
+            out[n] += w * kernel_value(kernel.kind, kernel.norm, kernel.cutoff, kernel.width, float(((x - p) ** 2).sum()))
+    return out
+
+
+@pytest.mark.parametrize("kernel", [gaussian(0.005), lucy(0.015)], ids=["gaussian", "lucy"])
+def test_cartesian_agrees_with_brute_force(kernel):
+    pos, vel, mass = cloud(60, [-0.01, -0.01, 0.0], [0.01, 0.01, 0.02], seed=4)
+    pi, pj, f = pos[:20], pos[:20] + np.random.default_rng(5).normal(scale=0.003, size=(20, 3)), RNG.normal(size=(20, 3))
+    grid = CartesianGrid([-0.02, -0.02, -0.01], [0.02, 0.02, 0.03], (5, 5, 5))
+    sums = coarse_grain_frame(grid, kernel, pos, vel, mass, contacts=(pi, pj, f))
+    ax = grid.axes()
+    nodes = np.array([(x, y, z) for z in ax["z"] for y in ax["y"] for x in ax["x"]])
+    w = np.column_stack([mass, mass[:, None] * vel, mass * vel[:, 2] ** 2])
+    ref = brute_cartesian(kernel, nodes, pos, w)
+    got = sums["particles"].reshape(-1, 10)[:, [0, 1, 2, 3, 6]]
+    np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+    pts, tens = contact_points(pi, pj, f, 5)
+    ref = brute_cartesian(kernel, nodes, pts, tens.reshape(-1, 9))
+    np.testing.assert_allclose(sums["contact"].reshape(-1, 9), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+
+
+def ring_average(kernel, r, z, pos, weight):
+    """Independent azimuthal average of sum_i weight_i phi(|x(theta) - p_i|) at radius r, height z:
+    scipy quad over each particle's own interval of theta inside the kernel's support."""
+    total = 0.0
+    for p, w in zip(pos, weight):
+        rho, th = math.hypot(p[0], p[1]), math.atan2(p[1], p[0])
+        d0 = (r - rho) ** 2 + (z - p[2]) ** 2
+        if d0 >= kernel.cutoff ** 2:
+            continue
+        cosc = 1 - (kernel.cutoff ** 2 - d0) / (2 * r * rho) if r * rho > 0 else -2
+        amax = math.pi if cosc <= -1 else math.acos(cosc)
+        fn = lambda t: kernel_value(kernel.kind, kernel.norm, kernel.cutoff, kernel.width,  # noqa: E731
+                                    (r * math.cos(t) - p[0]) ** 2 + (r * math.sin(t) - p[1]) ** 2 + (z - p[2]) ** 2)
+        total += w * quad(fn, th - amax, th + amax, epsabs=0, epsrel=1e-13, limit=200)[0] / (2 * math.pi)
+    return total
+
+
+@pytest.mark.parametrize("kernel", [gaussian(0.005), lucy(0.015)], ids=["gaussian", "lucy"])
+def test_axisymmetric_density_agrees_with_brute_force(kernel):
+    pos, vel, mass = cloud(80, [-0.015, -0.015, 0.0], [0.015, 0.015, 0.02], seed=6)
+    grid = AxisymmetricGrid(0.02, -0.005, 0.025, 8, 6)
+    rho = coarse_grain_frame(grid, kernel, pos, vel, mass)["particles"][..., 0]
+    ax = grid.axes()
+    for iz, ir in [(0, 0), (2, 3), (3, 7), (5, 1), (2, 5)]:
+        ref = ring_average(kernel, ax["r"][ir], ax["z"][iz], pos, mass)
+        assert rho[iz, ir] == pytest.approx(ref, rel=1e-10, abs=1e-12 * rho.max())
+
+
+def test_axisymmetric_contact_stress_is_rotation_invariant_and_the_average_of_cartesian():
+    rng = np.random.default_rng(7)
+    pi = rng.uniform([-0.02, -0.02, 0.0], [0.02, 0.02, 0.03], (80, 3))
+    pj = pi + rng.normal(scale=0.003, size=(80, 3))
+    f = rng.normal(size=(80, 3))
+    k = gaussian(0.004)
+    grid = AxisymmetricGrid(0.03, 0.0, 0.03, 12, 6)
+    pos, vel, mass = pi, rng.normal(size=(80, 3)), np.ones(80)
+    base = coarse_grain_frame(grid, k, pos, vel, mass, contacts=(pi, pj, f))
+    th = 1.1
+    R = np.array([[math.cos(th), -math.sin(th), 0], [math.sin(th), math.cos(th), 0], [0, 0, 1]])
+    rot = coarse_grain_frame(grid, k, pos @ R.T, vel @ R.T, mass, contacts=(pi @ R.T, pj @ R.T, f @ R.T))
+    for key in ("contact", "particles"):
+        assert np.abs(rot[key] - base[key]).max() <= 1e-12 * np.abs(base[key]).max()
+    # the azimuthal average, in the local (r, theta, z) basis, of the Cartesian field on a ring
+    pts, tens = contact_points(pi, pj, f, 5)
+    ax = grid.axes()
+    iz, ir = 3, 4
+    r, z = ax["r"][ir], ax["z"][iz]
+    n = 3000
+    acc = np.zeros((3, 3))
+    for t in (np.arange(n) + 0.5) * 2 * math.pi / n:
+        x = np.array([r * math.cos(t), r * math.sin(t), z])
+        d2 = ((pts - x) ** 2).sum(axis=1)
+        w = np.array([kernel_value(k.kind, k.norm, k.cutoff, k.width, q) for q in d2])
+        Q = np.array([[math.cos(t), math.sin(t), 0], [-math.sin(t), math.cos(t), 0], [0, 0, 1]])
+        acc += Q @ (w[:, None, None] * tens).sum(axis=0) @ Q.T
+    acc /= n
+    # ring sampling of a kernel with a jump at its cutoff converges only as 1/n
+    np.testing.assert_allclose(base["contact"][iz, ir].reshape(3, 3), acc, atol=2e-3 * np.abs(acc).max())
+
+
+def test_frames_time_average_and_netcdf(tmp_path):
+    pos, vel, mass = cloud(500, [-0.02, -0.02, 0.0], [0.02, 0.02, 0.04], seed=8)
+    radius = np.where(np.arange(500) % 2, 0.001, 0.0015)
+    frames = []
+    for k in range(3):
+        data = pd.DataFrame({"id": np.arange(500) + 1, "x": pos[:, 0], "y": pos[:, 1], "z": pos[:, 2] + 0.001 * k,
+                             "vx": vel[:, 0], "vy": vel[:, 1], "vz": vel[:, 2], "radius": radius, "mass": mass})
+        frames.append(Frame(100 * k, np.zeros((3, 2)), data))
+    grid = AxisymmetricGrid(0.03, -0.01, 0.05, 10, 12)
+    cg = CoarseGraining(grid, gaussian(0.004), particle_density=2500.0, species="radius", per_frame=True).run(frames)
+    ds = cg.dataset()
+    assert list(ds.species.values) == [0.001, 0.0015]
+    mean_rho = np.mean([cg.fields(k)["rho"] for k in range(3)], axis=0)
+    np.testing.assert_allclose(ds.rho.values, mean_rho, rtol=1e-12)
+    path = tmp_path / "fields.nc"
+    ds.to_netcdf(path)
+    import xarray as xr
+    with xr.open_dataset(path) as back:
+        np.testing.assert_allclose(back.kinetic_pressure_species.values, ds.kinetic_pressure_species.values)
+        assert back.attrs["kernel_kernel"] == "gaussian" and back.rho.attrs["units"] == "kg m-3"
