@@ -10,7 +10,8 @@ s_i) and contacts (force f_ij on i from j, branch b_ij = r_i - r_j):
                 = sum_i m_i v_i v_i phi - rho V V                 (computed this way, one pass)
     sigma_k^a   = sum_{i in a} m_i v'_i v'_i phi                  partial kinetic stress; sums to sigma_k
     sigma_c     = sum_ij f_ij (x) b_ij int_0^1 phi(x - r_j - s b_ij) ds   contact stress, Pa
-                  (compressive positive; the line integral by n_s-point Gauss-Legendre)
+                  (compressive positive; the line integral by Gauss-Legendre, 2-16 points by
+                  branch length over kernel width: see line_points_needed)
     phi_s = rho / rho_p,  pressures p = trace / 3.
 
 Grids:
@@ -33,7 +34,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from .cg_kernels import GAUSSIAN, Kernel, kernel_value
+from .cg_kernels import GAUSSIAN, LUCY, Kernel, kernel_value
 
 # particle block: m, p (3), m v v (6: xx yy zz xy xz yz, or rr tt zz rt rz tz)
 PARTICLE_COLUMNS = ["m", "p0", "p1", "p2", "t00", "t11", "t22", "t01", "t02", "t12"]
@@ -43,7 +44,10 @@ PARTICLE_CODES = np.array([0, 1, 1, 0, 2, 2, 0, 3, 1, 1], dtype=np.int64)
 # contact stress, full tensor: 00 01 02 10 11 12 20 21 22
 CONTACT_CODES = np.array([2, 2, 1, 2, 2, 1, 1, 1, 0], dtype=np.int64)
 
-_GL_A_X, _GL_A_W = np.polynomial.legendre.leggauss(16)
+_GL_A_X, _GL_A_W = np.polynomial.legendre.leggauss(16)   # azimuth, a_c > pi/2
+# u = sqrt((1 - cos a) / kappa), kappa <= 1: the Gaussian is smooth in u; Lucy's sqrt(d0 + ...) is
+# nearly |u| when d0 is small and needs more points (both checked to 1e-10 against quad)
+_GL_U = {GAUSSIAN: np.polynomial.legendre.leggauss(10), LUCY: np.polynomial.legendre.leggauss(32)}
 
 
 # ----------------------------------------------------------------------------- numba cores
@@ -83,13 +87,53 @@ def _accumulate_cartesian(origin, spacing, shape, pos, weights, dest, lo, hi, ki
                             out[iz, iy, ix, base + c] += weights[i, c] * phi
 
 
+@njit(cache=True)
+def _ring_moments(kind, norm, cutoff, width, d0, two_rr, gl_x, gl_w, u_x, u_w):
+    """Azimuthal averages (1/2 pi) int phi {1, cos a, cos^2 a} da of the kernel on a ring, for a
+    source and node whose distance is sqrt(d0 + two_rr (1 - cos a)) at relative azimuth a.
+
+    The support is |a| < a_c with 1 - cos a_c = kappa = (c^2 - d0) / two_rr. For kappa <= 1
+    the substitution 1 - cos a = kappa u^2 (da = 2 sqrt(kappa) du / sqrt(2 - kappa u^2))
+    makes the integrand a smooth function of u on [0, 1] without trigonometry; otherwise
+    (a_c > pi/2, sources near the axis) Gauss-Legendre runs over a in [0, a_c]."""
+    rem = cutoff * cutoff - d0
+    if two_rr <= 0.0:                       # node or source on the axis: a full ring at one distance
+        phi = kernel_value(kind, norm, cutoff, width, d0)
+        return phi, 0.0, 0.5 * phi
+    kappa = rem / two_rr
+    m0 = 0.0
+    m1 = 0.0
+    mc2 = 0.0
+    if kappa <= 1.0:
+        sk = math.sqrt(kappa)
+        for q in range(u_x.shape[0]):
+            u = 0.5 * (u_x[q] + 1.0)
+            ku2 = kappa * u * u
+            w = u_w[q] * sk / math.sqrt(2.0 - ku2) * kernel_value(kind, norm, cutoff, width, d0 + two_rr * ku2)
+            ca = 1.0 - ku2
+            m0 += w
+            m1 += w * ca
+            mc2 += w * ca * ca
+        return m0 / math.pi, m1 / math.pi, mc2 / math.pi
+    amax = math.pi if kappa >= 2.0 else math.acos(1.0 - kappa)
+    half = 0.5 * amax
+    for q in range(gl_x.shape[0]):
+        a = half * (gl_x[q] + 1.0)
+        ca = math.cos(a)
+        w = gl_w[q] * kernel_value(kind, norm, cutoff, width, d0 + two_rr * (1.0 - ca))
+        m0 += w
+        m1 += w * ca
+        mc2 += w * ca * ca
+    scale = half / math.pi
+    return m0 * scale, m1 * scale, mc2 * scale
+
+
 @njit(parallel=True, cache=True)
 def _accumulate_rz(dr, nr, z0, dz_cell, nz, rho_s, z_s, weights, codes, dest, lo, hi,
-                   kind, norm, cutoff, width, gl_x, gl_w, out):
+                   kind, norm, cutoff, width, gl_x, gl_w, u_x, u_w, out):
     """Axisymmetric accumulation: out[iz, ir, dest + c, slot] += weights * kernel moment."""
     ncomp = weights.shape[1]
     ndest = dest.shape[1]
-    nq = gl_x.shape[0]
     c2 = cutoff * cutoff
     for iz in prange(nz):
         zc = z0 + (iz + 0.5) * dz_cell
@@ -107,27 +151,7 @@ def _accumulate_rz(dr, nr, z0, dz_cell, nz, rho_s, z_s, weights, codes, dest, lo
                 d0 = (r - rho) * (r - rho) + ddz * ddz
                 if d0 >= c2:
                     continue
-                two_rr = 2.0 * r * rho
-                if two_rr <= 0.0:
-                    amax = math.pi
-                else:
-                    cosc = 1.0 - (c2 - d0) / two_rr
-                    amax = math.pi if cosc <= -1.0 else math.acos(cosc)
-                half = 0.5 * amax
-                m0 = 0.0
-                m1 = 0.0
-                mc2 = 0.0
-                for q in range(nq):
-                    a = half * (gl_x[q] + 1.0)
-                    ca = math.cos(a)
-                    phi = gl_w[q] * kernel_value(kind, norm, cutoff, width, d0 + two_rr * (1.0 - ca))
-                    m0 += phi
-                    m1 += phi * ca
-                    mc2 += phi * ca * ca
-                scale = half / math.pi
-                m0 *= scale
-                m1 *= scale
-                mc2 *= scale
+                m0, m1, mc2 = _ring_moments(kind, norm, cutoff, width, d0, 2.0 * r * rho, gl_x, gl_w, u_x, u_w)
                 ms2 = m0 - mc2
                 m2 = mc2 - ms2
                 for d in range(ndest):
@@ -170,10 +194,32 @@ def to_cylindrical(pos, vectors):
     return rho, out, c, s
 
 
-def contact_points(pos_i, pos_j, force, n_s: int):
-    """Quadrature points along each branch (r_j -> r_i) and the (n * n_s, 9) tensor weights
-    w_s f (x) b. Returns (points (n*n_s, 3), tensors (n*n_s, 3, 3))."""
-    b = np.asarray(pos_i, float) - np.asarray(pos_j, float)
+def line_points_needed(branch_length, kernel: Kernel) -> np.ndarray:
+    """Gauss-Legendre points for each contact's line integral: 2 + ceil(2 L / s), s the kernel's
+    length scale (sqrt(2) w for the Gaussian, c / 3 for Lucy); 2 to 16. A branch as long as the
+    kernel's standard deviation gets 4 points, paper B's w = rb/2 with L = 2 rb gets 8."""
+    scale = math.sqrt(2.0) * kernel.width if kernel.kind == GAUSSIAN else kernel.cutoff / 3.0
+    return np.clip(2 + np.ceil(2.0 * np.asarray(branch_length, float) / scale), 2, 16).astype(int)
+
+
+def contact_points(pos_i, pos_j, force, n_s=None, kernel: Kernel | None = None):
+    """Quadrature points along each branch (r_j -> r_i) and the tensor weights w_s f (x) b.
+
+    ``n_s``: points per contact (int), or None to choose per contact by
+    :func:`line_points_needed` for ``kernel``. Returns (points (k, 3), tensors (k, 3, 3))."""
+    pos_i = np.asarray(pos_i, float)
+    pos_j = np.asarray(pos_j, float)
+    force = np.asarray(force, float)
+    if n_s is None:
+        if kernel is None:
+            raise ValueError("contact_points needs n_s or the kernel")
+        need = line_points_needed(np.linalg.norm(pos_i - pos_j, axis=1), kernel)
+        parts = [contact_points(pos_i[need == n], pos_j[need == n], force[need == n], int(n))
+                 for n in np.unique(need)]
+        if not parts:
+            return np.empty((0, 3)), np.empty((0, 3, 3))
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+    b = pos_i - pos_j
     s, w = gl_line_points(n_s)
     pts = np.asarray(pos_j, float)[:, None, :] + s[None, :, None] * b[:, None, :]
     t = np.asarray(force, float)[:, :, None] * b[:, None, :]
@@ -285,7 +331,7 @@ class AxisymmetricGrid:
         _accumulate_rz(self.dr, self.nr, self.z_lo, self.dz, self.nz, np.ascontiguousarray(pos[order, 0]),
                        np.ascontiguousarray(pos[order, 2]), np.ascontiguousarray(weights[order]),
                        np.asarray(codes, np.int64), np.ascontiguousarray(dest[order]), lo, hi,
-                       kernel.kind, kernel.norm, kernel.cutoff, kernel.width, _GL_A_X, _GL_A_W, out)
+                       kernel.kind, kernel.norm, kernel.cutoff, kernel.width, _GL_A_X, _GL_A_W, *_GL_U[kernel.kind], out)
         return out
 
     def combine(self, out, codes):
@@ -308,7 +354,7 @@ class AxisymmetricGrid:
 # ----------------------------------------------------------------------------- one frame
 
 def coarse_grain_frame(grid, kernel: Kernel, pos, vel, mass, species=None, n_species: int = 0,
-                       contacts=None, n_s: int = 5) -> dict:
+                       contacts=None, n_s: int | None = None) -> dict:
     """Raw kernel sums of one frame: ``particles`` (grid..., 10 * (1 + n_species)) and, with
     ``contacts`` = (pos_i, pos_j, force_on_i), ``contact`` (grid..., 9)."""
     pos = np.asarray(pos, float)
@@ -328,7 +374,7 @@ def coarse_grain_frame(grid, kernel: Kernel, pos, vel, mass, species=None, n_spe
     out = {"particles": grid.combine(raw, PARTICLE_CODES)}
     if contacts is not None:
         pi, pj, f = contacts
-        pts, tens = contact_points(pi, pj, f, n_s)
+        pts, tens = contact_points(pi, pj, f, n_s, kernel)
         cpos, cw = grid.contact_frame(pts, tens)
         cdest = np.zeros((len(cpos), 1), np.int64)
         raw = grid.accumulate(kernel, cpos, cw, cdest, 9, CONTACT_CODES)
@@ -445,7 +491,7 @@ class CoarseGraining:
     """
 
     def __init__(self, grid, kernel: Kernel, particle_density: float | None = None, species: str | None = None,
-                 species_classes=None, per_frame: bool = False, n_s: int = 5):
+                 species_classes=None, per_frame: bool = False, n_s: int | None = None):
         self.grid, self.kernel, self.rho_p = grid, kernel, particle_density
         self.species, self.classes, self.per_frame, self.n_s = species, species_classes, per_frame, n_s
         self.sum = None
@@ -527,6 +573,6 @@ class CoarseGraining:
         if "rho_species" in f:
             ds = ds.assign_coords(species=[float(c) for c in self.classes])
         ds.attrs.update({"grid": self.grid.kind, "frames": len(self.steps), "first_step": self.steps[0],
-                         "last_step": self.steps[-1], "contact_line_points": self.n_s,
+                         "last_step": self.steps[-1], "contact_line_points": "adaptive: 2 + ceil(2 L / s)" if self.n_s is None else self.n_s,
                          **{f"kernel_{k}": v for k, v in self.kernel.describe().items()}})
         return ds

@@ -130,7 +130,7 @@ def test_cartesian_agrees_with_brute_force(kernel):
     pos, vel, mass = cloud(60, [-0.01, -0.01, 0.0], [0.01, 0.01, 0.02], seed=4)
     pi, pj, f = pos[:20], pos[:20] + np.random.default_rng(5).normal(scale=0.003, size=(20, 3)), RNG.normal(size=(20, 3))
     grid = CartesianGrid([-0.02, -0.02, -0.01], [0.02, 0.02, 0.03], (5, 5, 5))
-    sums = coarse_grain_frame(grid, kernel, pos, vel, mass, contacts=(pi, pj, f))
+    sums = coarse_grain_frame(grid, kernel, pos, vel, mass, contacts=(pi, pj, f), n_s=5)
     ax = grid.axes()
     nodes = np.array([(x, y, z) for z in ax["z"] for y in ax["y"] for x in ax["x"]])
     w = np.column_stack([mass, mass[:, None] * vel, mass * vel[:, 2] ** 2])
@@ -178,10 +178,10 @@ def test_axisymmetric_contact_stress_is_rotation_invariant_and_the_average_of_ca
     k = gaussian(0.004)
     grid = AxisymmetricGrid(0.03, 0.0, 0.03, 12, 6)
     pos, vel, mass = pi, rng.normal(size=(80, 3)), np.ones(80)
-    base = coarse_grain_frame(grid, k, pos, vel, mass, contacts=(pi, pj, f))
+    base = coarse_grain_frame(grid, k, pos, vel, mass, contacts=(pi, pj, f), n_s=5)
     th = 1.1
     R = np.array([[math.cos(th), -math.sin(th), 0], [math.sin(th), math.cos(th), 0], [0, 0, 1]])
-    rot = coarse_grain_frame(grid, k, pos @ R.T, vel @ R.T, mass, contacts=(pi @ R.T, pj @ R.T, f @ R.T))
+    rot = coarse_grain_frame(grid, k, pos @ R.T, vel @ R.T, mass, contacts=(pi @ R.T, pj @ R.T, f @ R.T), n_s=5)
     for key in ("contact", "particles"):
         assert np.abs(rot[key] - base[key]).max() <= 1e-12 * np.abs(base[key]).max()
     # the azimuthal average, in the local (r, theta, z) basis, of the Cartesian field on a ring
