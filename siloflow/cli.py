@@ -171,6 +171,68 @@ def post(source: str = typer.Argument(..., help="a finished run folder, or dump 
 
 
 @app.command()
+def cg(source: str = typer.Argument(..., help="a finished run folder, or dump file(s): a file, glob or folder"),
+       output: Optional[Path] = typer.Option(None, "-o", "--output", help="results folder (default <run>/results/cg)"),
+       kernel: str = typer.Option("gaussian", help="gaussian (paper B) or lucy"),
+       width: float = typer.Option(2.0, help="kernel width w (Gaussian) or c (Lucy)"),
+       unit: str = typer.Option("radius", help="unit of --width: radius (mean particle radius) or m"),
+       nr: int = typer.Option(100, min=1, help="radial cells (or x and y cells of a Cartesian grid)"),
+       nz: int = typer.Option(300, min=1, help="vertical cells"),
+       grid: str = typer.Option("rz", help="rz (axisymmetric) or cartesian"),
+       species: Optional[str] = typer.Option("radius", help="partial fields by radius, type, or none"),
+       per_frame: bool = typer.Option(False, help="keep per-frame fields (time evolution) as well"),
+       every: int = typer.Option(1, min=1, help="use every n-th frame"),
+       contacts: Optional[str] = typer.Option(None, help="dump local of contacts (for a dump source)"),
+       contact_keywords: Optional[str] = typer.Option(None, help="keywords of the compute that wrote --contacts"),
+       r_max: Optional[float] = typer.Option(None, help="grid radius, m (dump source)"),
+       z_lo: Optional[float] = typer.Option(None, help="grid bottom, m (dump source)"),
+       z_hi: Optional[float] = typer.Option(None, help="grid top, m (dump source)"),
+       z_outlet: float = typer.Option(0.0, help="outlet height, m (dump source)"),
+       outlet_radius: Optional[float] = typer.Option(None, help="outlet radius R, m (dump source)"),
+       particle_density: Optional[float] = typer.Option(None, help="kg/m3 when the dump has no mass column"),
+       steps: Optional[str] = typer.Option(None, help="time window FIRST:LAST in timesteps (dump source)")) -> None:
+    """Coarse-grain particles and contacts into continuum fields (paper B): fields.nc, profiles, figures."""
+    from postprocess.cg_run import CgSetup, run_cg, setup_from_run
+    from .engine_output import local_columns
+    path = Path(source)
+    try:
+        if grid not in ("rz", "cartesian"):
+            raise ReadError("--grid must be rz or cartesian")
+        if path.is_dir() and (path / "derived.json").is_file():
+            setup = setup_from_run(path)
+            target = output or path / "results" / "cg"
+        else:
+            from postprocess.dumps import dump_files
+            missing = [n for n, v in (("--r-max", r_max), ("--z-lo", z_lo), ("--z-hi", z_hi),
+                                      ("--outlet-radius", outlet_radius)) if v is None]
+            if missing:
+                raise ReadError(f"a dump source needs {', '.join(missing)} (the grid and the outlet)")
+            lo_hi = [None, None]
+            if steps:
+                try:
+                    lo_hi = [int(v) if v else None for v in steps.split(":")]
+                except ValueError:
+                    raise ReadError(f"--steps {steps!r}: expected FIRST:LAST timesteps") from None
+            setup = CgSetup(dump_files(source), dump_files(contacts) if contacts else None,
+                            local_columns(contact_keywords.split(",")) if contact_keywords else None,
+                            r_max, z_lo, z_hi, z_outlet, outlet_radius, particle_density, *lo_hi)
+            target = output or Path("cg_results")
+        summary = run_cg(setup, target, kernel, width, unit, nr, nz, None if species == "none" else species,
+                         per_frame, grid, every)
+    except SiloflowError as exc:
+        _fail(exc)
+    except ValueError as exc:
+        _fail(SiloflowError(str(exc)))
+    out.print(f"coarse-grained {summary['frames']} frames (steps {summary['steps'][0]}-{summary['steps'][1]}) "
+              f"on a {grid} grid with a {summary['kernel']} kernel; contacts: {summary['contacts']}")
+    if "v_z_centre_outlet" in summary:
+        out.print(f"outlet centre: solid fraction {summary['solid_fraction_centre_outlet']:.3f}, "
+                  f"v_z {summary['v_z_centre_outlet']:.3f} m/s; kinetic pressure peaks "
+                  f"{summary['kinetic_peak_height_m'] * 1000:.1f} mm above the outlet")
+    out.print(f"results: {target} (fields.nc, *.csv, cg_summary.json, figures)")
+
+
+@app.command()
 def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folders (different orifices or grains)"),
              output: Path = typer.Option(Path("beverloo.csv"), "-o", "--output", help="table of the runs and the fit")) -> None:
     """Fit Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) across runs: C and k with standard errors."""

@@ -222,3 +222,44 @@ def test_frames_time_average_and_netcdf(tmp_path):
     with xr.open_dataset(path) as back:
         np.testing.assert_allclose(back.kinetic_pressure_species.values, ds.kinetic_pressure_species.values)
         assert back.attrs["kernel_kernel"] == "gaussian" and back.rho.attrs["units"] == "kg m-3"
+
+
+def synthetic_rz_dataset():
+    """An (r, z) field set with known profiles: v_z = -v0 sqrt(1 - (r/R)^2) at the outlet row,
+    a kinetic-pressure peak at height 2R on the axis, two size classes."""
+    import xarray as xr
+    R, v0 = 0.01, 0.5
+    r = (np.arange(40) + 0.5) * 0.0005
+    z = (np.arange(80) + 0.5) * 0.001
+    vz = -v0 * np.sqrt(np.clip(1 - (r / R) ** 2, 0, None))[None, :] * np.ones((len(z), 1))
+    vel = np.stack([np.zeros_like(vz), np.zeros_like(vz), vz], axis=-1)
+    kp = np.exp(-((z - 2 * R) / 0.005) ** 2)[:, None] * np.ones((1, len(r)))
+    phi = np.full((len(z), len(r)), 0.6)
+    kps = np.stack([0.3 * kp, 0.7 * kp], axis=-1)
+    phis = np.stack([0.4 * phi, 0.6 * phi], axis=-1)
+    return xr.Dataset({"velocity": (("z", "r", "component"), vel), "kinetic_pressure": (("z", "r"), kp),
+                       "solid_fraction": (("z", "r"), phi), "rho": (("z", "r"), 7520 * phi),
+                       "contact_pressure": (("z", "r"), 100 * (1 + z[:, None] * np.ones((1, len(r))))),
+                       "kinetic_pressure_species": (("z", "r", "species"), kps),
+                       "solid_fraction_species": (("z", "r", "species"), phis)},
+                      coords={"r": r, "z": z, "component": ["r", "t", "z"], "species": [0.001, 0.002]}), R
+
+
+def test_paper_b_analyses_on_known_fields(tmp_path):
+    from postprocess.cg_analyses import (axial_profiles, cg_figures, janda_fit, kinetic_peak_height, outlet_profiles,
+                                         power_law_fit, species_kinetic_table)
+    ds, R = synthetic_rz_dataset()
+    prof = outlet_profiles(ds, 0.0, R)
+    fit = janda_fit(prof)
+    assert fit["exponent"] == pytest.approx(0.5, abs=1e-6) and fit["rms_misfit_of_sqrt_form"] < 1e-3
+    axial = axial_profiles(ds, 0.0)
+    assert kinetic_peak_height(axial) == pytest.approx(2 * R, abs=0.001)
+    table = species_kinetic_table(ds, 0.0).set_index("radius")
+    peak = float(np.exp(-((0.0205 - 2 * R) / 0.005) ** 2))
+    assert table.loc[0.002, "cumulative_kinetic_pressure_larger_or_equal"] == pytest.approx(0.7 * peak, rel=1e-3)
+    assert table.loc[0.001, "cumulative_kinetic_pressure_larger_or_equal"] == pytest.approx(peak, rel=1e-3)
+    # small grains: 0.3 of the kinetic pressure with 0.4 of the solid: (0.3 / 0.4) / 1 = 0.75
+    assert table.loc[0.001, "kinetic_per_solid_fraction_relative"] == pytest.approx(0.75)
+    a, b, b_err = power_law_fit([0.01, 0.02, 0.04, 0.08], 3.1 * np.sqrt([0.01, 0.02, 0.04, 0.08]))
+    assert b == pytest.approx(0.5) and a == pytest.approx(3.1)
+    assert len(cg_figures(ds, tmp_path, 0.0, R)) == 4

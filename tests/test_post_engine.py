@@ -147,3 +147,27 @@ def test_measured_pressure_comparison(small_run, tmp_path):
     assert table.loc[1, "W"] == pytest.approx(0.1 / 1.1, rel=1e-6)
     assert table.loc[2, "relative_difference"] == pytest.approx(1 / 1.1 - 1, rel=1e-6)
     assert "W (Eq. 34)" in (folder / "results" / "report.md").read_text()
+
+
+def test_coarse_graining_of_the_real_run(small_run, tmp_path):
+    """siloflow cg on the run folder: fields in the steady window, paper B's outlet profile."""
+    case, folder, record, summary = small_run
+    out = tmp_path / "cg"
+    result = CliRunner().invoke(app, ["cg", str(folder), "--nr", "20", "--nz", "60", "--width", "1.5", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    import xarray as xr
+    s = json.loads((out / "cg_summary.json").read_text())
+    assert s["frames"] >= 10 and s["contacts"]
+    assert s["v_z_centre_outlet"] < 0                                 # grains leave downwards
+    assert 0.3 < s["janda_fit"]["exponent"] < 0.8                     # Janda: 1/2
+    with xr.open_dataset(out / "fields.nc") as ds:
+        mid = ds.sel(z=0.5 * summary["frame_analyses"]["settled_surface_height_m"], method="nearest").isel(r=0)
+        assert 0.5 < float(mid.solid_fraction) < 0.68
+        # the contact pressure dominates the kinetic pressure in the bulk (paper B: by orders of magnitude)
+        assert float(mid.contact_pressure) > 20 * float(mid.kinetic_pressure)
+        # and grows with depth: deeper on the axis, more contact pressure (above the outlet region)
+        axis = ds.contact_pressure.isel(r=0)
+        h = summary["frame_analyses"]["settled_surface_height_m"]
+        assert float(axis.sel(z=0.3 * h, method="nearest")) > float(axis.sel(z=0.7 * h, method="nearest"))
+    for name in ("cg_maps.png", "cg_outlet_profiles.png", "cg_axial_pressure.png", "outlet_profiles.csv"):
+        assert (out / name).is_file(), name

@@ -1,0 +1,109 @@
+"""``siloflow cg``: coarse-grain a run folder's dumps (steady window, geometry from the case)
+or any LIGGGHTS/LAMMPS dumps (grid given on the command line); write fields.nc (NetCDF),
+paper B's profiles as CSV, a summary and figures."""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from siloflow.atomic_files import write_json, write_text
+from siloflow.errors import ReadError
+
+from .cg_analyses import axial_profiles, cg_figures, janda_fit, kinetic_peak_height, outlet_profiles, species_kinetic_table
+from .cg_kernels import make_kernel
+from .coarse_grain import AxisymmetricGrid, CartesianGrid, CoarseGraining
+from .dumps import dump_files, read_frames
+
+
+@dataclass
+class CgSetup:
+    """Where and how to coarse-grain: grid extents (m), outlet (m), time window (timesteps)."""
+
+    atoms: list
+    contacts: list | None
+    contact_columns: list | None
+    r_max: float
+    z_lo: float
+    z_hi: float
+    z_outlet: float
+    outlet_radius: float
+    particle_density: float | None
+    step_lo: int | None = None
+    step_hi: int | None = None
+
+
+def setup_from_run(folder: Path) -> CgSetup:
+    """Grid and window of a siloflow run: the silo radius, the outlet region to the settled
+    surface, and the steady-flow window of its results."""
+    from siloflow.case import load_case
+
+    case = load_case(folder / "case.yaml")
+    derived = json.loads((folder / "derived.json").read_text())
+    try:
+        summary = json.loads((folder / "results" / "summary.json").read_text())
+    except (OSError, ValueError):
+        raise ReadError(f"{folder}: run `siloflow post {folder}` first (the steady window comes from its results)") from None
+    dt = float(derived["timestep"])
+    rate = summary["flow_rate"]
+    dumps = folder / "output" / "dumps"
+    atoms = dump_files(str(dumps / "dump.*.txt"))
+    try:
+        contacts = dump_files(str(dumps / "contacts.*.txt"))
+    except ReadError:
+        contacts = None
+    g = case.geometry
+    top = summary.get("frame_analyses", {}).get("settled_surface_height_m") or (g.hopper_height + g.height)
+    return CgSetup(atoms, contacts, derived.get("contact_columns") or None, g.radius, float(derived["outlet_z"]),
+                   float(top), 0.0, g.outlet_radius, case.materials.particle.density,
+                   int(rate["t_start"] / dt), int(rate["t_end"] / dt))
+
+
+def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: float = 2.0, unit: str = "radius",
+           nr: int = 100, nz: int = 300, species: str | None = "radius", per_frame: bool = False,
+           grid_kind: str = "rz", every: int = 1) -> dict:
+    """Coarse-grain the frames in the window; write fields.nc, profiles, summary and figures to ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    wanted = lambda f: ((setup.step_lo is None or f.timestep >= setup.step_lo)  # noqa: E731
+                        and (setup.step_hi is None or f.timestep <= setup.step_hi))
+    frames = [f for f in read_frames(setup.atoms, every=every) if wanted(f)]
+    if not frames:
+        raise ReadError(f"no particle frames between steps {setup.step_lo} and {setup.step_hi}")
+    radius = float(np.mean(frames[0].radii()))
+    kernel = make_kernel(kernel_name, width, unit, radius)
+    if grid_kind == "rz":
+        grid = AxisymmetricGrid(setup.r_max, setup.z_lo, setup.z_hi, nr, nz)
+    else:
+        grid = CartesianGrid([-setup.r_max, -setup.r_max, setup.z_lo], [setup.r_max, setup.r_max, setup.z_hi],
+                             (nr, nr, nz))
+    contacts = None
+    if setup.contacts:
+        steps = {f.timestep for f in frames}
+        contacts = [c for c in read_frames(setup.contacts, columns=setup.contact_columns) if c.timestep in steps]
+    cg = CoarseGraining(grid, kernel, setup.particle_density, species, per_frame=per_frame).run(frames, contacts)
+    ds = cg.dataset()
+    tmp = out / ".fields.nc.tmp"
+    ds.to_netcdf(tmp)
+    tmp.replace(out / "fields.nc")
+    summary = {"frames": len(cg.steps), "steps": [cg.steps[0], cg.steps[-1]], "grid": grid_kind,
+               "contacts": contacts is not None, **kernel.describe()}
+    if grid_kind == "rz":
+        prof = outlet_profiles(ds, setup.z_outlet, setup.outlet_radius)
+        write_text(out / "outlet_profiles.csv", prof.to_csv(index=False))
+        axial = axial_profiles(ds, setup.z_outlet)
+        write_text(out / "axial_profiles.csv", axial.to_csv(index=False))
+        summary["v_z_centre_outlet"] = float(prof.v_z.iloc[0])
+        summary["solid_fraction_centre_outlet"] = float(prof.solid_fraction.iloc[0])
+        try:
+            summary["janda_fit"] = janda_fit(prof)
+        except (RuntimeError, ValueError, TypeError) as exc:
+            summary["janda_fit"] = {"error": str(exc)}
+        summary["kinetic_peak_height_m"] = kinetic_peak_height(axial, setup.z_outlet)
+        if species and "kinetic_pressure_species" in ds:
+            table = species_kinetic_table(ds, setup.z_outlet)
+            write_text(out / "species_kinetic.csv", table.to_csv(index=False))
+        summary["figures"] = [p.name for p in cg_figures(ds, out, setup.z_outlet, setup.outlet_radius)]
+    write_json(out / "cg_summary.json", summary)
+    return summary
