@@ -39,6 +39,7 @@ test-fast: $(VENV)/.installed
 bench: install
 	$(PY) benchmarks/wrapper_overhead.py
 	$(PY) benchmarks/dump_reader_speed.py
+	$(PY) benchmarks/coarse_graining_speed.py
 
 clean:
 	rm -rf runs .pytest_cache
