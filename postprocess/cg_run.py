@@ -66,29 +66,33 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
            grid_kind: str = "rz", every: int = 1) -> dict:
     """Coarse-grain the frames in the window; write fields.nc, profiles, summary and figures to ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    wanted = lambda f: ((setup.step_lo is None or f.timestep >= setup.step_lo)  # noqa: E731
-                        and (setup.step_hi is None or f.timestep <= setup.step_hi))
-    frames = [f for f in read_frames(setup.atoms, every=every) if wanted(f)]
-    if not frames:
+
+    def in_window(frames):
+        for f in frames:
+            if setup.step_hi is not None and f.timestep > setup.step_hi:
+                return
+            if setup.step_lo is None or f.timestep >= setup.step_lo:
+                yield f
+
+    first = next(in_window(read_frames(setup.atoms, every=every)), None)   # frames are streamed, not kept
+    if first is None:
         raise ReadError(f"no particle frames between steps {setup.step_lo} and {setup.step_hi}")
-    radius = float(np.mean(frames[0].radii()))
+    radius = float(np.mean(first.radii()))
     kernel = make_kernel(kernel_name, width, unit, radius)
     if grid_kind == "rz":
         grid = AxisymmetricGrid(setup.r_max, setup.z_lo, setup.z_hi, nr, nz)
     else:
         grid = CartesianGrid([-setup.r_max, -setup.r_max, setup.z_lo], [setup.r_max, setup.r_max, setup.z_hi],
                              (nr, nr, nz))
-    contacts = None
-    if setup.contacts:
-        steps = {f.timestep for f in frames}
-        contacts = [c for c in read_frames(setup.contacts, columns=setup.contact_columns) if c.timestep in steps]
-    cg = CoarseGraining(grid, kernel, setup.particle_density, species, per_frame=per_frame).run(frames, contacts)
+    contacts = read_frames(setup.contacts, columns=setup.contact_columns) if setup.contacts else None
+    cg = CoarseGraining(grid, kernel, setup.particle_density, species, per_frame=per_frame).run(
+        in_window(read_frames(setup.atoms, every=every)), contacts)
     ds = cg.dataset()
     tmp = out / ".fields.nc.tmp"
     ds.to_netcdf(tmp)
     tmp.replace(out / "fields.nc")
     summary = {"frames": len(cg.steps), "steps": [cg.steps[0], cg.steps[-1]], "grid": grid_kind,
-               "contacts": contacts is not None, **kernel.describe()}
+               "contacts": setup.contacts is not None, **kernel.describe()}
     if grid_kind == "rz":
         prof = outlet_profiles(ds, setup.z_outlet, setup.outlet_radius)
         write_text(out / "outlet_profiles.csv", prof.to_csv(index=False))
