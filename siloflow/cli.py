@@ -80,18 +80,23 @@ def run(case_file: Path = typer.Argument(..., help="YAML case file"),
         force: bool = typer.Option(False, "--force", help="replace an existing run folder"),
         liggghts: Optional[str] = typer.Option(None, "--liggghts", envvar="SILOFLOW_LIGGGHTS",
                                                help="LIGGGHTS binary (default: liggghts on PATH)"),
-        post_process: bool = typer.Option(True, "--post/--no-post", help="compute first results")) -> None:
+        post_process: bool = typer.Option(True, "--post/--no-post", help="compute first results"),
+        allow_large_output: bool = typer.Option(False, help="run even if the estimated output exceeds the free disk")) -> None:
     """Render, run LIGGGHTS with a progress bar, check the run, and compute first results."""
+    from .derived import derive
+    from .disk_estimate import check_disk_space
     from .engine import get_engine
     try:
         case = load_case(case_file)
         engine = get_engine(case.engine.name, executable=liggghts)
         engine.command(case.engine.ranks)  # binary and launcher present before anything is written
+        sizes = check_disk_space(case, derive(case), output, allow_large_output)
         folder = engine.prepare(case, output, force=force)
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
-    out.print(f"run folder: {folder}")
+    out.print(f"run folder: {folder} (expected output up to {sizes['total'] / 1e6:.0f} MB, "
+              f"{sizes['frames']} dump frames)")
     with _progress_bar() as bar:
         task = bar.add_task("run", total=None, stage="start", step=0)
 

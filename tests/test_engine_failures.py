@@ -71,3 +71,24 @@ def test_diagnose_known_messages():
     assert "mesh file" in cause
     msg, cause, fix = diagnose([], [], -9)
     assert "SIGKILL" in msg
+
+
+def test_run_refused_when_the_output_would_not_fit(tmp_path, monkeypatch):
+    """The disk estimate is checked before anything is written."""
+    import shutil as _shutil
+    from collections import namedtuple
+
+    from typer.testing import CliRunner
+
+    from siloflow.cli import app
+    from conftest import SMALL
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(_shutil, "disk_usage", lambda p: usage(10**9, 10**9 - 1000, 1000))
+    fake = tmp_path / "liggghts"
+    fake.write_text("#!/bin/sh\nexit 0\n")
+    fake.chmod(0o755)
+    result = CliRunner().invoke(app, ["run", str(SMALL), "-o", str(tmp_path / "run"), "--liggghts", str(fake)])
+    assert result.exit_code == 1
+    assert "free" in result.output and "dump_interval" in result.output
+    assert not (tmp_path / "run").exists()

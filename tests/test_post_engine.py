@@ -171,3 +171,12 @@ def test_coarse_graining_of_the_real_run(small_run, tmp_path):
         assert float(axis.sel(z=0.3 * h, method="nearest")) > float(axis.sel(z=0.7 * h, method="nearest"))
     for name in ("cg_maps.png", "cg_outlet_profiles.png", "cg_axial_pressure.png", "outlet_profiles.csv"):
         assert (out / name).is_file(), name
+
+
+def test_disk_estimate_bounds_what_the_run_wrote(small_run):
+    from siloflow.derived import derive
+    from siloflow.disk_estimate import estimate_bytes
+    case, folder, record, summary = small_run
+    written = sum(p.stat().st_size for p in (folder / "output").rglob("*") if p.is_file())
+    estimate = estimate_bytes(case, derive(case))["total"]
+    assert written <= estimate <= 3 * written, (written, estimate)
