@@ -92,7 +92,8 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
     ds.to_netcdf(tmp)
     tmp.replace(out / "fields.nc")
     summary = {"frames": len(cg.steps), "steps": [cg.steps[0], cg.steps[-1]], "grid": grid_kind,
-               "contacts": setup.contacts is not None, **kernel.describe()}
+               "contacts": setup.contacts is not None, "outlet_radius_m": setup.outlet_radius,
+               "z_outlet_m": setup.z_outlet, **kernel.describe()}
     if grid_kind == "rz":
         prof = outlet_profiles(ds, setup.z_outlet, setup.outlet_radius)
         write_text(out / "outlet_profiles.csv", prof.to_csv(index=False))
@@ -111,3 +112,33 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
         summary["figures"] = [p.name for p in cg_figures(ds, out, setup.z_outlet, setup.outlet_radius)]
     write_json(out / "cg_summary.json", summary)
     return summary
+
+
+def scaling_across_runs(folders) -> dict:
+    """Paper B's scaling with the outlet radius R across coarse-grained runs (folders holding
+    cg_summary.json): power-law fits v_z(0) = a R^b (expected b = 1/2) and h_c = a R^b
+    (expected b = 1), and the table of the runs."""
+    import pandas as pd
+
+    from .cg_analyses import power_law_fit
+
+    rows = []
+    for folder in folders:
+        try:
+            s = json.loads((Path(folder) / "cg_summary.json").read_text())
+        except (OSError, ValueError):
+            raise ReadError(f"{folder}: no cg_summary.json (run `siloflow cg` first)") from None
+        if "v_z_centre_outlet" not in s:
+            raise ReadError(f"{folder}: not an axisymmetric coarse-graining")
+        rows.append({"folder": str(folder), "R": s["outlet_radius_m"], "v_z0": abs(s["v_z_centre_outlet"]),
+                     "phi0": s["solid_fraction_centre_outlet"], "h_c": s["kinetic_peak_height_m"]})
+    table = pd.DataFrame(rows)
+    if table.R.nunique() < 2:
+        raise ReadError("scaling needs runs with at least two outlet radii")
+    a, b, b_err = power_law_fit(table.R, table.v_z0)
+    result = {"v_z0": {"prefactor": a, "exponent": b, "exponent_stderr": b_err, "expected_exponent": 0.5}}
+    valid = table[table.h_c > 0]
+    if valid.R.nunique() >= 2:
+        a, b, b_err = power_law_fit(valid.R, valid.h_c)
+        result["h_c"] = {"prefactor": a, "exponent": b, "exponent_stderr": b_err, "expected_exponent": 1.0}
+    return {"runs": table.to_dict(orient="records"), **result}

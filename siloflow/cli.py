@@ -237,6 +237,25 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
     out.print(f"results: {target} (fields.nc, *.csv, cg_summary.json, figures)")
 
 
+@app.command("cg-scaling")
+def cg_scaling(folders: List[Path] = typer.Argument(..., help="cg result folders of runs with different outlets"),
+               output: Path = typer.Option(Path("cg_scaling.json"), "-o", "--output")) -> None:
+    """Power-law fits across runs: outlet centre velocity v_z(0) ~ R^b and h_c ~ R^b (paper B)."""
+    from postprocess.cg_run import scaling_across_runs
+    from .atomic_files import write_json
+    try:
+        result = scaling_across_runs(folders)
+    except SiloflowError as exc:
+        _fail(exc)
+    write_json(output, result)
+    v = result["v_z0"]
+    out.print(f"v_z(0) ~ R^{v['exponent']:.3f} +/- {v['exponent_stderr']:.3f} (paper B: 1/2)")
+    if "h_c" in result:
+        h = result["h_c"]
+        out.print(f"h_c ~ R^{h['exponent']:.3f} +/- {h['exponent_stderr']:.3f} (paper B: 1)")
+    out.print(f"written: {output}")
+
+
 @app.command()
 def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folders (different orifices or grains)"),
              output: Path = typer.Option(Path("beverloo.csv"), "-o", "--output", help="table of the runs and the fit")) -> None:

@@ -263,3 +263,25 @@ def test_paper_b_analyses_on_known_fields(tmp_path):
     a, b, b_err = power_law_fit([0.01, 0.02, 0.04, 0.08], 3.1 * np.sqrt([0.01, 0.02, 0.04, 0.08]))
     assert b == pytest.approx(0.5) and a == pytest.approx(3.1)
     assert len(cg_figures(ds, tmp_path, 0.0, R)) == 4
+
+
+def test_scaling_across_runs(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from siloflow.cli import app
+    folders = []
+    for k, R in enumerate([0.01, 0.015, 0.02, 0.03]):
+        folder = tmp_path / f"cg{k}"
+        folder.mkdir()
+        (folder / "cg_summary.json").write_text(json.dumps({
+            "outlet_radius_m": R, "v_z_centre_outlet": -2.0 * math.sqrt(9.81 * R), "solid_fraction_centre_outlet": 0.5,
+            "kinetic_peak_height_m": 1.3 * R}))
+        folders.append(str(folder))
+    out = tmp_path / "s.json"
+    result = CliRunner().invoke(app, ["cg-scaling", *folders, "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    s = json.loads(out.read_text())
+    assert s["v_z0"]["exponent"] == pytest.approx(0.5) and s["h_c"]["exponent"] == pytest.approx(1.0)
+    assert s["v_z0"]["prefactor"] == pytest.approx(2.0 * math.sqrt(9.81))
