@@ -33,6 +33,8 @@ class CgSetup:
     particle_density: float | None
     step_lo: int | None = None
     step_hi: int | None = None
+    wall_contacts: list | None = None
+    wall_contact_columns: list | None = None
 
 
 def setup_from_run(folder: Path) -> CgSetup:
@@ -54,11 +56,15 @@ def setup_from_run(folder: Path) -> CgSetup:
         contacts = dump_files(str(dumps / "contacts.*.txt"))
     except ReadError:
         contacts = None
+    try:
+        walls = dump_files(str(dumps / "wall_contacts.*.txt")) if derived.get("wall_contact_columns") else None
+    except ReadError:
+        walls = None
     g = case.geometry
     top = summary.get("frame_analyses", {}).get("settled_surface_height_m") or (g.hopper_height + g.height)
     return CgSetup(atoms, contacts, derived.get("contact_columns") or None, g.radius, float(derived["outlet_z"]),
                    float(top), 0.0, g.outlet_radius, case.materials.particle.density,
-                   int(rate["t_start"] / dt), int(rate["t_end"] / dt))
+                   int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, derived.get("wall_contact_columns"))
 
 
 def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: float = 2.0, unit: str = "radius",
@@ -85,14 +91,16 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
         grid = CartesianGrid([-setup.r_max, -setup.r_max, setup.z_lo], [setup.r_max, setup.r_max, setup.z_hi],
                              (nr, nr, nz))
     contacts = read_frames(setup.contacts, columns=setup.contact_columns) if setup.contacts else None
+    walls = read_frames(setup.wall_contacts, columns=setup.wall_contact_columns) if setup.wall_contacts else None
     cg = CoarseGraining(grid, kernel, setup.particle_density, species, per_frame=per_frame).run(
-        in_window(read_frames(setup.atoms, every=every)), contacts)
+        in_window(read_frames(setup.atoms, every=every)), contacts, walls)
     ds = cg.dataset()
     tmp = out / ".fields.nc.tmp"
     ds.to_netcdf(tmp)
     tmp.replace(out / "fields.nc")
     summary = {"frames": len(cg.steps), "steps": [cg.steps[0], cg.steps[-1]], "grid": grid_kind,
-               "contacts": setup.contacts is not None, "outlet_radius_m": setup.outlet_radius,
+               "contacts": setup.contacts is not None, "wall_contacts": setup.wall_contacts is not None,
+               "outlet_radius_m": setup.outlet_radius,
                "z_outlet_m": setup.z_outlet, **kernel.describe()}
     if grid_kind == "rz":
         prof = outlet_profiles(ds, setup.z_outlet, setup.outlet_radius)

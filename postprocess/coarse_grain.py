@@ -571,19 +571,39 @@ def species_of(frame, by: str | None, classes=None):
     return idx, list(labels)
 
 
-def liggghts_contacts(contacts_frame, atoms_frame=None):
-    """(pos_i, pos_j, force on i) from a LIGGGHTS pair/gran/local frame with pos and force
-    columns. LIGGGHTS reports the force on the first particle (checked on a settled bed: the
+def liggghts_contacts(contacts_frame):
+    """(pos_i, pos_j, force on i) from a LIGGGHTS pair/gran/local frame (pos and force columns)
+    or wall/gran/local frame (pos: wall point then particle; branch from the wall point).
+
+    LIGGGHTS reports the force on the first particle of a pair (checked on a settled bed: the
     normal force points from particle 2 to particle 1 in 99 % of contacts, the rest being
-    damping-dominated separating contacts)."""
+    damping-dominated separating contacts) and, for walls, the force on the particle."""
     d = contacts_frame.data
-    for col in ("x1", "fx"):
-        if col not in d:
-            raise ValueError(f"{contacts_frame.source}: contact stress needs pos and force columns "
-                             "(compute pair/gran/local pos id force)")
+    if "fx" not in d or not ("x1" in d):
+        raise ValueError(f"{contacts_frame.source}: contact stress needs pos and force columns "
+                         "(compute pair/gran/local pos id force)")
+    force = d[["fx", "fy", "fz"]].to_numpy()
+    if "xw" in d:   # wall contact: the branch runs from the contact point on the wall to the centre
+        return d[["x1", "y1", "z1"]].to_numpy(), d[["xw", "yw", "zw"]].to_numpy(), force
     keep = (d["periodic"].to_numpy() == 0) if "periodic" in d else np.ones(len(d), bool)
-    return (d.loc[keep, ["x1", "y1", "z1"]].to_numpy(), d.loc[keep, ["x2", "y2", "z2"]].to_numpy(),
-            d.loc[keep, ["fx", "fy", "fz"]].to_numpy())
+    return (d.loc[keep, ["x1", "y1", "z1"]].to_numpy(), d.loc[keep, ["x2", "y2", "z2"]].to_numpy(), force[keep])
+
+
+def _joined_contacts(*frames):
+    """Concatenate the (pos_i, pos_j, force) of several contact frames (pairs, walls); None if none."""
+    parts = [liggghts_contacts(f) for f in frames if f is not None]
+    if not parts:
+        return None
+    return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
+
+
+def _same_step(stream, step):
+    """Advance ``stream`` (a [iterator, current] pair) to the frame at ``step``; that frame or None."""
+    it, current = stream
+    while current is not None and current.timestep < step:
+        current = next(it, None)
+    stream[1] = current
+    return current if current is not None and current.timestep == step else None
 
 
 class CoarseGraining:
@@ -612,13 +632,12 @@ class CoarseGraining:
             raise ValueError(f"{frame.source}: no mass column; give particle_density")
         return self.rho_p * 4.0 / 3.0 * np.pi * frame.radii() ** 3
 
-    def add_frame(self, frame, contacts=None):
+    def add_frame(self, frame, contacts=None, wall_contacts=None):
         sp, labels = species_of(frame, self.species, self.classes)
         if self.species is not None and self.classes is None:
             self.classes = labels              # the first frame fixes the classes
         sums = coarse_grain_frame(self.grid, self.kernel, frame.positions(), frame.velocities(), self._mass(frame),
-                                  sp, len(self.classes or []),
-                                  liggghts_contacts(contacts) if contacts is not None else None, self.n_s)
+                                  sp, len(self.classes or []), _joined_contacts(contacts, wall_contacts), self.n_s)
         if self.per_frame:
             self.frames.append(sums)
         if self.sum is None:
@@ -628,10 +647,20 @@ class CoarseGraining:
                 self.sum[k] += sums[k]
         self.steps.append(int(frame.timestep))
 
-    def run(self, frames, contacts=None):
-        from .analysis_base import paired
-        for frame, cframe in paired(frames, contacts):
-            self.add_frame(frame, cframe)
+    def run(self, frames, contacts=None, wall_contacts=None):
+        """Coarse-grain ``frames``; with ``contacts`` (and ``wall_contacts``), only the frames that
+        have a contact frame of the same timestep (all streams in increasing step order)."""
+        pair = [iter(contacts), None] if contacts is not None else None
+        wall = [iter(wall_contacts), None] if wall_contacts is not None else None
+        for s in (pair, wall):
+            if s is not None:
+                s[1] = next(s[0], None)
+        for frame in frames:
+            c = _same_step(pair, frame.timestep) if pair else None
+            if pair and c is None:
+                continue
+            w = _same_step(wall, frame.timestep) if wall else None
+            self.add_frame(frame, c, w)
         if not self.steps:
             raise ValueError("coarse graining: no frames")
         return self

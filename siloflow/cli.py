@@ -189,6 +189,9 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
        every: int = typer.Option(1, min=1, help="use every n-th frame"),
        contacts: Optional[str] = typer.Option(None, help="dump local of contacts (for a dump source)"),
        contact_keywords: Optional[str] = typer.Option(None, help="keywords of the compute that wrote --contacts"),
+       wall_contacts: Optional[str] = typer.Option(None, help="dump local of wall contacts (wall/gran/local pos id "
+                                                   "force), boundary terms of the contact stress"),
+       wall_contact_keywords: str = typer.Option("pos,id,force", help="keywords of the compute that wrote --wall-contacts"),
        r_max: Optional[float] = typer.Option(None, help="grid radius, m (dump source)"),
        z_lo: Optional[float] = typer.Option(None, help="grid bottom, m (dump source)"),
        z_hi: Optional[float] = typer.Option(None, help="grid top, m (dump source)"),
@@ -220,7 +223,9 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
                     raise ReadError(f"--steps {steps!r}: expected FIRST:LAST timesteps") from None
             setup = CgSetup(dump_files(source), dump_files(contacts) if contacts else None,
                             local_columns(contact_keywords.split(",")) if contact_keywords else None,
-                            r_max, z_lo, z_hi, z_outlet, outlet_radius, particle_density, *lo_hi)
+                            r_max, z_lo, z_hi, z_outlet, outlet_radius, particle_density, *lo_hi,
+                            dump_files(wall_contacts) if wall_contacts else None,
+                            local_columns(wall_contact_keywords.split(","), wall=True) if wall_contacts else None)
             target = output or Path("cg_results")
         summary = run_cg(setup, target, kernel, width, unit, nr, nz, None if species == "none" else species,
                          per_frame, grid, every)
@@ -229,7 +234,8 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
     except ValueError as exc:
         _fail(SiloflowError(str(exc)))
     out.print(f"coarse-grained {summary['frames']} frames (steps {summary['steps'][0]}-{summary['steps'][1]}) "
-              f"on a {grid} grid with a {summary['kernel']} kernel; contacts: {summary['contacts']}")
+              f"on a {grid} grid with a {summary['kernel']} kernel; contacts: {summary['contacts']}, "
+              f"wall contacts: {summary['wall_contacts']}")
     if "v_z_centre_outlet" in summary:
         out.print(f"outlet centre: solid fraction {summary['solid_fraction_centre_outlet']:.3f}, "
                   f"v_z {summary['v_z_centre_outlet']:.3f} m/s; kinetic pressure peaks "

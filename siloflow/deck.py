@@ -19,7 +19,7 @@ from . import __version__
 from .atomic_files import new_folder, write_json, write_text
 from .case import SAFE_NAME_PATTERN, Case, case_to_yaml
 from .derived import Derived, derive
-from .engine_output import CONTACT_KEYWORDS, local_columns
+from .engine_output import CONTACT_KEYWORDS, WALL_CONTACT_KEYWORDS, local_columns
 from .errors import SiloflowError
 from .meshes import silo_meshes, write_stl
 
@@ -131,6 +131,7 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
         "sample_repeat": d.sample_repeat, "sample_freq": d.sample_freq,
         "dump_every": d.dump_every, "vtk": case.outputs.vtk,
         "contact_keywords": list(CONTACT_KEYWORDS), "contact_columns": contact_columns(case, d),
+        "wall_contact_keywords": list(WALL_CONTACT_KEYWORDS), "wall_contact_columns": wall_contact_columns(case, d),
         "empty_mass": case.discharge.empty_fraction * d.total_mass,
         "planned": d.planned_steps, "fill_steps": d.fill_steps,
         "settle_max_chunks": d.settle_max_chunks, "settle_chunk_steps": d.settle_chunk_steps,
@@ -156,6 +157,11 @@ def contact_columns(case: Case, d: Derived) -> list[str]:
     return local_columns(CONTACT_KEYWORDS) if d.dump_every and case.outputs.contacts else []
 
 
+def wall_contact_columns(case: Case, d: Derived) -> list[str]:
+    """Column names of the particle-wall contact dump (empty when the case writes none)."""
+    return local_columns(WALL_CONTACT_KEYWORDS, wall=True) if d.dump_every and case.outputs.contacts else []
+
+
 def write_deck(case: Case, folder: Path) -> Derived:
     """Write the deck files of ``case`` into the existing, empty ``folder``."""
     d = derive(case)
@@ -175,6 +181,7 @@ def write_deck(case: Case, folder: Path) -> Derived:
     info["engine_ranks"] = case.engine.ranks
     info["gravity"] = case.gravity
     info["contact_columns"] = contact_columns(case, d)
+    info["wall_contact_columns"] = wall_contact_columns(case, d)
     info["walls"] = [w.info() for w in walls]
     info["sensors"] = {"sectors": case.sensors.sectors,
                        "bands": len([w for w in walls if w.role == "band"]) // case.sensors.sectors}

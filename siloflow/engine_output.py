@@ -52,7 +52,12 @@ PAIR_LOCAL_LAYOUT = {
     "delta": ["delta"],
 }
 #: ``compute wall/gran/local`` uses the same order, but ``id`` is (mesh id, triangle id, particle id)
+#: and ``pos`` is (contact point on the wall, particle centre): seen in LIGGGHTS 3.8 output, where
+#: the first point lies on the cylinder (r = R) and the second at r = R - radius
 WALL_LOCAL_ID = ["mesh", "triangle", "id1"]
+WALL_LOCAL_POS = ["xw", "yw", "zw", "x1", "y1", "z1"]
+#: what siloflow decks ask of wall/gran/local (the force is the force on the particle)
+WALL_CONTACT_KEYWORDS = ("pos", "id", "force")
 #: what siloflow decks ask of pair/gran/local
 CONTACT_KEYWORDS = ("pos", "id", "force", "force_normal")
 
@@ -65,5 +70,9 @@ def local_columns(keywords: Sequence[str], wall: bool = False) -> list[str]:
     names: list[str] = []
     for key, cols in PAIR_LOCAL_LAYOUT.items():
         if key in keywords:
-            names += WALL_LOCAL_ID if (wall and key == "id") else cols
+            if wall and key == "id":
+                cols = WALL_LOCAL_ID
+            elif wall and key == "pos":
+                cols = WALL_LOCAL_POS
+            names += cols
     return names

@@ -285,3 +285,34 @@ def test_scaling_across_runs(tmp_path):
     s = json.loads(out.read_text())
     assert s["v_z0"]["exponent"] == pytest.approx(0.5) and s["h_c"]["exponent"] == pytest.approx(1.0)
     assert s["v_z0"]["prefactor"] == pytest.approx(2.0 * math.sqrt(9.81))
+
+
+def test_wall_contacts_close_the_contact_stress_virial():
+    """With the bottom wall's contacts as boundary terms (branch from the contact point on the
+    wall to the grain centre), the contact stress integrates to the full virial
+    sum f (x) b over pairs and walls, and the column's sigma_zz reaches the bottom layer."""
+    from postprocess.coarse_grain import _joined_contacts
+    a, m, g, layers, n = 0.004, 1e-4, 9.81, 12, 6
+    ij = np.array(list(itertools.product(range(n), range(n))), float) * a
+    pos = np.concatenate([np.column_stack([ij, np.full(len(ij), (k + 0.5) * a)]) for k in range(layers)])
+    upper = pos[len(ij):]
+    lower = upper - [0, 0, a]
+    above = np.repeat(np.arange(layers - 1, 0, -1), len(ij))
+    pair_force = np.column_stack([np.zeros((len(upper), 2)), m * g * above])
+    bottom = pos[:len(ij)]
+    wall_point = bottom - [0, 0, 0.5 * a]
+    wall_force = np.column_stack([np.zeros((len(bottom), 2)), np.full(len(bottom), m * g * layers)])
+    pairs = Frame(0, np.zeros((3, 2)), pd.DataFrame(np.column_stack([upper, lower, pair_force]),
+                                                     columns=["x1", "y1", "z1", "x2", "y2", "z2", "fx", "fy", "fz"]),
+                  kind="entries")
+    walls = Frame(0, np.zeros((3, 2)), pd.DataFrame(np.column_stack([wall_point, bottom, wall_force]),
+                                                     columns=["xw", "yw", "zw", "x1", "y1", "z1", "fx", "fy", "fz"]),
+                  kind="entries")
+    pi, pj, f = _joined_contacts(pairs, walls)
+    grid = CartesianGrid([-0.02, -0.02, -0.02], [0.04, 0.04, 0.07], (40, 40, 60))
+    k = gaussian(0.003)      # resolved by the grid: the cell sum is the integral to 1e-3
+    sums = coarse_grain_frame(grid, k, pos, np.zeros_like(pos), np.full(len(pos), m), contacts=(pi, pj, f))
+    virial = (f[:, 2] * (pi - pj)[:, 2]).sum()
+    assert sums["contact"][..., 8].sum() * grid.cell_volume == pytest.approx(virial, rel=1e-3)
+    # the wall term carries the weight of the whole column at the bottom
+    assert (wall_force[:, 2] * 0.5 * a).sum() == pytest.approx(m * g * layers * len(ij) * 0.5 * a)

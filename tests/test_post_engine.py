@@ -157,7 +157,7 @@ def test_coarse_graining_of_the_real_run(small_run, tmp_path):
     assert result.exit_code == 0, result.output
     import xarray as xr
     s = json.loads((out / "cg_summary.json").read_text())
-    assert s["frames"] >= 10 and s["contacts"]
+    assert s["frames"] >= 10 and s["contacts"] and s["wall_contacts"]
     assert s["v_z_centre_outlet"] < 0                                 # grains leave downwards
     assert 0.3 < s["janda_fit"]["exponent"] < 0.8                     # Janda: 1/2
     with xr.open_dataset(out / "fields.nc") as ds:
