@@ -178,13 +178,85 @@ class Materials(Strict):
 
 # --------------------------------------------------------------------------- particles
 class MonodisperseSpheres(Strict):
-    """Spheres of one radius (polydisperse and clumps come as further kinds)."""
+    """Spheres of one radius."""
 
     kind: Literal["spheres"]
     radius: Positive = Field(description="sphere radius, m", le=1.0)
 
+    @property
+    def radii(self) -> list[float]:
+        return [self.radius]
 
-Particles = Annotated[Union[MonodisperseSpheres], Field(discriminator="kind")]
+    @property
+    def number_fractions(self) -> list[float]:
+        return [1.0]
+
+    @property
+    def max_radius(self) -> float:
+        return self.radius
+
+    @property
+    def min_radius(self) -> float:
+        return self.radius
+
+
+class PolydisperseSpheres(Strict):
+    """Spheres of several radii, inserted at random with the given fractions.
+
+    ``basis`` says whether ``fractions`` count particles (``number``) or mass (``mass``);
+    LIGGGHTS' particledistribution/discrete takes mass fractions, and siloflow converts
+    (all sizes have the particle density, so mass goes as r^3).
+    """
+
+    kind: Literal["polydisperse_spheres"]
+    radii: list[Positive] = Field(min_length=2, max_length=20, description="sphere radii, m")
+    fractions: list[Fraction] = Field(min_length=2, max_length=20, description="fraction of each radius; sum 1")
+    basis: Literal["number", "mass"] = Field(description="what the fractions count")
+
+    @model_validator(mode="after")
+    def _distribution(self):
+        if len(self.fractions) != len(self.radii):
+            raise ValueError(f"fractions has {len(self.fractions)} entries for {len(self.radii)} radii")
+        if len(set(self.radii)) != len(self.radii):
+            raise ValueError("radii must be distinct")
+        if max(self.radii) > 1.0:
+            raise ValueError("radii must be <= 1 m")
+        if abs(sum(self.fractions) - 1.0) > 1e-6:
+            raise ValueError(f"fractions must sum to 1 (they sum to {sum(self.fractions):.9g})")
+        return self
+
+    @property
+    def number_fractions(self) -> list[float]:
+        if self.basis == "number":
+            return list(self.fractions)
+        inv = [f / r ** 3 for f, r in zip(self.fractions, self.radii)]
+        return [v / sum(inv) for v in inv]
+
+    @property
+    def mass_fractions(self) -> list[float]:
+        if self.basis == "mass":
+            return list(self.fractions)
+        w = [f * r ** 3 for f, r in zip(self.fractions, self.radii)]
+        return [v / sum(w) for v in w]
+
+    @property
+    def max_radius(self) -> float:
+        return max(self.radii)
+
+    @property
+    def min_radius(self) -> float:
+        return min(self.radii)
+
+
+def paper_b_radii(rb: float, sizes: int = 7) -> list[float]:
+    """Paper B's size classes: ``sizes`` radii in arithmetic progression with difference rb/16,
+    from rb down. The paper states seven sizes, a difference of rb/16 and a smallest radius of
+    rb/2 + rb/16, which cannot all hold (that would take eight sizes); this keeps the seven
+    sizes and the difference, so the smallest radius is rb/2 + rb/8."""
+    return [rb - k * rb / 16.0 for k in range(sizes)]
+
+
+Particles = Annotated[Union[MonodisperseSpheres, PolydisperseSpheres], Field(discriminator="kind")]
 
 
 # --------------------------------------------------------------------------- stages
@@ -318,12 +390,13 @@ class Case(Strict):
         g, p, f = self.geometry, self.particles, self.fill
         problems = []
         if g.kind != "planar":
-            d = 2 * p.radius
-            if p.radius >= g.outlet_radius:
-                problems.append(f"particles.radius ({p.radius} m) must be smaller than the outlet "
+            d = 2 * p.max_radius
+            field = "particles.radius" if p.kind == "spheres" else "particles.radii"
+            if p.max_radius >= g.outlet_radius:
+                problems.append(f"{field} ({p.max_radius} m) must be smaller than the outlet "
                                 f"radius ({g.outlet_radius} m): nothing could leave")
             if 3 * d > g.radius:
-                problems.append(f"particles.radius ({p.radius} m) is too large for a silo of radius "
+                problems.append(f"{field} ({p.max_radius} m) is too large for a silo of radius "
                                 f"{g.radius} m (need radius >= 3 particle diameters)")
             top = g.hopper_height + g.height
             if f.height is not None and f.height >= top:
@@ -382,7 +455,7 @@ def _field_path(loc) -> str:
     for item in loc:
         if isinstance(item, int):
             parts.append(f"[{item}]")
-        elif item in ("cylinder", "hopper", "planar", "spheres") and parts:
+        elif item in ("cylinder", "hopper", "planar", "spheres", "polydisperse_spheres") and parts:
             continue  # discriminator tag pydantic inserts into the path
         else:
             parts.append(("." if parts else "") + str(item))

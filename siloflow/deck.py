@@ -123,6 +123,8 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
         "timestep": d.timestep, "gravity": case.gravity,
         "walls": [w for w in walls if w.role != "outlet"],
         "seeds": d.seeds, "density": m.particle.density, "radius": d.particle_radius,
+        "templates": [{"radius": r, "seed": seed, "weight": w}
+                      for r, seed, w in zip(d.radii, d.seeds["templates"], d.mass_fractions)],
         "insertion_region": d.insertion_region, "particle_count": d.particle_count,
         "particle_rate": d.insertion_batch / (d.insert_every * d.timestep),
         "insert_every": d.insert_every, "insertion_speed": d.insertion_speed,

@@ -39,9 +39,9 @@ class PairParameters:
 class Derived:
     """Derived parameters of a case (SI units)."""
 
-    particle_radius: float
-    particle_volume: float
-    particle_mass: float
+    particle_radius: float     # the largest radius, m
+    particle_volume: float     # mean volume per grain, m3
+    particle_mass: float       # mean mass per grain, kg
     particle_count: int
     total_mass: float
     bed_height_estimate: float
@@ -76,7 +76,10 @@ class Derived:
     plate_travel: float
     box: dict
     skin: float
-    seeds: dict[str, int] = field(default_factory=dict)
+    seeds: dict = field(default_factory=dict)
+    radii: list = field(default_factory=list)             # m
+    number_fractions: list = field(default_factory=list)
+    mass_fractions: list = field(default_factory=list)    # what LIGGGHTS' distribution takes
 
     @property
     def planned_steps(self) -> dict[str, int]:
@@ -180,10 +183,16 @@ def derive(case: Case) -> Derived:
     if not isinstance(g, (CylinderGeometry, HopperGeometry)):
         raise CaseError([("geometry.kind", f"'{g.kind}' has a schema but no deck yet: the planar "
                           "silo deck is part of the particle-systems issue")])
-    r = case.particles.radius
+    p = case.particles
+    r = p.max_radius                       # geometry margins use the largest grain
+    r_min = p.min_radius                   # the time step, the smallest (shortest contacts)
     d = 2 * r
     rho = case.materials.particle.density
-    vol, mass = cp.sphere_volume(r), cp.sphere_mass(r, rho)
+    numbers = p.number_fractions
+    vol = sum(n * cp.sphere_volume(ri) for n, ri in zip(numbers, p.radii))     # mean volume per grain
+    mass = rho * vol
+    mass_fractions = [n * ri ** 3 for n, ri in zip(numbers, p.radii)]
+    mass_fractions = [w / sum(mass_fractions) for w in mass_fractions]
     f = case.fill
     top = g.hopper_height + g.height
     if f.count is not None:
@@ -208,12 +217,12 @@ def derive(case: Case) -> Derived:
 
     # time step
     v_impact = cp.free_fall_speed(z_max, case.gravity, INSERTION_SPEED)
-    pairs = contact_pairs(case, mass, r, v_impact)
-    candidates = {f"contact time {p.name}": p.contact_time for p in pairs.values()}
+    pairs = contact_pairs(case, cp.sphere_mass(r_min, rho), r_min, v_impact)
+    candidates = {f"contact time {pp.name}": pp.contact_time for pp in pairs.values()}
     rayleigh = None
     if case.materials.model == "hertz":
         pm = case.materials.particle
-        rayleigh = cp.rayleigh_time(r, rho, pm.youngs_modulus, pm.poisson_ratio)
+        rayleigh = cp.rayleigh_time(r_min, rho, pm.youngs_modulus, pm.poisson_ratio)
         candidates["Rayleigh time of the particles"] = rayleigh
     source = min(candidates, key=candidates.get)
     t_crit = candidates[source]
@@ -274,6 +283,7 @@ def derive(case: Case) -> Derived:
         sample_freq=sample_freq, dump_every=dump_every,
         outlet_z=outlet_z, outlet_disc_radius=g.outlet_radius + 2 * d, plate_travel=plate_travel,
         box=box, skin=0.5 * r,
-        seeds={"insertion": prime_seed(case.seed, 1), "template": prime_seed(case.seed, 2),
-               "distribution": prime_seed(case.seed, 3)},
+        seeds={"insertion": prime_seed(case.seed, 1), "distribution": prime_seed(case.seed, 3),
+               "templates": [prime_seed(case.seed, 10 + k) for k in range(len(p.radii))]},
+        radii=list(p.radii), number_fractions=list(numbers), mass_fractions=mass_fractions,
     )

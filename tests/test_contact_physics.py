@@ -70,7 +70,8 @@ def test_derived_timestep_is_fraction_of_smallest_time(quick_dict):
     assert d.critical_time == min(times)
     assert d.timestep == pytest.approx(case.engine.timestep_fraction * min(times))
     assert d.particle_mass * d.particle_count == pytest.approx(d.total_mass)
-    assert all(is_prime(s) and s > 10000 for s in d.seeds.values())
+    seeds = [s for v in d.seeds.values() for s in (v if isinstance(v, list) else [v])]
+    assert all(is_prime(s) and s > 10000 for s in seeds) and len(set(seeds)) == len(seeds)
     assert d.sample_freq % d.sample_every == 0
     # the insertion region sits above the expected bed
     assert d.insertion_region["z_min"] > d.bed_height_estimate
@@ -107,3 +108,43 @@ def test_hopper_volume_is_cone_plus_cylinder(quick_dict):
     cone = math.pi * hh / 3 * (0.008 ** 2 + 0.008 * 0.015 + 0.015 ** 2)
     assert bed_volume(case, hh + 0.05) == pytest.approx(cone + math.pi * 0.015 ** 2 * 0.05)
     assert bed_height(case, bed_volume(case, 0.04)) == pytest.approx(0.04, rel=1e-6)
+
+
+def test_polydisperse_number_and_mass_fractions_and_time_step(quick_dict):
+    from siloflow.case import paper_b_radii
+    from siloflow.deck import render_deck_text
+    from siloflow.meshes import silo_meshes
+    quick_dict["particles"] = {"kind": "polydisperse_spheres", "radii": [0.0015, 0.001, 0.00075],
+                               "fractions": [0.2, 0.3, 0.5], "basis": "number"}
+    case = case_from_dict(quick_dict)
+    mono = dict(quick_dict, particles={"kind": "spheres", "radius": 0.00075})
+    d, d_small = derive(case), derive(case_from_dict(mono))
+    w = [0.2 * 1.5 ** 3, 0.3 * 1.0, 0.5 * 0.75 ** 3]
+    assert d.mass_fractions == pytest.approx([v / sum(w) for v in w])
+    # the smallest grains set the contact times and the time step
+    assert d.timestep == pytest.approx(d_small.timestep)
+    assert d.particle_radius == 0.0015
+    assert d.particle_volume == pytest.approx(sum(n * 4 / 3 * math.pi * r ** 3 for n, r in zip([0.2, 0.3, 0.5],
+                                                                                              [0.0015, 0.001, 0.00075])))
+    deck = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+    assert "particledistribution/discrete" in deck and deck.count("particletemplate/sphere") == 3
+    line = next(ln for ln in deck.splitlines() if "particledistribution/discrete" in ln).split()
+    assert [float(x) for x in line[7::2]] == pytest.approx(d.mass_fractions, rel=1e-9)
+    # the same distribution given by mass converts back to the number fractions
+    by_mass = dict(quick_dict, particles=dict(quick_dict["particles"], fractions=d.mass_fractions, basis="mass"))
+    assert case_from_dict(by_mass).particles.number_fractions == pytest.approx([0.2, 0.3, 0.5])
+    assert paper_b_radii(1 / 64) == pytest.approx([(16 - k) / 16 / 64 for k in range(7)])
+
+
+@pytest.mark.parametrize("particles,words", [
+    ({"radii": [0.001, 0.002], "fractions": [0.5, 0.6]}, "sum to 1"),
+    ({"radii": [0.001, 0.002], "fractions": [1.0]}, "fractions"),
+    ({"radii": [0.001, 0.001], "fractions": [0.5, 0.5]}, "distinct"),
+    ({"radii": [0.001, 0.009], "fractions": [0.5, 0.5]}, "smaller than the outlet"),
+])
+def test_bad_size_distributions_are_refused(quick_dict, particles, words):
+    from siloflow.errors import CaseError
+    quick_dict["particles"] = {"kind": "polydisperse_spheres", "basis": "number", **particles}
+    with pytest.raises(CaseError, match=words) as info:
+        case_from_dict(quick_dict)
+    assert any(path.startswith("particles") or "particles.radii" in msg for path, msg in info.value.problems)
