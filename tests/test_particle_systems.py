@@ -1,0 +1,61 @@
+"""Real LIGGGHTS runs of the particle systems beyond monodisperse spheres (issue 3)."""
+from __future__ import annotations
+
+import json
+import math
+import shutil
+
+import numpy as np
+import pytest
+
+from postprocess.dumps import read_frames
+from siloflow.case import load_case
+from siloflow.derived import derive
+from siloflow.engine import LiggghtsEngine
+from siloflow.engine_output import FLOW_COLUMNS, read_ave_time
+
+from conftest import ROOT
+
+pytestmark = [pytest.mark.engine,
+              pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS not installed "
+                                 "(make install-engine); CI installs it, so CI never skips this")]
+POLY = ROOT / "tests" / "data" / "poly_silo.yaml"
+
+
+@pytest.fixture(scope="module")
+def poly_run(tmp_path_factory):
+    case = load_case(POLY)
+    folder = tmp_path_factory.mktemp("poly") / "run"
+    record = LiggghtsEngine().run(case, folder)
+    return case, folder, record
+
+
+def test_inserted_size_distribution_matches_the_request(poly_run):
+    case, folder, record = poly_run
+    settled = [f for f in read_frames(folder / "output" / "dumps") if f.timestep <= record.stage_steps["open"]][-1]
+    assert settled.n == case.fill.count
+    radii = np.round(settled.radii(), 9)
+    n = len(radii)
+    for r, want in zip(case.particles.radii, case.particles.number_fractions):
+        got = float(np.mean(radii == round(r, 9)))
+        assert abs(got - want) < 3 * math.sqrt(want * (1 - want) / n), (r, got, want)
+    # masses follow the particle density and each grain's own radius
+    rho = case.materials.particle.density
+    np.testing.assert_allclose(settled.column("mass"), rho * 4 / 3 * np.pi * settled.radii() ** 3, rtol=1e-5)
+
+
+def test_mass_is_conserved_through_settling_and_the_criterion_stopped_it(poly_run):
+    case, folder, record = poly_run
+    flow = read_ave_time(folder / "output" / "flow.txt", FLOW_COLUMNS)
+    steps = record.stage_steps
+    settling = flow[(flow.step >= steps["settle"]) & (flow.step <= steps["open"])]
+    assert settling.mass_total.max() == pytest.approx(settling.mass_total.min(), rel=1e-9)
+    assert record.settled_ke_pe < case.fill.settle.ke_pe_ratio
+    d = derive(case)
+    assert steps["static"] - steps["settle"] < d.settle_max_chunks * d.settle_chunk_steps   # not the cap
+    log = (folder / "log.liggghts").read_text(errors="replace")
+    printed = [ln for ln in log.splitlines() if ln.startswith("SILOFLOW_")]     # the deck's echo is indented
+    assert any(ln.startswith("SILOFLOW_SETTLED ") for ln in printed)
+    assert not any(ln.startswith("SILOFLOW_NOT_SETTLED") for ln in printed)
+    info = json.loads((folder / "derived.json").read_text())
+    assert info["mass_fractions"] == pytest.approx(case.particles.mass_fractions)
