@@ -212,6 +212,9 @@ class PolydisperseSpheres(Strict):
     radii: list[Positive] = Field(min_length=2, max_length=20, description="sphere radii, m")
     fractions: list[Fraction] = Field(min_length=2, max_length=20, description="fraction of each radius; sum 1")
     basis: Literal["number", "mass"] = Field(description="what the fractions count")
+    protocol: Literal["insert", "shrink_after_settling"] = Field(
+        "insert", description="insert: pour the mixture; shrink_after_settling (paper B): pour and settle "
+        "grains of the largest radius, shrink them at random to the size classes, settle again")
 
     @model_validator(mode="after")
     def _distribution(self):

@@ -31,7 +31,7 @@ CASE_NAME = "case.yaml"
 ALLOWED_COMMANDS = frozenset("""
 atom_style atom_modify boundary newton communicate units processors region create_box neighbor
 neigh_modify hard_particles fix pair_style pair_coeff timestep compute variable thermo_style thermo
-thermo_modify dump dump_modify print run unfix label next jump if
+thermo_modify dump dump_modify print run unfix label next jump if set group
 """.split())
 FORBIDDEN_WORDS = re.compile(r"\b(shell|include|python|system|popen)\b", re.IGNORECASE)
 _SAFE = re.compile(SAFE_NAME_PATTERN.replace("{0,63}", "{0,127}").replace("_.-", "_./-"))
@@ -123,8 +123,12 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
         "timestep": d.timestep, "gravity": case.gravity,
         "walls": [w for w in walls if w.role != "outlet"],
         "seeds": d.seeds, "density": m.particle.density, "radius": d.particle_radius,
-        "templates": [{"radius": r, "seed": seed, "weight": w}
-                      for r, seed, w in zip(d.radii, d.seeds["templates"], d.mass_fractions)],
+        "templates": ([{"radius": d.particle_radius, "seed": d.seeds["templates"][0], "weight": 1.0}]
+                      if d.shrink_classes else
+                      [{"radius": r, "seed": seed, "weight": w}
+                       for r, seed, w in zip(d.radii, d.seeds["templates"], d.mass_fractions)]),
+        "shrink_classes": [{"diameter": 2 * r, "fraction": f, "seed": seed}
+                           for (r, f), seed in zip(d.shrink_classes, d.seeds["shrink"])],
         "insertion_region": d.insertion_region, "particle_count": d.particle_count,
         "particle_rate": d.insertion_batch / (d.insert_every * d.timestep),
         "insert_every": d.insert_every, "insertion_speed": d.insertion_speed,

@@ -40,8 +40,8 @@ class Derived:
     """Derived parameters of a case (SI units)."""
 
     particle_radius: float     # the largest radius, m
-    particle_volume: float     # mean volume per grain, m3
-    particle_mass: float       # mean mass per grain, kg
+    particle_volume: float     # mean volume per grain (after shrinking, if any), m3
+    particle_mass: float       # mean mass per grain (after shrinking, if any), kg
     particle_count: int
     total_mass: float
     bed_height_estimate: float
@@ -80,12 +80,16 @@ class Derived:
     radii: list = field(default_factory=list)             # m
     number_fractions: list = field(default_factory=list)
     mass_fractions: list = field(default_factory=list)    # what LIGGGHTS' distribution takes
+    shrink_classes: list = field(default_factory=list)    # [(radius, conditional fraction)], paper B
 
     @property
     def planned_steps(self) -> dict[str, int]:
         """Upper bound of the steps each stage can take."""
-        return {"fill": self.fill_steps,
-                "settle": self.settle_chunk_steps * self.settle_max_chunks,
+        out = {"fill": self.fill_steps,
+               "settle": self.settle_chunk_steps * self.settle_max_chunks}
+        if self.shrink_classes:
+            out["shrink"] = self.settle_chunk_steps * self.settle_max_chunks
+        return {**out,
                 "static": self.static_steps,
                 "open": self.open_steps,
                 "discharge": self.discharge_chunk_steps * self.discharge_max_chunks}
@@ -170,6 +174,21 @@ def contact_pairs(case: Case, mass: float, radius: float, v_impact: float) -> di
     return out
 
 
+def shrink_classes(radii, number_fractions) -> list[tuple[float, float]]:
+    """Paper B's random shrinking as a sequence of (radius, conditional fraction): each class in
+    turn takes that fraction of the grains not yet assigned, so the classes end with the given
+    number fractions; the largest radius (the poured grains) keeps the rest."""
+    order = sorted(range(len(radii)), key=lambda k: radii[k])
+    largest = order[-1]
+    remaining = 1.0
+    out = []
+    for k in order[:-1]:
+        out.append((radii[k], min(1.0, number_fractions[k] / remaining)))
+        remaining -= number_fractions[k]
+    assert radii[largest] == max(radii)
+    return out
+
+
 def derive(case: Case) -> Derived:
     """Compute the derived parameters of a cylinder or hopper case.
 
@@ -193,6 +212,11 @@ def derive(case: Case) -> Derived:
     mass = rho * vol
     mass_fractions = [n * ri ** 3 for n, ri in zip(numbers, p.radii)]
     mass_fractions = [w / sum(mass_fractions) for w in mass_fractions]
+    final_mass = mass                      # mean grain mass once the bed has its size distribution
+    shrink = getattr(p, "protocol", "insert") == "shrink_after_settling"
+    if shrink:        # the bed is poured as grains of the largest radius
+        vol = cp.sphere_volume(r)
+        mass = rho * vol
     f = case.fill
     top = g.hopper_height + g.height
     if f.count is not None:
@@ -270,8 +294,8 @@ def derive(case: Case) -> Derived:
            "ylo": -g.radius - margin, "yhi": g.radius + margin,
            "zlo": outlet_z - plate_travel - margin, "zhi": top + margin}
     return Derived(
-        particle_radius=r, particle_volume=vol, particle_mass=mass, particle_count=count,
-        total_mass=count * mass, bed_height_estimate=h_bed, impact_velocity=v_impact,
+        particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass, particle_count=count,
+        total_mass=count * final_mass, bed_height_estimate=h_bed, impact_velocity=v_impact,
         pairs=pairs, rayleigh_time=rayleigh, critical_time=t_crit, critical_time_source=source,
         timestep=dt,
         insertion_region={"radius": region_radius, "z_min": z_min, "z_max": z_max},
@@ -284,6 +308,8 @@ def derive(case: Case) -> Derived:
         outlet_z=outlet_z, outlet_disc_radius=g.outlet_radius + 2 * d, plate_travel=plate_travel,
         box=box, skin=0.5 * r,
         seeds={"insertion": prime_seed(case.seed, 1), "distribution": prime_seed(case.seed, 3),
-               "templates": [prime_seed(case.seed, 10 + k) for k in range(len(p.radii))]},
+               "templates": [prime_seed(case.seed, 10 + k) for k in range(len(p.radii))],
+               "shrink": [prime_seed(case.seed, 40 + k) for k in range(len(p.radii))]},
         radii=list(p.radii), number_fractions=list(numbers), mass_fractions=mass_fractions,
+        shrink_classes=shrink_classes(p.radii, numbers) if shrink else [],
     )

@@ -59,3 +59,38 @@ def test_mass_is_conserved_through_settling_and_the_criterion_stopped_it(poly_ru
     assert not any(ln.startswith("SILOFLOW_NOT_SETTLED") for ln in printed)
     info = json.loads((folder / "derived.json").read_text())
     assert info["mass_fractions"] == pytest.approx(case.particles.mass_fractions)
+
+
+SHRINK = ROOT / "tests" / "data" / "shrink_silo.yaml"
+
+
+def test_paper_b_protocol_shrinks_a_settled_bed_to_seven_sizes(tmp_path):
+    from siloflow.case import paper_b_radii
+    case = load_case(SHRINK)
+    assert case.particles.radii == pytest.approx(paper_b_radii(case.particles.max_radius))
+    folder = tmp_path / "run"
+    record = LiggghtsEngine().run(case, folder)
+    steps = record.stage_steps
+    assert steps["settle"] < steps["shrink"] < steps["static"]
+    frames = list(read_frames(folder / "output" / "dumps"))
+    before = [f for f in frames if f.timestep <= steps["shrink"]][-1]
+    after = [f for f in frames if f.timestep <= steps["open"]][-1]
+    assert np.allclose(before.radii(), case.particles.max_radius)          # poured as one size
+    classes = np.asarray(case.particles.radii)
+    nearest = np.abs(after.radii()[:, None] - classes[None, :]).argmin(axis=1)
+    assert np.allclose(after.radii(), classes[nearest], rtol=1e-5)       # dumps print 6 digits
+    n = after.n
+    for k, want in enumerate(case.particles.number_fractions):
+        got = float(np.mean(nearest == k))
+        assert abs(got - want) < 3.5 * math.sqrt(want * (1 - want) / n), (classes[k], got, want)
+    rho = case.materials.particle.density
+    np.testing.assert_allclose(after.column("mass"), rho * 4 / 3 * np.pi * after.radii() ** 3, rtol=5e-5)  # 6 digits
+    # no grain lost; the mass fell by exactly what the shrinking took away
+    flow = read_ave_time(folder / "output" / "flow.txt", FLOW_COLUMNS)
+    settled = flow[(flow.step > steps["shrink"]) & (flow.step <= steps["open"])]
+    assert settled.atoms.min() == case.fill.count
+    assert settled.mass_total.iloc[-1] == pytest.approx(after.column("mass").sum(), rel=1e-5)  # 6-digit tables
+    printed = [ln for ln in (folder / "log.liggghts").read_text(errors="replace").splitlines()
+               if ln.startswith("SILOFLOW_")]
+    assert sum(ln.startswith("SILOFLOW_SETTLED ") for ln in printed) == 2     # settled, shrunk, settled again
+    assert "SILOFLOW_SHRUNK" in printed

@@ -13,7 +13,7 @@ _THERMO = re.compile(r"^\s*(\d+)\s+([-+0-9.eE]+)\s+(\d+)(\s+[-+0-9.eEnaif]+)*\s*
 _ERROR = re.compile(r"^(ERROR( on proc \d+)?:.*)$")
 _WARNING = re.compile(r"^(WARNING:.*)$")
 
-STAGE_ORDER = ("fill", "settle", "static", "open", "discharge")
+STAGE_ORDER = ("fill", "settle", "shrink", "static", "open", "discharge")
 
 
 @dataclass
