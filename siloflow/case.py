@@ -284,6 +284,8 @@ class Fill(Strict):
     insertion_z_max: Optional[Positive] = Field(None, description="top of the insertion region, m")
     batch_volume_fraction: float = Field(0.15, gt=0, le=0.4, allow_inf_nan=False,
                                          description="solid fraction of one insertion batch in the region")
+    frictionless: bool = Field(False, description="paper A: particle-particle friction is 0 while pouring and "
+                               "restored to its value before settling (a denser bed)")
     settle: Settle = Settle()
 
     @model_validator(mode="after")

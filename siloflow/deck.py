@@ -98,11 +98,23 @@ def _properties(case: Case, d: Derived) -> list[dict]:
     else:
         props += [("kn", "peratomtypepair", pair("kn")), ("kt", "peratomtypepair", pair("kt")),
                   ("gamman", "peratomtypepair", pair("gamman")), ("gammat", "peratomtypepair", pair("gammat"))]
-    props.append(("coefficientFriction", "peratomtypepair", pair("friction")))
+    friction = pair("friction")
+    if case.fill.frictionless:     # restored after the fill: see friction_restore()
+        friction = [0.0] + friction[1:]
+    props.append(("coefficientFriction", "peratomtypepair", friction))
     if uses_rolling_friction(case):
         props.append(("coefficientRollingFriction", "peratomtypepair", pair("rolling_friction")))
     return [{"id": f"material{i + 1}", "name": n, "style": s, "numbers": v}
             for i, (n, s, v) in enumerate(props)]
+
+
+def friction_restore(case: Case, d: Derived) -> dict | None:
+    """The friction property as it must be after a frictionless fill (None if the fill has friction)."""
+    if not case.fill.frictionless:
+        return None
+    prop = next(p for p in _properties(case, d) if p["name"] == "coefficientFriction")
+    pp, pw = d.pairs["particle_particle"].friction, d.pairs["particle_wall"].friction
+    return {"id": prop["id"], "numbers": [pp, pw, pw, pw]}
 
 
 def uses_rolling_friction(case: Case) -> bool:
@@ -123,6 +135,7 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
         "timestep": d.timestep, "gravity": case.gravity,
         "walls": [w for w in walls if w.role != "outlet"],
         "seeds": d.seeds, "density": m.particle.density, "radius": d.particle_radius,
+        "friction_restore": friction_restore(case, d),
         "templates": ([{"radius": d.particle_radius, "seed": d.seeds["templates"][0], "weight": 1.0}]
                       if d.shrink_classes else
                       [{"radius": r, "seed": seed, "weight": w}

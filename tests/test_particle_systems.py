@@ -94,3 +94,33 @@ def test_paper_b_protocol_shrinks_a_settled_bed_to_seven_sizes(tmp_path):
                if ln.startswith("SILOFLOW_")]
     assert sum(ln.startswith("SILOFLOW_SETTLED ") for ln in printed) == 2     # settled, shrunk, settled again
     assert "SILOFLOW_SHRUNK" in printed
+
+
+def test_frictionless_fill_packs_denser_then_friction_is_restored(small_run, tmp_path):
+    """Paper A's fill: particle-particle friction 0 while pouring, restored before settling.
+    Compared with the same case poured with friction (the shared small run)."""
+    import yaml
+
+    from postprocess.first_results import analyse
+    from siloflow.case import case_from_dict
+    from conftest import SMALL
+
+    data = yaml.safe_load(SMALL.read_text())
+    data["fill"]["frictionless"] = True
+    data["discharge"] = {"duration": 0.05}
+    case = case_from_dict(data)
+    folder = tmp_path / "frictionless"
+    LiggghtsEngine().run(case, folder)
+    summary = analyse(folder)
+    with_friction = small_run[3]["frame_analyses"]
+    without = summary["frame_analyses"]
+    assert without["bulk_solid_fraction"] > with_friction["bulk_solid_fraction"] + 0.01
+    assert without["coordination_settled"]["z_mean"] > with_friction["coordination_settled"]["z_mean"]
+    mu = case.materials.particle_particle.friction
+    deck = (folder / "in.liggghts").read_text()
+    assert "coefficientFriction peratomtypepair 2 0 " in deck            # poured without friction
+    printed = [ln for ln in (folder / "log.liggghts").read_text(errors="replace").splitlines()
+               if ln.startswith("SILOFLOW_")]
+    restored = [ln for ln in printed if ln.startswith("SILOFLOW_FRICTION_RESTORED")]
+    assert restored and float(restored[0].split()[1]) == mu
+    assert printed.index(restored[0]) < next(k for k, ln in enumerate(printed) if ln.startswith("SILOFLOW_STAGE settle"))
