@@ -146,14 +146,20 @@ class PairContact(Strict):
 class Materials(Strict):
     """Particle and wall materials and the contact law of each pair."""
 
-    model: Literal["hertz", "linear"] = Field(
-        "hertz", description="hertz: Hertz-Mindlin from Young's modulus; linear: PFC-style kn/kt springs")
+    model: Literal["hertz", "linear", "hooke"] = Field(
+        "hertz", description="hertz: Hertz-Mindlin from Young's modulus; linear: PFC-style kn/kt springs; "
+        "hooke (paper B): linear springs with kn from Young's modulus and a characteristic velocity, "
+        "kt = tangential_stiffness_ratio kn, per pair of sizes")
     particle: ParticleMaterial
     wall: WallMaterial = WallMaterial()
     particle_particle: PairContact
     particle_wall: PairContact
     tangential_damping_ratio: float = Field(
-        0.1, ge=0, le=1, allow_inf_nan=False, description="gamma_t / gamma_n (linear model)")
+        0.1, ge=0, le=1, allow_inf_nan=False, description="gamma_t / gamma_n (linear and hooke models)")
+    characteristic_velocity: Optional[Positive] = Field(
+        None, le=1000, description="impact speed that sets kn of model 'hooke', m/s")
+    tangential_stiffness_ratio: float = Field(
+        2.0 / 7.0, gt=0, le=1, allow_inf_nan=False, description="kt / kn (model 'hooke'; paper B: 2/7)")
 
     @model_validator(mode="after")
     def _model_parameters(self):
@@ -167,6 +173,15 @@ class Materials(Strict):
             for name, pair in pairs.items():
                 if pair.kn is not None or pair.kt is not None:
                     problems.append(f"{name}: kn/kt belong to model 'linear', not 'hertz'")
+        elif self.model == "hooke":
+            for part in ("particle", "wall"):
+                if getattr(self, part).youngs_modulus is None:
+                    problems.append(f"{part}.youngs_modulus is required by model 'hooke'")
+            if self.characteristic_velocity is None:
+                problems.append("characteristic_velocity is required by model 'hooke'")
+            for name, pair in pairs.items():
+                if pair.kn is not None or pair.kt is not None:
+                    problems.append(f"{name}: kn/kt are computed by model 'hooke'; give them with model 'linear'")
         else:
             for name, pair in pairs.items():
                 if pair.kn is None or pair.kt is None:

@@ -68,6 +68,15 @@ def linear_gamma(kn: float, m_eff: float, restitution: float) -> float:
     return 2.0 * damping_ratio_from_restitution(restitution) * math.sqrt(kn / m_eff)
 
 
+def hooke_kn(m_eff: float, r_eff: float, y_eff: float, characteristic_velocity: float) -> float:
+    """Normal stiffness (N/m) of LIGGGHTS' ``hooke`` model (paper B, Eq. 10):
+    kn = 16/15 sqrt(R*) Y* (15 m* V^2 / (16 sqrt(R*) Y*))^(1/5): the linear spring whose
+    maximum overlap at impact speed V equals Hertz's. (Paper B prints sqrt(R* Y) in the bracket,
+    which is not dimensionally consistent; this is LIGGGHTS' form.)"""
+    root = math.sqrt(r_eff)
+    return 16.0 / 15.0 * root * y_eff * (15.0 * m_eff * characteristic_velocity ** 2 / (16.0 * root * y_eff)) ** 0.2
+
+
 def linear_contact_time(kn: float, m_eff: float, restitution: float = 1.0) -> float:
     """Duration of a linear spring-dashpot contact pi / sqrt(kn/m - (gamma/2)^2), s.
 

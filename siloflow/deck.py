@@ -81,29 +81,39 @@ def check_deck(text: str) -> None:
             raise DeckError(f"rendered deck line {lineno} is not allowed: {stripped[:120]!r}")
 
 
+def _matrix(d: Derived, attr: str, particle_pairs: float | None = None) -> list[float]:
+    """A peratomtypepair matrix (row-major, n_types^2) of ``attr`` from the per-type-pair
+    parameters; ``particle_pairs`` overrides the particle-particle entries (frictionless fill).
+    The wall-wall entry is unused (walls do not touch walls); it repeats type 1's wall value."""
+    n, wall = d.wall_type, d.wall_type
+    out = []
+    for i in range(1, n + 1):
+        for j in range(1, n + 1):
+            a, b = min(i, j), max(i, j)
+            if a == wall:
+                a = 1
+            value = getattr(d.type_pairs[(a, b)], attr)
+            if particle_pairs is not None and b != wall:
+                value = particle_pairs
+            out.append(value)
+    return out
+
+
 def _properties(case: Case, d: Derived) -> list[dict]:
-    """``fix property/global`` entries (type 1 particles, type 2 walls; the 2-2 pair is unused)."""
-    pp, pw = d.pairs["particle_particle"], d.pairs["particle_wall"]
-
-    def pair(attr):
-        a, b = getattr(pp, attr), getattr(pw, attr)
-        return [a, b, b, b]
-
+    """``fix property/global`` entries: atom types 1..K are the size classes, type K+1 the walls."""
     m = case.materials
+    k = d.wall_type - 1
     props = []
     if m.model == "hertz":
-        props += [("youngsModulus", "peratomtype", [m.particle.youngs_modulus, m.wall.youngs_modulus]),
-                  ("poissonsRatio", "peratomtype", [m.particle.poisson_ratio, m.wall.poisson_ratio]),
-                  ("coefficientRestitution", "peratomtypepair", pair("restitution"))]
+        props += [("youngsModulus", "peratomtype", [m.particle.youngs_modulus] * k + [m.wall.youngs_modulus]),
+                  ("poissonsRatio", "peratomtype", [m.particle.poisson_ratio] * k + [m.wall.poisson_ratio]),
+                  ("coefficientRestitution", "peratomtypepair", _matrix(d, "restitution"))]
     else:
-        props += [("kn", "peratomtypepair", pair("kn")), ("kt", "peratomtypepair", pair("kt")),
-                  ("gamman", "peratomtypepair", pair("gamman")), ("gammat", "peratomtypepair", pair("gammat"))]
-    friction = pair("friction")
-    if case.fill.frictionless:     # restored after the fill: see friction_restore()
-        friction = [0.0] + friction[1:]
+        props += [(name, "peratomtypepair", _matrix(d, name)) for name in ("kn", "kt", "gamman", "gammat")]
+    friction = _matrix(d, "friction", 0.0 if case.fill.frictionless else None)   # restored: friction_restore()
     props.append(("coefficientFriction", "peratomtypepair", friction))
     if uses_rolling_friction(case):
-        props.append(("coefficientRollingFriction", "peratomtypepair", pair("rolling_friction")))
+        props.append(("coefficientRollingFriction", "peratomtypepair", _matrix(d, "rolling_friction")))
     return [{"id": f"material{i + 1}", "name": n, "style": s, "numbers": v}
             for i, (n, s, v) in enumerate(props)]
 
@@ -113,8 +123,8 @@ def friction_restore(case: Case, d: Derived) -> dict | None:
     if not case.fill.frictionless:
         return None
     prop = next(p for p in _properties(case, d) if p["name"] == "coefficientFriction")
-    pp, pw = d.pairs["particle_particle"].friction, d.pairs["particle_wall"].friction
-    return {"id": prop["id"], "numbers": [pp, pw, pw, pw]}
+    return {"id": prop["id"], "numbers": _matrix(d, "friction"),
+            "particle_friction": case.materials.particle_particle.friction}
 
 
 def uses_rolling_friction(case: Case) -> bool:
@@ -130,17 +140,20 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
         "name": case.name, "box": d.box, "skin": d.skin,
         "hard_particles": any(e > 1e9 for e in youngs),
         "properties": _properties(case, d),
-        "contact_model": "hertz" if m.model == "hertz" else "hooke/stiffness",
+        "contact_model": "hertz" if m.model == "hertz" else "hooke/stiffness",   # hooke: kn, kt computed here
         "rolling": uses_rolling_friction(case),
         "timestep": d.timestep, "gravity": case.gravity,
         "walls": [w for w in walls if w.role != "outlet"],
         "seeds": d.seeds, "density": m.particle.density, "radius": d.particle_radius,
         "friction_restore": friction_restore(case, d),
-        "templates": ([{"radius": d.particle_radius, "seed": d.seeds["templates"][0], "weight": 1.0}]
+        "n_types": d.wall_type, "wall_type": d.wall_type,
+        "templates": ([{"radius": d.particle_radius, "seed": d.seeds["templates"][0], "weight": 1.0,
+                        "type": d.radii.index(d.particle_radius) + 1}]
                       if d.shrink_classes else
-                      [{"radius": r, "seed": seed, "weight": w}
-                       for r, seed, w in zip(d.radii, d.seeds["templates"], d.mass_fractions)]),
-        "shrink_classes": [{"diameter": 2 * r, "fraction": f, "seed": seed}
+                      [{"radius": r, "seed": seed, "weight": w, "type": k + 1}
+                       for k, (r, seed, w) in enumerate(zip(d.radii, d.seeds["templates"], d.mass_fractions))]),
+        "pour_type": d.radii.index(d.particle_radius) + 1,
+        "shrink_classes": [{"diameter": 2 * r, "fraction": f, "seed": seed, "type": d.radii.index(r) + 1}
                            for (r, f), seed in zip(d.shrink_classes, d.seeds["shrink"])],
         "insertion_region": d.insertion_region, "particle_count": d.particle_count,
         "particle_rate": d.insertion_batch / (d.insert_every * d.timestep),

@@ -81,6 +81,12 @@ class Derived:
     number_fractions: list = field(default_factory=list)
     mass_fractions: list = field(default_factory=list)    # what LIGGGHTS' distribution takes
     shrink_classes: list = field(default_factory=list)    # [(radius, conditional fraction)], paper B
+    type_pairs: dict = field(default_factory=dict)        # (type i, type j) -> PairParameters
+
+    @property
+    def wall_type(self) -> int:
+        """Atom type of the walls: after the size classes (types 1..K)."""
+        return len(self.radii) + 1
 
     @property
     def planned_steps(self) -> dict[str, int]:
@@ -96,6 +102,7 @@ class Derived:
 
     def to_json(self) -> dict:
         out = asdict(self)
+        out["type_pairs"] = {f"{i}-{j}": asdict(v) for (i, j), v in self.type_pairs.items()}
         out["planned_steps"] = self.planned_steps
         return out
 
@@ -151,27 +158,51 @@ def _steps(duration: float, dt: float) -> int:
     return max(1, math.ceil(duration / dt - 1e-9))
 
 
-def contact_pairs(case: Case, mass: float, radius: float, v_impact: float) -> dict[str, PairParameters]:
-    """Contact parameters of particle-particle and particle-wall contacts."""
+def _pair(case: Case, name: str, m_eff: float, r_eff: float, wall: bool, v_impact: float) -> PairParameters:
+    """Contact parameters of one pair of grains (or grain and wall) with reduced mass and radius."""
     m = case.materials
-    partners = {"particle_particle": (cp.reduced(mass, mass), cp.reduced(radius, radius), m.particle_particle),
-                "particle_wall": (mass, radius, m.particle_wall)}
+    pc = m.particle_wall if wall else m.particle_particle
+    other = m.wall if wall else m.particle
+    common = dict(name=name, m_eff=m_eff, r_eff=r_eff, friction=pc.friction,
+                  restitution=pc.restitution, rolling_friction=pc.rolling_friction)
+    if m.model in ("hertz", "hooke"):
+        y_eff = cp.effective_modulus(m.particle.youngs_modulus, m.particle.poisson_ratio,
+                                     other.youngs_modulus, other.poisson_ratio)
+    if m.model == "hertz":
+        return PairParameters(**common, y_eff=y_eff,
+                              contact_time=cp.hertz_contact_time(m_eff, r_eff, y_eff, v_impact))
+    if m.model == "hooke":
+        kn = cp.hooke_kn(m_eff, r_eff, y_eff, m.characteristic_velocity)
+        kt = m.tangential_stiffness_ratio * kn
+    else:
+        kn, kt = pc.kn, pc.kt
+    gamman = cp.linear_gamma(kn, m_eff, pc.restitution)
+    return PairParameters(**common, y_eff=y_eff if m.model == "hooke" else None, kn=kn, kt=kt, gamman=gamman,
+                          gammat=m.tangential_damping_ratio * gamman, contact_time=cp.linear_contact_time(kn, m_eff))
+
+
+def type_pair_parameters(case: Case, radii: list[float], v_impact: float) -> dict[tuple[int, int], PairParameters]:
+    """Contact parameters of every pair of atom types: size class k is type k + 1 (in the order
+    of the case's radii), the walls the last type. A wall acts as infinite mass and radius."""
+    rho = case.materials.particle.density
+    wall = len(radii) + 1
     out = {}
-    for name, (m_eff, r_eff, pc) in partners.items():
-        common = dict(name=name, m_eff=m_eff, r_eff=r_eff, friction=pc.friction,
-                      restitution=pc.restitution, rolling_friction=pc.rolling_friction)
-        if m.model == "hertz":
-            other = m.particle if name == "particle_particle" else m.wall
-            y_eff = cp.effective_modulus(m.particle.youngs_modulus, m.particle.poisson_ratio,
-                                         other.youngs_modulus, other.poisson_ratio)
-            out[name] = PairParameters(**common, y_eff=y_eff,
-                                       contact_time=cp.hertz_contact_time(m_eff, r_eff, y_eff, v_impact))
-        else:
-            gamman = cp.linear_gamma(pc.kn, m_eff, pc.restitution)
-            out[name] = PairParameters(**common, kn=pc.kn, kt=pc.kt, gamman=gamman,
-                                       gammat=m.tangential_damping_ratio * gamman,
-                                       contact_time=cp.linear_contact_time(pc.kn, m_eff))
+    for i, ri in enumerate(radii, start=1):
+        mi = cp.sphere_mass(ri, rho)
+        for j, rj in enumerate(radii, start=1):
+            if j >= i:
+                mj = cp.sphere_mass(rj, rho)
+                out[(i, j)] = _pair(case, f"particle_particle {i}-{j}", cp.reduced(mi, mj), cp.reduced(ri, rj),
+                                    False, v_impact)
+        out[(i, wall)] = _pair(case, f"particle_wall {i}", mi, ri, True, v_impact)
     return out
+
+
+def contact_pairs(case: Case, mass: float, radius: float, v_impact: float) -> dict[str, PairParameters]:
+    """Contact parameters of particle-particle and particle-wall contacts of grains of one size."""
+    return {"particle_particle": _pair(case, "particle_particle", cp.reduced(mass, mass), cp.reduced(radius, radius),
+                                       False, v_impact),
+            "particle_wall": _pair(case, "particle_wall", mass, radius, True, v_impact)}
 
 
 def shrink_classes(radii, number_fractions) -> list[tuple[float, float]]:
@@ -242,7 +273,8 @@ def derive(case: Case) -> Derived:
     # time step
     v_impact = cp.free_fall_speed(z_max, case.gravity, INSERTION_SPEED)
     pairs = contact_pairs(case, cp.sphere_mass(r_min, rho), r_min, v_impact)
-    candidates = {f"contact time {pp.name}": pp.contact_time for pp in pairs.values()}
+    type_pairs = type_pair_parameters(case, list(p.radii), v_impact)
+    candidates = {f"contact time {pp.name}": pp.contact_time for pp in [*pairs.values(), *type_pairs.values()]}
     rayleigh = None
     if case.materials.model == "hertz":
         pm = case.materials.particle
@@ -312,4 +344,5 @@ def derive(case: Case) -> Derived:
                "shrink": [prime_seed(case.seed, 40 + k) for k in range(len(p.radii))]},
         radii=list(p.radii), number_fractions=list(numbers), mass_fractions=mass_fractions,
         shrink_classes=shrink_classes(p.radii, numbers) if shrink else [],
+        type_pairs=type_pairs,
     )

@@ -148,3 +148,47 @@ def test_bad_size_distributions_are_refused(quick_dict, particles, words):
     with pytest.raises(CaseError, match=words) as info:
         case_from_dict(quick_dict)
     assert any(path.startswith("particles") or "particles.radii" in msg for path, msg in info.value.problems)
+
+
+def test_hooke_model_per_size_pair(quick_dict):
+    """Paper B's contact law: kn from Young's modulus and a characteristic velocity (Eq. 10, LIGGGHTS'
+    hooke), kt = 2/7 kn, gamma_t = 0.1 gamma_n, computed for every pair of size classes."""
+    from siloflow.contact_physics import effective_modulus, hooke_kn, reduced, sphere_mass
+    from siloflow.deck import _properties
+    quick_dict["materials"] = {
+        "model": "hooke", "characteristic_velocity": 1.0,
+        "particle": {"density": 7520.0, "youngs_modulus": 1.2e11, "poisson_ratio": 0.3},
+        "wall": {"youngs_modulus": 1.2e11, "poisson_ratio": 0.3},
+        "particle_particle": {"friction": 0.5, "restitution": 0.88},
+        "particle_wall": {"friction": 0.5, "restitution": 0.88}}
+    quick_dict["particles"] = {"kind": "polydisperse_spheres", "radii": [0.0015, 0.001], "fractions": [0.5, 0.5],
+                               "basis": "number"}
+    case = case_from_dict(quick_dict)
+    d = derive(case)
+    y = effective_modulus(1.2e11, 0.3, 1.2e11, 0.3)
+    m1, m2 = sphere_mass(0.0015, 7520.0), sphere_mass(0.001, 7520.0)
+    p12 = d.type_pairs[(1, 2)]
+    # Eq. 10 by hand: the linear spring with Hertz's maximum overlap at speed V
+    r, m = reduced(0.0015, 0.001), reduced(m1, m2)
+    assert p12.kn == pytest.approx(16 / 15 * math.sqrt(r) * y * (15 * m * 1.0 / (16 * math.sqrt(r) * y)) ** 0.2)
+    assert p12.kn == pytest.approx(hooke_kn(m, r, y, 1.0))
+    assert p12.kt == pytest.approx(2 / 7 * p12.kn) and p12.gammat == pytest.approx(0.1 * p12.gamman)
+    # the smallest pair has the shortest contact, and sets the time step
+    times = {k: v.contact_time for k, v in d.type_pairs.items()}
+    assert min(times, key=times.get) in ((2, 2), (2, 3))
+    assert d.critical_time == pytest.approx(min(times.values()))
+    kn = next(p for p in _properties(case, d) if p["name"] == "kn")["numbers"]
+    matrix = np.array(kn).reshape(3, 3)
+    assert np.allclose(matrix, matrix.T) and matrix[0, 1] == pytest.approx(p12.kn)
+    assert matrix[1, 2] == pytest.approx(d.type_pairs[(2, 3)].kn)      # size class 2 with the wall
+
+
+def test_hooke_needs_its_velocity_and_no_springs(quick_dict):
+    from siloflow.errors import CaseError
+    quick_dict["materials"]["model"] = "hooke"
+    with pytest.raises(CaseError, match="characteristic_velocity is required"):
+        case_from_dict(quick_dict)
+    quick_dict["materials"]["characteristic_velocity"] = 1.0
+    quick_dict["materials"]["particle_particle"]["kn"] = 1e5
+    with pytest.raises(CaseError, match="computed by model 'hooke'"):
+        case_from_dict(quick_dict)
