@@ -176,6 +176,18 @@ def post(source: str = typer.Argument(..., help="a finished run folder, or dump 
 
 
 @app.command()
+def status(folder: Path = typer.Argument(..., help="a run folder")) -> None:
+    """The state of a run: rendered, running, complete, failed, interrupted or abandoned."""
+    from .engine.base import run_state
+    try:
+        st = run_state(folder)
+    except SiloflowError as exc:
+        _fail(exc)
+    extra = ", ".join(f"{k} {v}" for k, v in st.items() if k in ("stage", "step", "reason"))
+    out.print(f"{folder}: {st['state']}" + (f" ({extra})" if extra else ""))
+
+
+@app.command()
 def cg(source: str = typer.Argument(..., help="a finished run folder, or dump file(s): a file, glob or folder"),
        output: Optional[Path] = typer.Option(None, "-o", "--output", help="results folder (default <run>/results/cg)"),
        kernel: str = typer.Option("gaussian", help="gaussian (paper B) or lucy"),

@@ -7,6 +7,7 @@ left and checks it finished properly. ``run`` composes the three.
 from __future__ import annotations
 
 import json
+import os
 import time
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, field
@@ -45,6 +46,26 @@ class RunRecord:
 def write_status(folder: Path, state: str, **extra) -> None:
     """Record the run state (``rendered``, ``running``, ``complete``, ``failed``, ``interrupted``)."""
     write_json(Path(folder) / STATUS_NAME, {"state": state, "time": time.time(), **extra})
+
+
+def _alive(pid) -> bool:
+    try:
+        os.kill(int(pid), 0)
+    except (ProcessLookupError, ValueError, TypeError):
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def run_state(folder: Path) -> dict:
+    """The run's status, with a ``running`` run whose siloflow process is gone reported as
+    ``abandoned`` (siloflow was killed without a chance to record it)."""
+    status = read_status(folder)
+    if status.get("state") == "running" and not _alive(status.get("siloflow_pid")):
+        status = {**status, "state": "abandoned",
+                  "reason": "siloflow stopped without recording it (killed?); the engine was stopped with it"}
+    return status
 
 
 def read_status(folder: Path) -> dict:

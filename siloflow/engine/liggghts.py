@@ -89,10 +89,10 @@ class LiggghtsEngine(Engine):
         planned = {k: int(v) for k, v in derived["planned_steps"].items()}
         state = LogState()
         tail: deque[str] = deque(maxlen=25)
-        write_status(folder, "running", command=cmd)
         start = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, start_new_session=True)
+                                stdin=subprocess.DEVNULL, start_new_session=True, preexec_fn=_die_with_parent)
+        write_status(folder, "running", command=cmd, engine_pid=proc.pid, siloflow_pid=os.getpid())
         try:
             with open(folder / SCREEN_NAME, "wb") as screen:
                 for raw in proc.stdout:
@@ -167,6 +167,19 @@ def _read_derived(folder: Path) -> dict:
         return json.loads((Path(folder) / DERIVED_NAME).read_text())
     except (OSError, ValueError) as exc:
         raise SetupError(f"{folder} is not a siloflow deck folder (no readable {DERIVED_NAME}: {exc})") from None
+
+
+def _die_with_parent() -> None:
+    """In the engine's child process: ask Linux to SIGTERM it when siloflow dies, even by SIGKILL,
+    so no engine is left running unattended. (Its output pipe closing also stops it at its next
+    write; this covers long silent stretches.) mpirun passes the signal on to its ranks."""
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        PR_SET_PDEATHSIG = 1
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):  # not Linux: the SIGTERM/Ctrl-C handling still stops the engine
+        pass
 
 
 def _stop(proc: subprocess.Popen, grace: float = 10.0) -> None:
