@@ -46,18 +46,23 @@ def local_pairs(frame, contacts, min_normal_force: float = 0.0):
             raise ReadError(f"{contacts.source}: contact frame has no {col} column; name the columns of "
                             "the dump local (postprocess.dumps.local_columns)")
     ids = frame.column("id")
-    order = np.argsort(ids)
-    sorted_ids = ids[order]
-    rows = []
-    for col in ("id1", "id2"):
-        wanted = contacts.column(col)
-        k = np.searchsorted(sorted_ids, wanted).clip(0, max(len(ids) - 1, 0))
-        found = sorted_ids[k] == wanted if len(ids) else np.zeros(len(wanted), bool)
-        rows.append((order[k], found))
-    keep = rows[0][1] & rows[1][1]
+    i, found_i = rows_of(ids, contacts.column("id1"))
+    j, found_j = rows_of(ids, contacts.column("id2"))
+    keep = found_i & found_j
     if min_normal_force > 0:
         keep &= normal_force(contacts.data, frame) >= min_normal_force
-    return rows[0][0][keep], rows[1][0][keep]
+    return i[keep], j[keep]
+
+
+def rows_of(ids: np.ndarray, wanted) -> tuple[np.ndarray, np.ndarray]:
+    """Row of each of the atom ids ``wanted`` in a frame's id column ``ids``, and whether it is there."""
+    wanted = np.asarray(wanted)
+    if len(ids) == 0:
+        return np.zeros(len(wanted), dtype=np.int64), np.zeros(len(wanted), bool)
+    order = np.argsort(ids)
+    sorted_ids = ids[order]
+    k = np.searchsorted(sorted_ids, wanted).clip(0, len(ids) - 1)
+    return order[k], sorted_ids[k] == wanted
 
 
 def normal_force(data, frame=None) -> np.ndarray:
@@ -80,13 +85,14 @@ def branch_vectors(data, frame=None) -> np.ndarray:
         raise ReadError("contacts have no pos columns and no atom frame was given")
     ids = frame.column("id")
     pos = frame.positions()
-    index = {int(a): k for k, a in enumerate(ids)}
-    try:
-        i = np.array([index[int(a)] for a in data["id1"]], dtype=int)
-        j = np.array([index[int(a)] for a in data["id2"]], dtype=int)
-    except KeyError as exc:
-        raise ReadError(f"contact names atom {exc} that is not in the atom frame") from None
-    return pos[j] - pos[i]
+    rows = []
+    for col in ("id1", "id2"):
+        wanted = data[col].to_numpy()
+        r, found = rows_of(ids, wanted)
+        if not found.all():
+            raise ReadError(f"contact names atom {int(wanted[~found][0])} that is not in the atom frame")
+        rows.append(r)
+    return pos[rows[1]] - pos[rows[0]]
 
 
 def coordination(n: int, i: np.ndarray, j: np.ndarray, body: np.ndarray | None = None,

@@ -9,7 +9,7 @@ import numpy as np
 
 from siloflow.errors import ReadError
 
-from .coordination import normal_force
+from .coordination import normal_force, rows_of
 from .dumps import Frame
 
 
@@ -25,13 +25,9 @@ def chain_segments(atoms: Frame, contacts: Frame, axis: int = 1, center: float |
         raise ReadError(f"{contacts.source}: contacts need id1/id2 columns")
     pos = atoms.positions()
     ids = atoms.column("id")
-    index = np.full(int(ids.max()) + 1 if len(ids) else 1, -1, dtype=np.int64)
-    index[ids] = np.arange(len(ids))
-    id1, id2 = data["id1"].to_numpy(), data["id2"].to_numpy()
-    inside = (id1 < len(index)) & (id2 < len(index))
-    i = np.where(inside, index[np.minimum(id1, len(index) - 1)], -1)
-    j = np.where(inside, index[np.minimum(id2, len(index) - 1)], -1)
-    known = (i >= 0) & (j >= 0)
+    i, found_i = rows_of(ids, data["id1"].to_numpy())
+    j, found_j = rows_of(ids, data["id2"].to_numpy())
+    known = found_i & found_j
     if "periodic" in data:
         known &= data["periodic"].to_numpy() == 0
     if center is None:
