@@ -88,6 +88,30 @@ def _accumulate_cartesian(origin, spacing, shape, pos, weights, dest, lo, hi, ki
 
 
 @njit(cache=True)
+def _deposit(cell, weights, dest, codes, m0, m1, mc2):
+    """Add one source's weights, times the kernel moment each component's code asks for, into
+    the (field, slot) sums of one (r, z) node; ``dest`` holds the column blocks it goes to."""
+    ms2 = m0 - mc2
+    m2 = mc2 - ms2
+    for d in range(dest.shape[0]):
+        base = dest[d]
+        if base < 0:
+            continue
+        for c in range(weights.shape[0]):
+            w = weights[c]
+            code = codes[c]
+            if code == 0:
+                cell[base + c, 0] += w * m0
+            elif code == 1:
+                cell[base + c, 0] += w * m1
+            elif code == 2:
+                cell[base + c, 0] += w * mc2
+                cell[base + c, 1] += w * ms2
+            else:
+                cell[base + c, 0] += w * m2
+
+
+@njit(cache=True)
 def _ring_moments(kind, norm, cutoff, width, d0, two_rr, gl_x, gl_w, u_x, u_w):
     """Azimuthal averages (1/2 pi) int phi {1, cos a, cos^2 a} da of the kernel on a ring, for a
     source and node whose distance is sqrt(d0 + two_rr (1 - cos a)) at relative azimuth a.
@@ -132,8 +156,6 @@ def _ring_moments(kind, norm, cutoff, width, d0, two_rr, gl_x, gl_w, u_x, u_w):
 def _accumulate_rz(dr, nr, z0, dz_cell, nz, rho_s, z_s, weights, codes, dest, lo, hi,
                    kind, norm, cutoff, width, gl_x, gl_w, u_x, u_w, out):
     """Axisymmetric accumulation: out[iz, ir, dest + c, slot] += weights * kernel moment."""
-    ncomp = weights.shape[1]
-    ndest = dest.shape[1]
     c2 = cutoff * cutoff
     for iz in prange(nz):
         zc = z0 + (iz + 0.5) * dz_cell
@@ -152,24 +174,7 @@ def _accumulate_rz(dr, nr, z0, dz_cell, nz, rho_s, z_s, weights, codes, dest, lo
                 if d0 >= c2:
                     continue
                 m0, m1, mc2 = _ring_moments(kind, norm, cutoff, width, d0, 2.0 * r * rho, gl_x, gl_w, u_x, u_w)
-                ms2 = m0 - mc2
-                m2 = mc2 - ms2
-                for d in range(ndest):
-                    base = dest[i, d]
-                    if base < 0:
-                        continue
-                    for c in range(ncomp):
-                        w = weights[i, c]
-                        code = codes[c]
-                        if code == 0:
-                            out[iz, ir, base + c, 0] += w * m0
-                        elif code == 1:
-                            out[iz, ir, base + c, 0] += w * m1
-                        elif code == 2:
-                            out[iz, ir, base + c, 0] += w * mc2
-                            out[iz, ir, base + c, 1] += w * ms2
-                        else:
-                            out[iz, ir, base + c, 0] += w * m2
+                _deposit(out[iz, ir], weights[i], dest[i], codes, m0, m1, mc2)
 
 
 @njit(parallel=True, cache=True, fastmath=True)
@@ -181,8 +186,6 @@ def _accumulate_rz_gaussian(dr, nr, z0, dz_cell, nz, rho_s, z_s, weights, codes,
     pair loop needs no exponential. Sources are split into ``nchunks`` chunks, each summed into
     its own copy of the grid (out[chunk]); the caller adds the copies."""
     n = rho_s.shape[0]
-    ncomp = weights.shape[1]
-    ndest = dest.shape[1]
     nq = u_x.shape[0]
     c2 = cutoff * cutoff
     inv4w2 = 1.0 / (4.0 * width * width)
@@ -248,25 +251,7 @@ def _accumulate_rz_gaussian(dr, nr, z0, dz_cell, nz, rho_s, z_s, weights, codes,
                         mc2 *= sk
                     else:
                         m0, m1, mc2 = _ring_moments(GAUSSIAN, norm, cutoff, width, d0, two_rr, gl_x, gl_w, u_x, u_w)
-                    ms2 = m0 - mc2
-                    m2 = mc2 - ms2
-                    ir = ir0 + kr
-                    for d in range(ndest):
-                        base = dest[i, d]
-                        if base < 0:
-                            continue
-                        for c in range(ncomp):
-                            w = weights[i, c]
-                            code = codes[c]
-                            if code == 0:
-                                grid[iz, ir, base + c, 0] += w * m0
-                            elif code == 1:
-                                grid[iz, ir, base + c, 0] += w * m1
-                            elif code == 2:
-                                grid[iz, ir, base + c, 0] += w * mc2
-                                grid[iz, ir, base + c, 1] += w * ms2
-                            else:
-                                grid[iz, ir, base + c, 0] += w * m2
+                    _deposit(grid[iz, ir0 + kr], weights[i], dest[i], codes, m0, m1, mc2)
 
 
 # ----------------------------------------------------------------------------- sources
