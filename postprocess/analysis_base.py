@@ -30,6 +30,21 @@ def _as_frames(source) -> Iterable[Frame] | None:
     return source
 
 
+class StepCursor:
+    """Walks a stream of frames in increasing timestep order and hands out the frame of a given
+    step (None if the stream has none), never going back."""
+
+    def __init__(self, frames: Iterable[Frame]):
+        self._it = iter(frames)
+        self._current = next(self._it, None)
+
+    def at(self, step: int) -> Frame | None:
+        while self._current is not None and self._current.timestep < step:
+            self._current = next(self._it, None)
+        c = self._current
+        return c if c is not None and c.timestep == step else None
+
+
 def paired(frames: Iterable[Frame], contacts: Iterable[Frame] | None) -> Iterator[tuple[Frame, Frame | None]]:
     """Pair atom frames with contact frames of the same timestep (both in increasing step order);
     atom frames with no contact frame get None when ``contacts`` is None, else are skipped."""
@@ -37,12 +52,10 @@ def paired(frames: Iterable[Frame], contacts: Iterable[Frame] | None) -> Iterato
         for f in frames:
             yield f, None
         return
-    it = iter(contacts)
-    c = next(it, None)
+    cursor = StepCursor(contacts)
     for f in frames:
-        while c is not None and c.timestep < f.timestep:
-            c = next(it, None)
-        if c is not None and c.timestep == f.timestep:
+        c = cursor.at(f.timestep)
+        if c is not None:
             yield f, c
 
 

@@ -34,6 +34,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .analysis_base import StepCursor, paired
 from .cg_kernels import GAUSSIAN, LUCY, Kernel, kernel_value
 
 # particle block: m, p (3), m v v (6: xx yy zz xy xz yz, or rr tt zz rt rz tz)
@@ -582,15 +583,6 @@ def _joined_contacts(*frames):
     return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
 
 
-def _same_step(stream, step):
-    """Advance ``stream`` (a [iterator, current] pair) to the frame at ``step``; that frame or None."""
-    it, current = stream
-    while current is not None and current.timestep < step:
-        current = next(it, None)
-    stream[1] = current
-    return current if current is not None and current.timestep == step else None
-
-
 class CoarseGraining:
     """Coarse-grain frames onto a grid; time-average (default) or keep per-frame fields.
 
@@ -635,17 +627,9 @@ class CoarseGraining:
     def run(self, frames, contacts=None, wall_contacts=None):
         """Coarse-grain ``frames``; with ``contacts`` (and ``wall_contacts``), only the frames that
         have a contact frame of the same timestep (all streams in increasing step order)."""
-        pair = [iter(contacts), None] if contacts is not None else None
-        wall = [iter(wall_contacts), None] if wall_contacts is not None else None
-        for s in (pair, wall):
-            if s is not None:
-                s[1] = next(s[0], None)
-        for frame in frames:
-            c = _same_step(pair, frame.timestep) if pair else None
-            if pair and c is None:
-                continue
-            w = _same_step(wall, frame.timestep) if wall else None
-            self.add_frame(frame, c, w)
+        walls = StepCursor(wall_contacts) if wall_contacts is not None else None
+        for frame, c in paired(frames, contacts):
+            self.add_frame(frame, c, walls.at(frame.timestep) if walls else None)
         if not self.steps:
             raise ValueError("coarse graining: no frames")
         return self
