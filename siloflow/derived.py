@@ -7,7 +7,7 @@ time step, stage lengths, insertion batches, output intervals, seeds, box.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 from . import contact_physics as cp
 from .case import Case, CylinderGeometry, HopperGeometry
@@ -198,13 +198,6 @@ def type_pair_parameters(case: Case, radii: list[float], v_impact: float) -> dic
     return out
 
 
-def contact_pairs(case: Case, mass: float, radius: float, v_impact: float) -> dict[str, PairParameters]:
-    """Contact parameters of particle-particle and particle-wall contacts of grains of one size."""
-    return {"particle_particle": _pair(case, "particle_particle", cp.reduced(mass, mass), cp.reduced(radius, radius),
-                                       False, v_impact),
-            "particle_wall": _pair(case, "particle_wall", mass, radius, True, v_impact)}
-
-
 def shrink_classes(radii, number_fractions) -> list[tuple[float, float]]:
     """Paper B's random shrinking as a sequence of (radius, conditional fraction): each class in
     turn takes that fraction of the grains not yet assigned, so the classes end with the given
@@ -272,8 +265,10 @@ def derive(case: Case) -> Derived:
 
     # time step
     v_impact = cp.free_fall_speed(z_max, case.gravity, INSERTION_SPEED)
-    pairs = contact_pairs(case, cp.sphere_mass(r_min, rho), r_min, v_impact)
     type_pairs = type_pair_parameters(case, list(p.radii), v_impact)
+    smallest = p.radii.index(r_min) + 1          # its contacts are the shortest
+    pairs = {"particle_particle": replace(type_pairs[(smallest, smallest)], name="particle_particle"),
+             "particle_wall": replace(type_pairs[(smallest, len(p.radii) + 1)], name="particle_wall")}
     candidates = {f"contact time {pp.name}": pp.contact_time for pp in [*pairs.values(), *type_pairs.values()]}
     rayleigh = None
     if case.materials.model == "hertz":
