@@ -163,7 +163,7 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
         "sample_repeat": d.sample_repeat, "sample_freq": d.sample_freq,
         "dump_every": d.dump_every, "vtk": case.outputs.vtk,
         "contact_keywords": list(CONTACT_KEYWORDS), "contact_columns": contact_columns(case, d),
-        "wall_contact_keywords": list(WALL_CONTACT_KEYWORDS), "wall_contact_columns": wall_contact_columns(case, d),
+        "wall_contact_keywords": list(WALL_CONTACT_KEYWORDS), "wall_contact_columns": contact_columns(case, d, wall=True),
         "empty_mass": case.discharge.empty_fraction * d.total_mass,
         "planned": d.planned_steps, "fill_steps": d.fill_steps,
         "settle_max_chunks": d.settle_max_chunks, "settle_chunk_steps": d.settle_chunk_steps,
@@ -184,14 +184,12 @@ def render_deck_text(case: Case, d: Derived, walls) -> str:
     return text
 
 
-def contact_columns(case: Case, d: Derived) -> list[str]:
-    """Column names of the contact dump (empty when the case writes none)."""
-    return local_columns(CONTACT_KEYWORDS) if d.dump_every and case.outputs.contacts else []
-
-
-def wall_contact_columns(case: Case, d: Derived) -> list[str]:
-    """Column names of the particle-wall contact dump (empty when the case writes none)."""
-    return local_columns(WALL_CONTACT_KEYWORDS, wall=True) if d.dump_every and case.outputs.contacts else []
+def contact_columns(case: Case, d: Derived, wall: bool = False) -> list[str]:
+    """Column names of the pair-contact (or, with ``wall``, particle-wall contact) dump; empty
+    when the case writes none."""
+    if not (d.dump_every and case.outputs.contacts):
+        return []
+    return local_columns(WALL_CONTACT_KEYWORDS, wall=True) if wall else local_columns(CONTACT_KEYWORDS)
 
 
 def write_deck(case: Case, folder: Path) -> Derived:
@@ -213,7 +211,7 @@ def write_deck(case: Case, folder: Path) -> Derived:
     info["engine_ranks"] = case.engine.ranks
     info["gravity"] = case.gravity
     info["contact_columns"] = contact_columns(case, d)
-    info["wall_contact_columns"] = wall_contact_columns(case, d)
+    info["wall_contact_columns"] = contact_columns(case, d, wall=True)
     info["walls"] = [w.info() for w in walls]
     info["sensors"] = {"sectors": case.sensors.sectors,
                        "bands": len([w for w in walls if w.role == "band"]) // case.sensors.sectors}
