@@ -41,6 +41,14 @@ def write_case(tmp_path):
     return _write
 
 
+def hooke_materials(density: float, youngs_modulus: float, restitution: float) -> dict:
+    """A ``materials`` section for paper B's hooke law (v_c = 1 m/s, friction 0.5, same particle and wall)."""
+    elastic = {"youngs_modulus": youngs_modulus, "poisson_ratio": 0.3}
+    pair = {"friction": 0.5, "restitution": restitution}
+    return {"model": "hooke", "characteristic_velocity": 1.0, "particle": {"density": density, **elastic},
+            "wall": dict(elastic), "particle_particle": dict(pair), "particle_wall": dict(pair)}
+
+
 def set_path(data: dict, dotted: str, value):
     """Set ``a.b.c`` in a nested dict (creating nothing: the path must exist up to its last key)."""
     keys = dotted.split(".")

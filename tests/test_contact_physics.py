@@ -154,13 +154,9 @@ def test_hooke_model_per_size_pair(quick_dict):
     """Paper B's contact law: kn from Young's modulus and a characteristic velocity (Eq. 10, LIGGGHTS'
     hooke), kt = 2/7 kn, gamma_t = 0.1 gamma_n, computed for every pair of size classes."""
     from siloflow.contact_physics import effective_modulus, hooke_kn, reduced, sphere_mass
+    from conftest import hooke_materials
     from siloflow.deck import _properties
-    quick_dict["materials"] = {
-        "model": "hooke", "characteristic_velocity": 1.0,
-        "particle": {"density": 7520.0, "youngs_modulus": 1.2e11, "poisson_ratio": 0.3},
-        "wall": {"youngs_modulus": 1.2e11, "poisson_ratio": 0.3},
-        "particle_particle": {"friction": 0.5, "restitution": 0.88},
-        "particle_wall": {"friction": 0.5, "restitution": 0.88}}
+    quick_dict["materials"] = hooke_materials(7520.0, 1.2e11, 0.88)
     quick_dict["particles"] = {"kind": "polydisperse_spheres", "radii": [0.0015, 0.001], "fractions": [0.5, 0.5],
                                "basis": "number"}
     case = case_from_dict(quick_dict)

@@ -14,7 +14,7 @@ from siloflow.derived import derive
 from siloflow.engine import LiggghtsEngine
 from siloflow.engine_output import FLOW_COLUMNS, read_ave_time
 
-from conftest import ROOT
+from conftest import ROOT, hooke_materials
 
 pytestmark = [pytest.mark.engine,
               pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS not installed "
@@ -135,12 +135,7 @@ def test_hooke_contact_law_runs_per_size_pair(tmp_path):
     from siloflow.case import case_from_dict
 
     data = yaml.safe_load(POLY.read_text())
-    data["materials"] = {
-        "model": "hooke", "characteristic_velocity": 1.0,
-        "particle": {"density": 2500.0, "youngs_modulus": 5.0e6, "poisson_ratio": 0.3},
-        "wall": {"youngs_modulus": 5.0e6, "poisson_ratio": 0.3},
-        "particle_particle": {"friction": 0.5, "restitution": 0.5},
-        "particle_wall": {"friction": 0.5, "restitution": 0.5}}
+    data["materials"] = hooke_materials(2500.0, 5.0e6, 0.5)
     case = case_from_dict(data)
     folder = tmp_path / "hooke"
     record = LiggghtsEngine().run(case, folder)
