@@ -86,19 +86,17 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     columns = run.derived.get("contact_columns") or None
     contacts = list(read_frames(contact_files, columns=columns)) if contact_files and columns else None
 
-    settled: Frame | None = None
-    for frame in read_frames(atoms_files):
-        if frame.timestep <= open_step:
-            settled = frame
-    if settled is None:
-        raise ReadError(f"{run.folder}: no particle dump at or before the outlet opened (step {open_step})")
-    d = 2.0 * float(np.mean(settled.radii()))
     R = case.geometry.radius
-    summary: dict = {"dump_frames": len(atoms_files), "grain_diameter_m": d}
 
-    # free surface over all frames (a dump per file)
+    # free surface over all frames; its table also says which frames exist
     surface = FreeSurface(radius=R, z_min=case.geometry.hopper_height, timestep=dt).run(read_frames(atoms_files))
     surface.save(out)
+    steps = surface.table.step
+    if not (steps <= open_step).any():
+        raise ReadError(f"{run.folder}: no particle dump at or before the outlet opened (step {open_step})")
+    settled = next(read_frames(atoms_files, steps=[int(steps[steps <= open_step].max())]))
+    d = 2.0 * float(np.mean(settled.radii()))
+    summary: dict = {"dump_frames": len(atoms_files), "grain_diameter_m": d}
     h_settled = float(surface.table.loc[surface.table.step == settled.timestep, "surface_height"].iloc[0])
 
     # bulk solid fraction of the settled bed
@@ -129,10 +127,8 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
             summary["coordination_settled"] = {k: float(row[k].iloc[0]) for k in ("z_mean", "z_mech")}
             summary["coordination_convention"] = str(row.convention.iloc[0])
         by_step = {c.timestep: c for c in contacts}
-        last = None
-        for frame in read_frames(atoms_files):
-            if frame.timestep > open_step and frame.timestep in by_step:
-                last = frame
+        after = [int(k) for k in steps if k > open_step and k in by_step]
+        last = next(read_frames(atoms_files, steps=[max(after)])) if after else None
         figs = [(settled, "force_chains_settled.png")] + ([(last, "force_chains_discharge.png")] if last else [])
         for frame, name in figs:
             if frame.timestep in by_step:

@@ -147,7 +147,7 @@ def _parse_block(block: bytes, names: list[str], n: int, path: Path, step: int) 
     return data
 
 
-def _text_frames(path: Path, columns: Sequence[str] | None) -> Iterator[Frame]:
+def _text_frames(path: Path, columns: Sequence[str] | None, wanted: set | None = None) -> Iterator[Frame]:
     with _open(path) as f:
         while True:
             line = f.readline()
@@ -180,6 +180,10 @@ def _text_frames(path: Path, columns: Sequence[str] | None) -> Iterator[Frame]:
                 names = list(columns)
             if len(set(names)) != len(names):
                 raise ReadError(f"{path}: repeated column names {names}; pass column names explicitly")
+            if wanted is not None and step not in wanted:   # skip the rows unparsed
+                for _ in islice(f, n):
+                    pass
+                continue
             block = b"".join(islice(f, n))
             data = _parse_block(block, names, n, path, step)
             boundary = tuple(box_line[3:] if triclinic else box_line)
@@ -188,6 +192,12 @@ def _text_frames(path: Path, columns: Sequence[str] | None) -> Iterator[Frame]:
 
 # ----------------------------------------------------------------------------------------
 # LIGGGHTS legacy VTK (dump custom/vtk)
+
+def _vtk_step(path: Path) -> int:
+    """LIGGGHTS' VTK dumps carry their timestep in the file name only (last number)."""
+    digits = re.findall(r"\d+", path.name)
+    return int(digits[-1]) if digits else 0
+
 
 def _vtk_frame(path: Path) -> Frame:
     with _open(path) as f:
@@ -223,8 +233,7 @@ def _vtk_frame(path: Path) -> Frame:
     for col in ("id", "type", "ix", "iy", "iz"):
         if col in data:
             data[col] = data[col].astype(np.int64)
-    digits = re.findall(r"\d+", path.name)
-    step = int(digits[-1]) if digits else 0
+    step = _vtk_step(path)
     box = np.column_stack([pos.min(axis=0), pos.max(axis=0)]) if n else np.zeros((3, 2))
     return Frame(step, box, data, "atoms", (), str(path), {"box_from_points": True})
 
@@ -245,10 +254,11 @@ def read_frames(source, columns: Sequence[str] | None = None, every: int = 1,
     k = 0
     for path in dump_files(source):
         name = path.name[:-3] if path.name.endswith(".gz") else path.name
-        frames = [_vtk_frame(path)] if name.endswith(".vtk") else _text_frames(path, columns)
+        if name.endswith(".vtk"):
+            frames = [_vtk_frame(path)] if wanted is None or _vtk_step(path) in wanted else []
+        else:
+            frames = _text_frames(path, columns, wanted)   # unwanted frames are skipped unparsed
         for frame in frames:
-            if wanted is not None and frame.timestep not in wanted:
-                continue
             if k % every == 0:
                 yield frame
             k += 1
