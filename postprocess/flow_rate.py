@@ -9,10 +9,16 @@
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from scipy.optimize import curve_fit
+
+from siloflow.case import load_case
+from siloflow.errors import ReadError
 
 from .analysis_base import FrameAnalysis
 
@@ -181,18 +187,10 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None) -> BeverlooFit
                        float(np.sqrt(np.mean(res ** 2))))
 
 
-def beverloo_table(folders) -> "pd.DataFrame":
+def beverloo_table(folders) -> pd.DataFrame:
     """One row per analysed run folder: orifice diameter D0, grain diameter d (m), bulk density
     rho_b (kg/m3, measured in the settled bed when dumps exist, else packing fraction x rho_p),
     steady flow rate W and its standard error (kg/s), gravity (m/s2)."""
-    import json
-    from pathlib import Path
-
-    import pandas as pd
-
-    from siloflow.case import load_case
-    from siloflow.errors import ReadError
-
     rows = []
     for folder in folders:
         folder = Path(folder)
