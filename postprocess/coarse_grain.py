@@ -514,26 +514,10 @@ def fields_from_sums(sums: dict, particle_density: float | None = None, n_specie
     return f
 
 
-def symmetric_to_full(t6):
-    """(..., 6) xx yy zz xy xz yz -> (..., 3, 3)."""
-    out = np.empty((*t6.shape[:-1], 3, 3))
-    for k, (a, b) in enumerate([(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]):
-        out[..., a, b] = t6[..., k]
-        out[..., b, a] = t6[..., k]
-    return out
-
-
 def gl_line_points(n_s: int):
     """Gauss-Legendre points and weights on [0, 1] for the contact line integral."""
     x, w = np.polynomial.legendre.leggauss(n_s)
     return 0.5 * (x + 1.0), 0.5 * w
-
-
-def gaussian_sigma(kernel: Kernel) -> float:
-    """Standard deviation (m) per coordinate of the untruncated Gaussian: sqrt(2) w."""
-    if kernel.kind != GAUSSIAN:
-        raise ValueError("only the Gaussian kernel has a standard deviation")
-    return math.sqrt(2.0) * kernel.width
 
 
 # ----------------------------------------------------------------------------- over frames
