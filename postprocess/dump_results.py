@@ -100,15 +100,21 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     h_settled = float(surface.table.loc[surface.table.step == settled.timestep, "surface_height"].iloc[0])
 
     # bulk solid fraction of the settled bed
-    por = Porosity(bed_regions(case, h_settled, d)).run([settled])
-    por.save(out, figure=False)
-    phi = dict(zip(por.table.region, por.table.solid_fraction.astype(float)))
-    phi_bulk, phi_section = phi["bulk_core"], phi["cross_section"]
     rho_p = case.materials.particle.density
     summary["settled_surface_height_m"] = h_settled
-    summary["bulk_solid_fraction"] = phi_bulk
-    summary["bulk_density_kg_m3"] = phi_bulk * rho_p
-    summary["cross_section_solid_fraction"] = phi_section
+    try:
+        regions = bed_regions(case, h_settled, d)
+    except ReadError as exc:     # a shallow bed: say so and skip what needs its solid fraction
+        regions = None
+        summary["bulk_solid_fraction"] = {"error": str(exc)}
+    if regions is not None:
+        por = Porosity(regions).run([settled])
+        por.save(out, figure=False)
+        phi = dict(zip(por.table.region, por.table.solid_fraction.astype(float)))
+        phi_bulk, phi_section = phi["bulk_core"], phi["cross_section"]
+        summary["bulk_solid_fraction"] = phi_bulk
+        summary["bulk_density_kg_m3"] = phi_bulk * rho_p
+        summary["cross_section_solid_fraction"] = phi_section
     if case.analysis.porosity_regions:
         summary["porosity_regions"] = case_regions_porosity(case, atoms_files, settled, out)
 
@@ -133,6 +139,9 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
         for frame, name in figs:
             if frame.timestep in by_step:
                 force_chain_figure(frame, by_step[frame.timestep], out / name, axis=1, center=0.0, thickness=d)
+
+    if regions is None:
+        return summary
 
     # Wr (free-surface speed) against Wf (outlet count) in Wf's steady window
     area = math.pi * R * R

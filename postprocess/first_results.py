@@ -181,16 +181,21 @@ def report_text(summary: dict, run: RunOutputs) -> str:
              f"- discharged {_fmt(summary['discharged_mass_kg'] * 1000)} g; {_fmt(summary['mass_in_silo_end_kg'] * 1000)} g left"]
     fa = summary.get("frame_analyses", {})
     if "bulk_solid_fraction" in fa:
-        lines += [f"- settled bed: bulk solid fraction {_fmt(fa['bulk_solid_fraction'], '.3f')} (core), "
-                  f"{_fmt(fa['cross_section_solid_fraction'], '.3f')} (whole cross-section); free surface at "
-                  f"{_fmt(fa['settled_surface_height_m'] * 1000)} mm"]
+        if "cross_section_solid_fraction" in fa:
+            lines += [f"- settled bed: bulk solid fraction {_fmt(fa['bulk_solid_fraction'], '.3f')} (core), "
+                      f"{_fmt(fa['cross_section_solid_fraction'], '.3f')} (whole cross-section); free surface at "
+                      f"{_fmt(fa['settled_surface_height_m'] * 1000)} mm"]
+        else:
+            lines += [f"- settled bed: free surface at {_fmt(fa['settled_surface_height_m'] * 1000)} mm; "
+                      f"no bulk solid fraction: {fa['bulk_solid_fraction']['error']}"]
         if "coordination_settled" in fa:
             c = fa["coordination_settled"]
             lines += [f"- coordination number (core, {fa['coordination_convention']}): {_fmt(c['z_mean'], '.2f')}, "
                       f"mechanical {_fmt(c['z_mech'], '.2f')}"]
-        wr = fa["flow_rate_surface"]
-        lines += [f"- free-surface flow rate Wr = {_fmt(wr['rate'] * 1000)} g/s = "
-                  f"{_fmt(fa['flow_rate_surface_over_outlet'], '.3f')} x Wf"]
+        if "flow_rate_surface" in fa:
+            wr = fa["flow_rate_surface"]
+            lines += [f"- free-surface flow rate Wr = {_fmt(wr['rate'] * 1000)} g/s = "
+                      f"{_fmt(fa['flow_rate_surface_over_outlet'], '.3f')} x Wf"]
         j = fa.get("janssen_static", {})
         if "K" in j:
             lines += [f"- Janssen fit of the settled profile: K = {_fmt(j['K'], '.3f')}, mu_w = {_fmt(j['mu_w'], '.3f')} "

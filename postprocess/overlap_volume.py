@@ -74,17 +74,24 @@ def sphere_cylinder_overlap(Rc, r, d, t0, t1):
     return out
 
 
-def solid_volume_in_sphere(center, radius, positions, radii, tree=None) -> float:
+def _weighted(values, weights, idx) -> float:
+    """Sum of ``values`` (of the rows ``idx``), each times its row's weight if weights are given."""
+    return float(values.sum() if weights is None else (values * weights[idx]).sum())
+
+
+def solid_volume_in_sphere(center, radius, positions, radii, tree=None, weights=None) -> float:
     """Solid volume (m3) of spheres (``positions`` (n,3), ``radii`` (n,)) inside the measurement
-    sphere; ``tree`` is an optional scipy cKDTree of ``positions``."""
+    sphere; ``tree`` is an optional scipy cKDTree of ``positions``; ``weights`` (n,) the share
+    of each sphere's volume that is its own (clumps: see postprocess.porosity.grain_weights)."""
     idx = _candidates(center, radius + radii.max(initial=0.0), positions, tree)
     if len(idx) == 0:
         return 0.0
     d = np.linalg.norm(positions[idx] - np.asarray(center, float), axis=1)
-    return float(sphere_sphere_overlap(radius, radii[idx], d).sum())
+    return _weighted(sphere_sphere_overlap(radius, radii[idx], d), weights, idx)
 
 
-def solid_volume_in_cylinder(center, radius, axis: int, t0: float, t1: float, positions, radii, tree=None) -> float:
+def solid_volume_in_cylinder(center, radius, axis: int, t0: float, t1: float, positions, radii, tree=None,
+                             weights=None) -> float:
     """Solid volume (m3) of spheres inside a measurement cylinder of ``radius`` whose axis runs
     along coordinate ``axis`` (0, 1, 2) through ``center`` and spans ``t0..t1`` on that axis."""
     center = np.asarray(center, float)
@@ -98,10 +105,11 @@ def solid_volume_in_cylinder(center, radius, axis: int, t0: float, t1: float, po
         return 0.0
     p = positions[idx]
     d = np.hypot(p[:, keep[0]] - center[keep[0]], p[:, keep[1]] - center[keep[1]])
-    return float(sphere_cylinder_overlap(radius, radii[idx], d, t0 - p[:, axis], t1 - p[:, axis]).sum())
+    return _weighted(sphere_cylinder_overlap(radius, radii[idx], d, t0 - p[:, axis], t1 - p[:, axis]), weights, idx)
 
 
-def solid_area_in_circle(center, radius, axis: int, plane: float, positions, radii, tree=None) -> float:
+def solid_area_in_circle(center, radius, axis: int, plane: float, positions, radii, tree=None,
+                         weights=None) -> float:
     """Solid area (m2) of the sections of spheres by the plane ``coordinate[axis] == plane``
     inside the circle of ``radius`` about ``center`` in that plane (a 2D measurement circle)."""
     center = np.asarray(center, float)
@@ -114,7 +122,7 @@ def solid_area_in_circle(center, radius, axis: int, plane: float, positions, rad
     rho = np.sqrt(radii[idx] ** 2 - h[idx] ** 2)
     p = positions[idx]
     d = np.hypot(p[:, keep[0]] - center[keep[0]], p[:, keep[1]] - center[keep[1]])
-    return float(circle_circle_overlap(radius, rho, d).sum())
+    return _weighted(circle_circle_overlap(radius, rho, d), weights, idx)
 
 
 def _candidates(center, reach: float, positions, tree):

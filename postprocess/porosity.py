@@ -10,8 +10,12 @@ Regions (all lengths m, coordinates absolute):
 
 Grains are spheres (``radius`` column). Soft-contact overlaps between grains (a few 1e-3 of a
 radius) are counted twice; the error is of the order of the mean overlap over the radius.
-Clumps (a ``mol`` column, overlapping sub-spheres) are refused here: the overlaps of their
-sub-spheres would be counted twice.
+
+Clumps (a ``mol`` column: LIGGGHTS multisphere body ids, -1 or 0 for plain spheres) have
+overlapping sub-spheres. Each sub-sphere's clipped volume is weighted with its clump's
+V_union / sum V_sphere (exact union volumes, :mod:`siloflow.clumps`); in a circle (2D)
+region with the clump's union area / sum of areas of its circles in that plane. This is
+exact for clumps wholly inside a region and an approximation for clumps cut by its edge.
 """
 from __future__ import annotations
 
@@ -21,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from siloflow.errors import ReadError
+from siloflow.clumps import union_area, union_volume
 
 from .analysis_base import FrameAnalysis
 from .overlap_volume import solid_area_in_circle, solid_volume_in_cylinder, solid_volume_in_sphere
@@ -63,14 +67,16 @@ class MeasureRegion:
             return math.pi * self.radius ** 2 * (self.t1 - self.t0)
         return math.pi * self.radius ** 2
 
-    def solid(self, positions, radii, tree=None) -> float:
-        """Solid volume (m3) or, for a circle, solid area (m2) inside the region."""
+    def solid(self, positions, radii, tree=None, weights=None) -> float:
+        """Solid volume (m3) or, for a circle, solid area (m2) inside the region; ``weights``: see
+        :func:`grain_weights` (volumes) and :func:`section_weights` (circle sections)."""
         if self.shape == "sphere":
-            return solid_volume_in_sphere(self.center, self.radius, positions, radii, tree)
+            return solid_volume_in_sphere(self.center, self.radius, positions, radii, tree, weights)
         if self.shape == "cylinder":
             return solid_volume_in_cylinder(self.center, self.radius, self.axis, self.t0, self.t1,
-                                            positions, radii, tree)
-        return solid_area_in_circle(self.center, self.radius, self.axis, self.plane, positions, radii, tree)
+                                            positions, radii, tree, weights)
+        return solid_area_in_circle(self.center, self.radius, self.axis, self.plane, positions, radii, tree,
+                                    weights)
 
 
 def porosity_2d_to_3d(eps2d, relative_density: float, reading: str = "as_printed"):
@@ -111,12 +117,72 @@ def relative_density(e: float, e_min: float, e_max: float) -> float:
     return (e_max - e) / (e_max - e_min)
 
 
-def sphere_grains(frame):
-    """(positions, radii) of a frame's spherical grains; refuses clump sub-spheres."""
-    if "mol" in frame.data and frame.data["mol"].nunique() < frame.n:
-        raise ReadError(f"{frame.source}: frame has clumps (mol column); porosity of clumps needs "
-                        "the union volume of each clump, which this analysis does not compute")
-    return frame.positions(), frame.radii()
+def clump_bodies(frame):
+    """(body index per row or -1, number of bodies) of a frame's clumps (``mol`` > 0 shared by
+    two or more rows); None when the frame has no clumps."""
+    if "mol" not in frame.data or frame.n == 0:
+        return None
+    mol = frame.column("mol").astype(np.int64)
+    keys, inverse, counts = np.unique(mol, return_inverse=True, return_counts=True)
+    multi = (keys > 0) & (counts > 1)
+    if not multi.any():
+        return None
+    index = np.cumsum(multi) - 1
+    body = np.where(multi[inverse], index[inverse], -1)
+    return body, int(multi.sum())
+
+
+_UNION_CACHE: dict = {}
+
+
+def _clump_key(pos, rad) -> tuple:
+    """Shape of a clump up to rigid motion, rounded to 1e-4 of its largest radius."""
+    scale = 1e-4 * rad.max()
+    d = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(-1))
+    return (tuple(np.round(np.sort(rad) / scale).astype(int)),
+            tuple(np.round(np.sort(d[np.triu_indices(len(rad), 1)]) / scale).astype(int)))
+
+
+def grain_weights(frame) -> np.ndarray | None:
+    """Per row, the share of the sphere's volume that is its grain's alone: None for plain spheres;
+    for clump sub-spheres V_union / sum V_sphere of their clump (exact union, cached per shape)."""
+    found = clump_bodies(frame)
+    if found is None:
+        return None
+    body, n_bodies = found
+    pos, rad = frame.positions(), frame.radii()
+    weights = np.ones(frame.n)
+    order = np.argsort(body, kind="stable")
+    starts = np.searchsorted(body[order], np.arange(n_bodies + 1))
+    for b in range(n_bodies):
+        rows = order[starts[b]:starts[b + 1]]
+        key = _clump_key(pos[rows], rad[rows])
+        if key not in _UNION_CACHE:
+            _UNION_CACHE[key] = union_volume(pos[rows], rad[rows]) / float((4.0 / 3.0 * np.pi * rad[rows] ** 3).sum())
+        weights[rows] = _UNION_CACHE[key]
+    return weights
+
+
+def section_weights(frame, axis: int, plane: float) -> np.ndarray | None:
+    """Like :func:`grain_weights` for the sections of the grains by the plane
+    ``coordinate[axis] == plane``: a clump's union area of its circles there over their summed area."""
+    found = clump_bodies(frame)
+    if found is None:
+        return None
+    body, _ = found
+    pos, rad = frame.positions(), frame.radii()
+    h = np.abs(pos[:, axis] - plane)
+    cut = (h < rad) & (body >= 0)
+    weights = np.ones(frame.n)
+    rows_cut = np.flatnonzero(cut)
+    keep = [k for k in range(3) if k != axis]
+    for b in np.unique(body[rows_cut]):
+        rows = rows_cut[body[rows_cut] == b]
+        if len(rows) < 2:
+            continue
+        circle = np.sqrt(rad[rows] ** 2 - h[rows] ** 2)
+        weights[rows] = union_area(pos[rows][:, keep], circle) / float((np.pi * circle ** 2).sum())
+    return weights
 
 
 class Porosity(FrameAnalysis):
@@ -136,11 +202,14 @@ class Porosity(FrameAnalysis):
         self.conversion = conversion
 
     def _single_frame(self, frame, contacts):
-        pos, rad = sphere_grains(frame)
+        pos, rad = frame.positions(), frame.radii()
         tree = cKDTree(pos) if len(pos) else None
+        volume_weights = grain_weights(frame)
         rows = []
         for region in self.regions:
-            solid = region.solid(pos, rad, tree) if tree is not None else 0.0
+            weights = (section_weights(frame, region.axis, region.plane) if region.shape == "circle"
+                       else volume_weights)
+            solid = region.solid(pos, rad, tree, weights) if tree is not None else 0.0
             phi = solid / region.measure
             row = {"region": region.name, "shape": region.shape, "solid_fraction": phi, "porosity": 1.0 - phi}
             if self.conversion and region.shape == "circle":

@@ -143,6 +143,18 @@ class PairContact(Strict):
     kt: Optional[Positive] = Field(None, description="tangential spring stiffness, N/m (linear model)", le=1e12)
 
 
+def _contact_problems(model: str, field: str, pair: "PairContact") -> list[str]:
+    """kn/kt must be given with model 'linear' and only then."""
+    given = pair.kn is not None or pair.kt is not None
+    if model == "linear" and (pair.kn is None or pair.kt is None):
+        return [f"{field}: kn and kt are required by model 'linear'"]
+    if model != "linear" and given:
+        computed = "are computed by model 'hooke'; give them with model 'linear'" if model == "hooke" else \
+            f"belong to model 'linear', not '{model}'"
+        return [f"{field}: kn/kt {computed}"]
+    return []
+
+
 class Materials(Strict):
     """Particle and wall materials and the contact law of each pair."""
 
@@ -164,39 +176,51 @@ class Materials(Strict):
     @model_validator(mode="after")
     def _model_parameters(self):
         problems = []
-        pairs = {"particle_particle": self.particle_particle, "particle_wall": self.particle_wall}
-        if self.model == "hertz":
-            if self.particle.youngs_modulus is None:
-                problems.append("particle.youngs_modulus is required by model 'hertz'")
-            if self.wall.youngs_modulus is None:
-                problems.append("wall.youngs_modulus is required by model 'hertz'")
-            for name, pair in pairs.items():
-                if pair.kn is not None or pair.kt is not None:
-                    problems.append(f"{name}: kn/kt belong to model 'linear', not 'hertz'")
-        elif self.model == "hooke":
+        for name in ("particle_particle", "particle_wall"):
+            problems += _contact_problems(self.model, name, getattr(self, name))
+        if self.model in ("hertz", "hooke"):
             for part in ("particle", "wall"):
                 if getattr(self, part).youngs_modulus is None:
-                    problems.append(f"{part}.youngs_modulus is required by model 'hooke'")
-            if self.characteristic_velocity is None:
-                problems.append("characteristic_velocity is required by model 'hooke'")
-            for name, pair in pairs.items():
-                if pair.kn is not None or pair.kt is not None:
-                    problems.append(f"{name}: kn/kt are computed by model 'hooke'; give them with model 'linear'")
-        else:
-            for name, pair in pairs.items():
-                if pair.kn is None or pair.kt is None:
-                    problems.append(f"{name}: kn and kt are required by model 'linear'")
+                    problems.append(f"{part}.youngs_modulus is required by model '{self.model}'")
+        if self.model == "hooke" and self.characteristic_velocity is None:
+            problems.append("characteristic_velocity is required by model 'hooke'")
         if problems:
             raise ValueError("; ".join(problems))
         return self
 
 
 # --------------------------------------------------------------------------- particles
+class Dust(Strict):
+    """Small spheres with their own material, added at a number ratio to the grains (paper A:
+    0.5 mm balls of density 2000, one per ten clumps). Dust usually sets the time step; the
+    ``density_scale`` remedy multiplies the dust density (mass scaling: contact times grow as
+    its square root) and its effect on results is measured in benchmarks/dust_density_scaling.py."""
+
+    radius: Positive = Field(description="dust sphere radius, m", le=1.0)
+    density: Positive = Field(description="dust solid density, kg/m3", le=1e5)
+    number_ratio: float = Field(description="dust spheres per grain (paper A: 0.1)", gt=0, le=100,
+                                allow_inf_nan=False)
+    youngs_modulus: Optional[Positive] = Field(None, description="Pa (hertz and hooke models)", ge=5e6, le=1e13)
+    poisson_ratio: float = Field(0.3, gt=-1, lt=0.5, allow_inf_nan=False)
+    dust_dust: PairContact
+    dust_particle: PairContact
+    dust_wall: PairContact
+    density_scale: float = Field(1.0, ge=1.0, le=1e6, allow_inf_nan=False,
+                                 description="time-step remedy: the dust runs with density x this factor "
+                                 "(1 = no scaling)")
+
+    @property
+    def run_density(self) -> float:
+        """Density the dust is simulated with, kg/m3."""
+        return self.density * self.density_scale
+
+
 class MonodisperseSpheres(Strict):
     """Spheres of one radius."""
 
     kind: Literal["spheres"]
     radius: Positive = Field(description="sphere radius, m", le=1.0)
+    dust: Optional[Dust] = None
 
     @property
     def radii(self) -> list[float]:
@@ -274,7 +298,68 @@ def paper_b_radii(rb: float, sizes: int = 7) -> list[float]:
     return [rb - k * rb / 16.0 for k in range(sizes)]
 
 
-Particles = Annotated[Union[MonodisperseSpheres, PolydisperseSpheres], Field(discriminator="kind")]
+class ClumpSphere(Strict):
+    center: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(description="m, body frame")
+    radius: Positive = Field(le=1.0, description="m")
+
+
+class Clumps(Strict):
+    """Rigid clumps of overlapping spheres (LIGGGHTS multisphere): paper A's wheat grain
+    (``shape: wheat``, three spheres of diameter ``width`` making a grain ``length`` long) or
+    any ``spheres`` list. Mass and inertia follow the union volume."""
+
+    kind: Literal["clumps"]
+    shape: Literal["wheat", "spheres"] = "wheat"
+    length: Positive = Field(6e-3, le=1.0, description="wheat grain length, m")
+    width: Positive = Field(4e-3, le=1.0, description="wheat grain width (sphere diameter), m")
+    spheres: Optional[list[ClumpSphere]] = Field(None, min_length=2, max_length=50,
+                                                 description="clump spheres (shape 'spheres')")
+    monte_carlo_tries: int = Field(1_000_000, ge=10_000, le=100_000_000,
+                                   description="LIGGGHTS' Monte Carlo samples for mass and inertia")
+    dust: Optional[Dust] = None
+
+    @model_validator(mode="after")
+    def _shape(self):
+        if self.shape == "spheres":
+            if self.spheres is None:
+                raise ValueError("shape 'spheres' needs a 'spheres' list")
+        elif self.spheres is not None:
+            raise ValueError("'spheres' is only read with shape: spheres (shape is 'wheat')")
+        else:
+            if not self.width <= self.length < 3 * self.width:
+                raise ValueError(f"a wheat grain needs width <= length < 3 width (got length {self.length} m, "
+                                 f"width {self.width} m)")
+        clump = self.clump
+        if not clump.connected():
+            raise ValueError("the clump's spheres must overlap into one body")
+        return self
+
+    @property
+    def clump(self):
+        from .clumps import ClumpShape, wheat_grain
+        if self.shape == "wheat":
+            return wheat_grain(self.length, self.width)
+        return ClumpShape(centers=tuple(s.center for s in self.spheres), radii=tuple(s.radius for s in self.spheres))
+
+    @property
+    def radii(self) -> list[float]:
+        return [max(self.clump.radii)]
+
+    @property
+    def number_fractions(self) -> list[float]:
+        return [1.0]
+
+    @property
+    def max_radius(self) -> float:
+        """Bounding radius of the clump, m (geometry margins)."""
+        return self.clump.bounding_radius
+
+    @property
+    def min_radius(self) -> float:
+        return min(self.clump.radii)
+
+
+Particles = Annotated[Union[MonodisperseSpheres, PolydisperseSpheres, Clumps], Field(discriminator="kind")]
 
 
 # --------------------------------------------------------------------------- stages
@@ -409,9 +494,10 @@ class Case(Strict):
     def _consistent(self):
         g, p, f = self.geometry, self.particles, self.fill
         problems = []
+        problems += _particle_problems(self)
         if g.kind != "planar":
             d = 2 * p.max_radius
-            field = "particles.radius" if p.kind == "spheres" else "particles.radii"
+            field = {"spheres": "particles.radius", "clumps": "particles.length"}.get(p.kind, "particles.radii")
             if p.max_radius >= g.outlet_radius:
                 problems.append(f"{field} ({p.max_radius} m) must be smaller than the outlet "
                                 f"radius ({g.outlet_radius} m): nothing could leave")
@@ -436,6 +522,25 @@ class Case(Strict):
         if problems:
             raise ValueError("; ".join(problems))
         return self
+
+
+def _particle_problems(case: "Case") -> list[str]:
+    """Cross-section checks of the particles: dust contact laws, multisphere limits."""
+    p, model = case.particles, case.materials.model
+    problems = []
+    dust = getattr(p, "dust", None)
+    if dust is not None:
+        for name in ("dust_dust", "dust_particle", "dust_wall"):
+            problems += _contact_problems(model, f"particles.dust.{name}", getattr(dust, name))
+        if model != "linear" and dust.youngs_modulus is None:
+            problems.append(f"particles.dust.youngs_modulus is required by model '{model}'")
+        if dust.radius >= p.min_radius:
+            problems.append(f"particles.dust.radius ({dust.radius} m) must be smaller than the grains "
+                            f"({p.min_radius} m)")
+    if p.kind == "clumps" and case.engine.ranks != 1:
+        problems.append(f"engine.ranks: clumps (LIGGGHTS-PUBLIC multisphere) run on one rank only, "
+                        f"not {case.engine.ranks}")
+    return problems
 
 
 # --------------------------------------------------------------------------- loading
@@ -475,7 +580,7 @@ def _field_path(loc) -> str:
     for item in loc:
         if isinstance(item, int):
             parts.append(f"[{item}]")
-        elif item in ("cylinder", "hopper", "planar", "spheres", "polydisperse_spheres") and parts:
+        elif item in ("cylinder", "hopper", "planar", "spheres", "polydisperse_spheres", "clumps") and parts:
             continue  # discriminator tag pydantic inserts into the path
         else:
             parts.append(("." if parts else "") + str(item))

@@ -131,11 +131,13 @@ def _post(folder: Path, measured: Path | None = None) -> None:
     out.print(f"steady flow rate: {fr['rate'] * 1000:.2f} +/- {fr['stderr'] * 1000:.2f} g/s; "
               f"discharged {summary['discharged_mass_kg'] * 1000:.1f} g")
     fa = summary.get("frame_analyses", {})
-    if "bulk_solid_fraction" in fa:
+    if "cross_section_solid_fraction" in fa:
         line = f"settled bulk solid fraction {fa['bulk_solid_fraction']:.3f}"
         if "coordination_settled" in fa:
             line += f", coordination number {fa['coordination_settled']['z_mean']:.2f}"
         out.print(line + f"; free-surface flow rate / outlet flow rate = {fa['flow_rate_surface_over_outlet']:.3f}")
+    elif "bulk_solid_fraction" in fa:
+        out.print(f"no bulk solid fraction: {fa['bulk_solid_fraction']['error']}")
     out.print(f"results: {Path(folder) / 'results'} (summary.json, *.csv, *.parquet, *.png)")
 
 

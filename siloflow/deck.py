@@ -18,7 +18,7 @@ import jinja2
 from . import __version__
 from .atomic_files import new_folder, write_json, write_text
 from .case import SAFE_NAME_PATTERN, Case, case_to_yaml
-from .derived import Derived, derive
+from .derived import Derived, _modulus_of, derive
 from .engine_output import CONTACT_KEYWORDS, WALL_CONTACT_KEYWORDS, local_columns
 from .errors import SiloflowError
 from .meshes import silo_meshes, write_stl
@@ -102,11 +102,11 @@ def _matrix(d: Derived, attr: str, particle_pairs: float | None = None) -> list[
 def _properties(case: Case, d: Derived) -> list[dict]:
     """``fix property/global`` entries: atom types 1..K are the size classes, type K+1 the walls."""
     m = case.materials
-    k = d.wall_type - 1
     props = []
     if m.model == "hertz":
-        props += [("youngsModulus", "peratomtype", [m.particle.youngs_modulus] * k + [m.wall.youngs_modulus]),
-                  ("poissonsRatio", "peratomtype", [m.particle.poisson_ratio] * k + [m.wall.poisson_ratio]),
+        moduli = [_modulus_of(case, sp.material) for sp in d.species] + [_modulus_of(case, None)]
+        props += [("youngsModulus", "peratomtype", [e for e, _ in moduli]),
+                  ("poissonsRatio", "peratomtype", [nu for _, nu in moduli]),
                   ("coefficientRestitution", "peratomtypepair", _matrix(d, "restitution"))]
     else:
         props += [(name, "peratomtypepair", _matrix(d, name)) for name in ("kn", "kt", "gamman", "gammat")]
@@ -116,6 +116,30 @@ def _properties(case: Case, d: Derived) -> list[dict]:
         props.append(("coefficientRollingFriction", "peratomtypepair", _matrix(d, "rolling_friction")))
     return [{"id": f"material{i + 1}", "name": n, "style": s, "numbers": v}
             for i, (n, s, v) in enumerate(props)]
+
+
+def particle_templates(case: Case, d: Derived) -> list[dict]:
+    """The grain templates of the distribution (spheres per size class, or the clump shape);
+    with paper B's shrinking, only the poured largest size."""
+    grains = [sp for sp in d.species if sp.stream == "grains"]
+    if d.shrink_classes:
+        grains = [max(grains, key=lambda sp: sp.radius)]
+        weights = [1.0]
+    else:
+        weights = d.mass_fractions
+    ntry = getattr(case.particles, "monte_carlo_tries", 0)
+    return [{"type": sp.type, "seed": d.seeds["templates"][sp.type - 1], "weight": w, "density": sp.density,
+             "radius": sp.radius, "spheres": sp.spheres, "ntry": ntry} for sp, w in zip(grains, weights)]
+
+
+def dust_insertion(d: Derived, particle_rate: float) -> dict | None:
+    """Dust template and insertion (None without dust): batches in proportion to the grains'."""
+    dust = next((sp for sp in d.species if sp.stream == "dust"), None)
+    if dust is None:
+        return None
+    return {"type": dust.type, "seed": d.seeds["templates"][dust.type - 1], "density": dust.density,
+            "radius": dust.radius, "count": d.dust_count,
+            "rate": particle_rate * d.dust_batch / d.insertion_batch}
 
 
 def friction_restore(case: Case, d: Derived) -> dict | None:
@@ -135,7 +159,9 @@ def uses_rolling_friction(case: Case) -> bool:
 def deck_context(case: Case, d: Derived, walls) -> dict:
     """Everything the LIGGGHTS template places, already computed and checked."""
     m = case.materials
-    youngs = [e for e in (m.particle.youngs_modulus, m.wall.youngs_modulus) if e is not None]
+    youngs = [e for e, _ in [_modulus_of(case, sp.material) for sp in d.species] + [_modulus_of(case, None)]
+              if e is not None]
+    particle_rate = d.insertion_batch / (d.insert_every * d.timestep)
     return {
         "name": case.name, "box": d.box, "skin": d.skin,
         "hard_particles": any(e > 1e9 for e in youngs),
@@ -147,16 +173,15 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
         "seeds": d.seeds, "density": m.particle.density, "radius": d.particle_radius,
         "friction_restore": friction_restore(case, d),
         "n_types": d.wall_type, "wall_type": d.wall_type,
-        "templates": ([{"radius": d.particle_radius, "seed": d.seeds["templates"][0], "weight": 1.0,
-                        "type": d.radii.index(d.particle_radius) + 1}]
-                      if d.shrink_classes else
-                      [{"radius": r, "seed": seed, "weight": w, "type": k + 1}
-                       for k, (r, seed, w) in enumerate(zip(d.radii, d.seeds["templates"], d.mass_fractions))]),
-        "pour_type": d.radii.index(d.particle_radius) + 1,
+        "templates": particle_templates(case, d),
+        "dust": dust_insertion(d, particle_rate),
+        "clumps": d.has_clumps, "mass_weights": d.mass_weights,
+        "plate_velocity": d.plate_velocity,
+        "pour_type": d.radii.index(d.particle_radius) + 1 if d.shrink_classes else 0,
         "shrink_classes": [{"diameter": 2 * r, "fraction": f, "seed": seed, "type": d.radii.index(r) + 1}
                            for (r, f), seed in zip(d.shrink_classes, d.seeds["shrink"])],
         "insertion_region": d.insertion_region, "particle_count": d.particle_count,
-        "particle_rate": d.insertion_batch / (d.insert_every * d.timestep),
+        "particle_rate": particle_rate,
         "insert_every": d.insert_every, "insertion_speed": d.insertion_speed,
         "check_timestep": m.model == "hertz",
         "thermo_every": d.thermo_every, "sample_every": d.sample_every,

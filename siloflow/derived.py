@@ -36,6 +36,61 @@ class PairParameters:
 
 
 @dataclass
+class Species:
+    """One atom type of grains (SI): size classes, a clump shape, or dust.
+
+    ``stream`` is ``grains`` (the case's particles) or ``dust`` (inserted beside them at
+    a number ratio); ``number_fraction`` is within the stream. A clump's ``volume`` is the
+    union volume of its spheres and ``radius`` its largest sphere (contacts)."""
+
+    name: str
+    type: int
+    kind: str                 # "sphere" or "clump"
+    stream: str               # "grains" or "dust"
+    radius: float             # m
+    bounding_radius: float    # m
+    volume: float             # m3
+    density: float            # kg/m3, as simulated
+    number_fraction: float
+    material: str             # "particle" or "dust": which contact parameters apply
+    spheres: list = field(default_factory=list)   # clumps: [x, y, z, r] per sphere, m
+
+    @property
+    def mass(self) -> float:
+        return self.density * self.volume
+
+    @property
+    def n_spheres(self) -> int:
+        return max(1, len(self.spheres))
+
+
+def species_of(case: Case) -> list[Species]:
+    """The atom types of a case's grains: size class k is type k + 1 (in the order of the case's
+    radii), a clump shape type 1, dust the type after the grains; the walls come last."""
+    p = case.particles
+    rho = case.materials.particle.density
+    out = []
+    if p.kind == "clumps":
+        clump = p.clump
+        out.append(Species(name="clump", type=1, kind="clump", stream="grains", radius=max(clump.radii),
+                           bounding_radius=clump.bounding_radius, volume=clump.volume, density=rho,
+                           number_fraction=1.0, material="particle",
+                           spheres=[[*c, r] for c, r in zip(clump.centers, clump.radii)]))
+    else:
+        many = len(p.radii) > 1
+        for k, (r, n) in enumerate(zip(p.radii, p.number_fractions)):
+            out.append(Species(name=f"size{k + 1}" if many else "grain", type=k + 1, kind="sphere",
+                               stream="grains", radius=r, bounding_radius=r, volume=cp.sphere_volume(r),
+                               density=rho, number_fraction=n, material="particle"))
+    dust = getattr(p, "dust", None)
+    if dust is not None:
+        out.append(Species(name="dust", type=len(out) + 1, kind="sphere", stream="dust", radius=dust.radius,
+                           bounding_radius=dust.radius, volume=cp.sphere_volume(dust.radius),
+                           density=dust.run_density, number_fraction=1.0, material="dust"))
+    return out
+
+
+@dataclass
 class Derived:
     """Derived parameters of a case (SI units)."""
 
@@ -82,11 +137,33 @@ class Derived:
     mass_fractions: list = field(default_factory=list)    # what LIGGGHTS' distribution takes
     shrink_classes: list = field(default_factory=list)    # [(radius, conditional fraction)], paper B
     type_pairs: dict = field(default_factory=dict)        # (type i, type j) -> PairParameters
+    plate_shift: float = 0.0                              # m, sideways travel of the opening plate
+    opening_speed: float = 1.0                            # m/s along the plate's path
+    species: list = field(default_factory=list)           # [Species], one per atom type
+    dust_count: int = 0
+    dust_batch: int = 0
+    timestep_without_dust: float | None = None            # s; the dust's cost is this / timestep
 
     @property
     def wall_type(self) -> int:
-        """Atom type of the walls: after the size classes (types 1..K)."""
-        return len(self.radii) + 1
+        """Atom type of the walls: after the grain types (size classes, clump, dust)."""
+        return len(self.species) + 1
+
+    @property
+    def plate_velocity(self) -> tuple[float, float, float]:
+        """Velocity of the orifice plate while the orifice opens, m/s."""
+        path = math.hypot(self.plate_travel, self.plate_shift)
+        return (self.opening_speed * self.plate_shift / path, 0.0, -self.opening_speed * self.plate_travel / path)
+
+    @property
+    def has_clumps(self) -> bool:
+        return any(s.kind == "clump" for s in self.species)
+
+    @property
+    def mass_weights(self) -> list[float]:
+        """Per atom type, the factor that turns LIGGGHTS' per-atom mass into a share of the grain's
+        mass: multisphere gives every sphere of a clump the whole clump's mass."""
+        return [1.0 / s.n_spheres for s in self.species]
 
     @property
     def planned_steps(self) -> dict[str, int]:
@@ -103,6 +180,9 @@ class Derived:
     def to_json(self) -> dict:
         out = asdict(self)
         out["type_pairs"] = {f"{i}-{j}": asdict(v) for (i, j), v in self.type_pairs.items()}
+        out["species"] = [{**asdict(sp), "mass": sp.mass} for sp in self.species]
+        out["wall_type"] = self.wall_type
+        out["mass_weights"] = self.mass_weights
         out["planned_steps"] = self.planned_steps
         return out
 
@@ -158,16 +238,16 @@ def _steps(duration: float, dt: float) -> int:
     return max(1, math.ceil(duration / dt - 1e-9))
 
 
-def _pair(case: Case, name: str, m_eff: float, r_eff: float, wall: bool, v_impact: float) -> PairParameters:
-    """Contact parameters of one pair of grains (or grain and wall) with reduced mass and radius."""
+def _pair(case: Case, name: str, m_eff: float, r_eff: float, contact, moduli, v_impact: float) -> PairParameters:
+    """Contact parameters of one pair with reduced mass and radius; ``contact`` is the case's
+    PairContact of the pair, ``moduli`` the (Young's modulus, Poisson ratio) of both sides."""
     m = case.materials
-    pc = m.particle_wall if wall else m.particle_particle
-    other = m.wall if wall else m.particle
-    common = dict(name=name, m_eff=m_eff, r_eff=r_eff, friction=pc.friction,
-                  restitution=pc.restitution, rolling_friction=pc.rolling_friction)
+    common = dict(name=name, m_eff=m_eff, r_eff=r_eff, friction=contact.friction,
+                  restitution=contact.restitution, rolling_friction=contact.rolling_friction)
+    y_eff = None
     if m.model in ("hertz", "hooke"):
-        y_eff = cp.effective_modulus(m.particle.youngs_modulus, m.particle.poisson_ratio,
-                                     other.youngs_modulus, other.poisson_ratio)
+        (e1, nu1), (e2, nu2) = moduli
+        y_eff = cp.effective_modulus(e1, nu1, e2, nu2)
     if m.model == "hertz":
         return PairParameters(**common, y_eff=y_eff,
                               contact_time=cp.hertz_contact_time(m_eff, r_eff, y_eff, v_impact))
@@ -175,27 +255,61 @@ def _pair(case: Case, name: str, m_eff: float, r_eff: float, wall: bool, v_impac
         kn = cp.hooke_kn(m_eff, r_eff, y_eff, m.characteristic_velocity)
         kt = m.tangential_stiffness_ratio * kn
     else:
-        kn, kt = pc.kn, pc.kt
-    gamman = cp.linear_gamma(kn, m_eff, pc.restitution)
-    return PairParameters(**common, y_eff=y_eff if m.model == "hooke" else None, kn=kn, kt=kt, gamman=gamman,
+        kn, kt = contact.kn, contact.kt
+    gamman = cp.linear_gamma(kn, m_eff, contact.restitution)
+    return PairParameters(**common, y_eff=y_eff, kn=kn, kt=kt, gamman=gamman,
                           gammat=m.tangential_damping_ratio * gamman, contact_time=cp.linear_contact_time(kn, m_eff))
 
 
-def type_pair_parameters(case: Case, radii: list[float], v_impact: float) -> dict[tuple[int, int], PairParameters]:
-    """Contact parameters of every pair of atom types: size class k is type k + 1 (in the order
-    of the case's radii), the walls the last type. A wall acts as infinite mass and radius."""
-    rho = case.materials.particle.density
-    wall = len(radii) + 1
+def _contact_of(case: Case, a: str, b: str | None):
+    """The case's PairContact between materials ``a`` and ``b`` (None: a wall)."""
+    m, dust = case.materials, getattr(case.particles, "dust", None)
+    if b is None:
+        return m.particle_wall if a == "particle" else dust.dust_wall
+    if a == b == "particle":
+        return m.particle_particle
+    return dust.dust_dust if a == b == "dust" else dust.dust_particle
+
+
+def _modulus_of(case: Case, material: str | None) -> tuple:
+    """(Young's modulus, Poisson ratio) of a material (None: the walls)."""
+    m = case.materials
+    if material is None:
+        return m.wall.youngs_modulus, m.wall.poisson_ratio
+    if material == "dust":
+        dust = case.particles.dust
+        return dust.youngs_modulus, dust.poisson_ratio
+    return m.particle.youngs_modulus, m.particle.poisson_ratio
+
+
+def type_pair_parameters(case: Case, species: list[Species], v_impact: float) -> dict[tuple[int, int], PairParameters]:
+    """Contact parameters of every pair of atom types (see :func:`species_of`); the walls are the
+    last type and act as infinite mass and radius. Radii are those of the touching spheres;
+    masses those of the whole grains (a clump moves as one body)."""
+    wall = len(species) + 1
     out = {}
-    for i, ri in enumerate(radii, start=1):
-        mi = cp.sphere_mass(ri, rho)
-        for j, rj in enumerate(radii, start=1):
-            if j >= i:
-                mj = cp.sphere_mass(rj, rho)
-                out[(i, j)] = _pair(case, f"particle_particle {i}-{j}", cp.reduced(mi, mj), cp.reduced(ri, rj),
-                                    False, v_impact)
-        out[(i, wall)] = _pair(case, f"particle_wall {i}", mi, ri, True, v_impact)
+    for a in species:
+        for b in species:
+            if b.type >= a.type:
+                out[(a.type, b.type)] = _pair(
+                    case, f"{a.name}-{b.name}", cp.reduced(a.mass, b.mass), cp.reduced(a.radius, b.radius),
+                    _contact_of(case, a.material, b.material),
+                    (_modulus_of(case, a.material), _modulus_of(case, b.material)), v_impact)
+        out[(a.type, wall)] = _pair(case, f"{a.name}-wall", a.mass, a.radius, _contact_of(case, a.material, None),
+                                    (_modulus_of(case, a.material), _modulus_of(case, None)), v_impact)
     return out
+
+
+def critical_time(case: Case, species: list[Species], type_pairs: dict) -> tuple[float, str]:
+    """The shortest contact time of any type pair (and, for Hertz, Rayleigh time of any
+    species), s, with what set it."""
+    candidates = {f"contact time {pp.name}": pp.contact_time for pp in type_pairs.values()}
+    if case.materials.model == "hertz":
+        for sp in species:
+            e, nu = _modulus_of(case, sp.material)
+            candidates[f"Rayleigh time of {sp.name}"] = cp.rayleigh_time(sp.radius, sp.density, e, nu)
+    source = min(candidates, key=candidates.get)
+    return candidates[source], source
 
 
 def shrink_classes(radii, number_fractions) -> list[tuple[float, float]]:
@@ -227,29 +341,37 @@ def derive(case: Case) -> Derived:
         raise CaseError([("geometry.kind", f"'{g.kind}' has a schema but no deck yet: the planar "
                           "silo deck is part of the particle-systems issue")])
     p = case.particles
-    r = p.max_radius                       # geometry margins use the largest grain
-    r_min = p.min_radius                   # the time step, the smallest (shortest contacts)
+    r = p.max_radius                       # geometry margins use the largest grain (clumps: bounding sphere)
     d = 2 * r
     rho = case.materials.particle.density
-    numbers = p.number_fractions
-    vol = sum(n * cp.sphere_volume(ri) for n, ri in zip(numbers, p.radii))     # mean volume per grain
+    species = species_of(case)
+    grains = [sp for sp in species if sp.stream == "grains"]
+    dust = next((sp for sp in species if sp.stream == "dust"), None)
+    dust_ratio = p.dust.number_ratio if dust is not None else 0.0
+    numbers = [sp.number_fraction for sp in grains]
+    vol = sum(sp.number_fraction * sp.volume for sp in grains)      # mean volume per grain
     mass = rho * vol
-    mass_fractions = [n * ri ** 3 for n, ri in zip(numbers, p.radii)]
+    mass_fractions = [sp.number_fraction * sp.volume for sp in grains]
     mass_fractions = [w / sum(mass_fractions) for w in mass_fractions]
     final_mass = mass                      # mean grain mass once the bed has its size distribution
     shrink = getattr(p, "protocol", "insert") == "shrink_after_settling"
     if shrink:        # the bed is poured as grains of the largest radius
         vol = cp.sphere_volume(r)
         mass = rho * vol
+    dust_vol = dust_ratio * dust.volume if dust is not None else 0.0    # dust volume per grain
     f = case.fill
     top = g.hopper_height + g.height
     if f.count is not None:
         count = f.count
     else:
-        count = int(f.packing_fraction * bed_volume(case, f.height) / vol)
+        count = int(f.packing_fraction * bed_volume(case, f.height) / (vol + dust_vol))
         if count < 1:
             raise CaseError([("fill.height", "too low to hold a single particle")])
-    h_bed = bed_height(case, count * vol / f.packing_fraction)
+    dust_count = round(dust_ratio * count)
+    if dust is not None and dust_count < 1:
+        raise CaseError([("particles.dust.number_ratio", f"{dust_ratio} dust per grain is less than one "
+                          f"dust sphere for {count} grains")])
+    h_bed = bed_height(case, count * (vol + dust_vol) / f.packing_fraction)
 
     # insertion region: above the expected bed, below the top
     z_max = f.insertion_z_max if f.insertion_z_max is not None else top - 0.5 * d
@@ -261,23 +383,25 @@ def derive(case: Case) -> Derived:
                           f"({top:.4g} m): fill fewer particles or make the silo taller")])
     region_radius = g.radius - 0.6 * r
     region_volume = math.pi * region_radius ** 2 * (z_max - z_min)
-    batch = max(1, min(count, int(f.batch_volume_fraction * region_volume / vol)))
+    batch = max(1, min(count, int(f.batch_volume_fraction * region_volume / (vol + dust_vol))))
 
-    # time step
+    # time step: the shortest contact of any pair of types; dust's cost is reported
     v_impact = cp.free_fall_speed(z_max, case.gravity, INSERTION_SPEED)
-    type_pairs = type_pair_parameters(case, list(p.radii), v_impact)
-    smallest = p.radii.index(r_min) + 1          # its contacts are the shortest
+    type_pairs = type_pair_parameters(case, species, v_impact)
+    smallest = min(grains, key=lambda sp: sp.radius).type          # its contacts are the shortest
+    wall_type = len(species) + 1
     pairs = {"particle_particle": replace(type_pairs[(smallest, smallest)], name="particle_particle"),
-             "particle_wall": replace(type_pairs[(smallest, len(p.radii) + 1)], name="particle_wall")}
-    candidates = {f"contact time {pp.name}": pp.contact_time for pp in [*pairs.values(), *type_pairs.values()]}
+             "particle_wall": replace(type_pairs[(smallest, wall_type)], name="particle_wall")}
+    t_crit, source = critical_time(case, species, type_pairs)
     rayleigh = None
     if case.materials.model == "hertz":
         pm = case.materials.particle
-        rayleigh = cp.rayleigh_time(r_min, rho, pm.youngs_modulus, pm.poisson_ratio)
-        candidates["Rayleigh time of the particles"] = rayleigh
-    source = min(candidates, key=candidates.get)
-    t_crit = candidates[source]
+        rayleigh = cp.rayleigh_time(p.min_radius, rho, pm.youngs_modulus, pm.poisson_ratio)
     dt = case.engine.timestep_fraction * t_crit
+    dt_without_dust = None
+    if dust is not None:
+        no_dust = {k: v for k, v in type_pairs.items() if dust.type not in k}
+        dt_without_dust = case.engine.timestep_fraction * critical_time(case, grains, no_dust)[0]
 
     # fill: batches leave the region before the next one comes
     h_region = z_max - z_min
@@ -295,11 +419,16 @@ def derive(case: Case) -> Derived:
     outlet_z = -2.0 * d
     v_open = case.discharge.opening.speed
     v_needed = math.sqrt(case.gravity * abs(outlet_z) / 2.0)
-    if v_open <= 1.5 * v_needed:
-        raise CaseError([("discharge.opening.speed", f"{v_open} m/s is too slow: the plate must move "
-                          f"faster than {1.5 * v_needed:.3g} m/s to leave the grains behind")])
     plate_travel = 3.0 * abs(outlet_z)
-    open_steps = _steps(plate_travel / v_open, dt)
+    # clumps cannot be deleted at the counting disc (multisphere refuses delete_atoms): the plate
+    # also moves aside, so they fall on out of the box, which removes the whole body
+    plate_shift = 2.0 * g.outlet_radius + d if any(sp.kind == "clump" for sp in species) else 0.0
+    path = math.hypot(plate_travel, plate_shift)
+    v_down = v_open * plate_travel / path
+    if v_down <= 1.5 * v_needed:
+        raise CaseError([("discharge.opening.speed", f"{v_open} m/s is too slow: the plate must move "
+                          f"down faster than {1.5 * v_needed:.3g} m/s to leave the grains behind")])
+    open_steps = _steps(path / v_open, dt)
 
     dis = case.discharge
     if dis.until_empty:
@@ -317,12 +446,12 @@ def derive(case: Case) -> Derived:
     dump_every = _steps(out.dump_interval, dt) if out.dump_interval else None
 
     margin = 2 * d
-    box = {"xlo": -g.radius - margin, "xhi": g.radius + margin,
+    box = {"xlo": -g.radius - margin, "xhi": max(g.radius, plate_shift + g.outlet_radius) + margin,
            "ylo": -g.radius - margin, "yhi": g.radius + margin,
            "zlo": outlet_z - plate_travel - margin, "zhi": top + margin}
     return Derived(
         particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass, particle_count=count,
-        total_mass=count * final_mass, bed_height_estimate=h_bed, impact_velocity=v_impact,
+        total_mass=count * final_mass + (dust_count * dust.mass if dust is not None else 0.0), bed_height_estimate=h_bed, impact_velocity=v_impact,
         pairs=pairs, rayleigh_time=rayleigh, critical_time=t_crit, critical_time_source=source,
         timestep=dt,
         insertion_region={"radius": region_radius, "z_min": z_min, "z_max": z_max},
@@ -332,12 +461,16 @@ def derive(case: Case) -> Derived:
         discharge_chunk_steps=d_chunk, discharge_max_chunks=d_chunks,
         thermo_every=thermo_every, sample_every=sample_every, sample_repeat=sample_repeat,
         sample_freq=sample_freq, dump_every=dump_every,
-        outlet_z=outlet_z, outlet_disc_radius=g.outlet_radius + 2 * d, plate_travel=plate_travel,
+        outlet_z=outlet_z, outlet_disc_radius=g.outlet_radius + 2 * d, plate_travel=plate_travel, plate_shift=plate_shift,
+        opening_speed=v_open,
         box=box, skin=0.5 * r,
         seeds={"insertion": prime_seed(case.seed, 1), "distribution": prime_seed(case.seed, 3),
-               "templates": [prime_seed(case.seed, 10 + k) for k in range(len(p.radii))],
+               "templates": [prime_seed(case.seed, 10 + k) for k in range(len(species))],
+               "dust_insertion": prime_seed(case.seed, 5), "dust_distribution": prime_seed(case.seed, 7),
                "shrink": [prime_seed(case.seed, 40 + k) for k in range(len(p.radii))]},
         radii=list(p.radii), number_fractions=list(numbers), mass_fractions=mass_fractions,
         shrink_classes=shrink_classes(p.radii, numbers) if shrink else [],
-        type_pairs=type_pairs,
+        type_pairs=type_pairs, species=species, dust_count=dust_count,
+        dust_batch=math.ceil(batch * dust_ratio) if dust is not None else 0,
+        timestep_without_dust=dt_without_dust,
     )

@@ -92,3 +92,26 @@ def test_run_refused_when_the_output_would_not_fit(tmp_path, monkeypatch):
     assert result.exit_code == 1
     assert "free" in result.output and "dump_interval" in result.output
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.engine
+@pytest.mark.skipif(__import__("shutil").which("liggghts") is None, reason="LIGGGHTS not installed "
+                    "(make install-engine); CI installs it, so CI never skips this")
+def test_error_that_aborts_mpi_still_reaches_the_message(tmp_path, quick_dict):
+    """An ERROR on one rank ends in MPI_Abort, which drops LIGGGHTS' block-buffered screen output
+    on a pipe: the message must still reach the user (the engine line-buffers it)."""
+    import json
+    import re
+
+    quick_dict["engine"]["ranks"] = 1
+    engine = LiggghtsEngine()
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    deck = (folder / "in.liggghts").read_text()
+    seeds = json.loads((folder / "derived.json").read_text())["seeds"]
+    # an insertion seed equal to a template seed: LIGGGHTS refuses it on one rank (error->one)
+    deck = re.sub(r"insert/rate/region seed \d+", f"insert/rate/region seed {seeds['templates'][0]}", deck)
+    (folder / "in.liggghts").write_text(deck)
+    with pytest.raises(EngineRunError) as info:
+        engine.execute(folder)
+    assert "random seeds" in str(info.value) + info.value.log_tail
+    assert info.value.returncode != 0

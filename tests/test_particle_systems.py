@@ -147,3 +147,77 @@ def test_hooke_contact_law_runs_per_size_pair(tmp_path):
     kn = np.array([float(v) for v in kn_line.split()[7:]]).reshape(4, 4)   # after "... peratomtypepair 4"
     assert kn[0, 1] == pytest.approx(d.type_pairs[(1, 2)].kn, rel=1e-9)
     assert kn[2, 3] == pytest.approx(d.type_pairs[(3, 4)].kn, rel=1e-9)
+
+
+# --------------------------------------------------------------------------- clumps + dust
+CLUMPS = ROOT / "tests" / "data" / "clump_silo.yaml"
+
+
+@pytest.fixture(scope="module")
+def clump_run(tmp_path_factory):
+    case = load_case(CLUMPS)
+    folder = tmp_path_factory.mktemp("clumps") / "run"
+    record = LiggghtsEngine().run(case, folder)
+    from postprocess.first_results import analyse
+    analyse(folder)
+    return case, folder, record
+
+
+def _settled(folder, record):
+    return [f for f in read_frames(folder / "output" / "dumps") if f.timestep <= record.stage_steps["open"]][-1]
+
+
+def test_clumps_and_dust_are_inserted_as_requested(clump_run):
+    case, folder, record = clump_run
+    settled = _settled(folder, record)
+    types, mol = settled.column("type").astype(int), settled.column("mol").astype(int)
+    clump_rows = types == 1
+    assert clump_rows.sum() == 3 * case.fill.count                      # three spheres per grain
+    assert len(np.unique(mol[clump_rows])) == case.fill.count           # one body each
+    assert np.all(np.bincount(mol[clump_rows])[np.unique(mol[clump_rows])] == 3)
+    assert (types == 2).sum() == round(case.particles.dust.number_ratio * case.fill.count)
+    assert np.all(mol[types == 2] <= 0)                                  # dust: no body
+    # each body keeps the template's shape (rigid): sphere spacing (length - width) / 2
+    order = np.argsort(mol[clump_rows])
+    pos = settled.positions()[clump_rows][order].reshape(-1, 3, 3)
+    spacing = np.linalg.norm(pos[:, 1:] - pos[:, :-1], axis=2)
+    np.testing.assert_allclose(np.sort(spacing, axis=1)[:, 0], 0.5 * (case.particles.length - case.particles.width),
+                               rtol=1e-3)
+
+
+def test_clump_mass_is_density_times_union_volume(clump_run):
+    case, folder, record = clump_run
+    settled = _settled(folder, record)
+    want = case.materials.particle.density * case.particles.clump.volume
+    mass = settled.column("mass")[settled.column("type").astype(int) == 1]
+    np.testing.assert_allclose(mass, want, rtol=0.01)                   # LIGGGHTS' Monte Carlo vs exact union
+    assert abs(mass.mean() / want - 1) < 0.01
+    sum_of_spheres = case.materials.particle.density * case.particles.clump.sphere_volume_sum
+    assert mass.mean() < 0.7 * sum_of_spheres                           # overlaps are not double counted
+    dust = case.particles.dust
+    np.testing.assert_allclose(settled.column("mass")[settled.column("type").astype(int) == 2],
+                               dust.run_density * 4 / 3 * np.pi * dust.radius ** 3, rtol=1e-5)
+
+
+def test_clump_run_conserves_mass_and_balances_the_weight(clump_run):
+    case, folder, record = clump_run
+    d = derive(case)
+    flow = read_ave_time(folder / "output" / "flow.txt", FLOW_COLUMNS)
+    steps = record.stage_steps
+    settling = flow[(flow.step >= steps["settle"]) & (flow.step <= steps["open"])]
+    # the deck weighs each clump once (multisphere gives every sphere the clump's mass)
+    assert settling.mass_total.iloc[-1] == pytest.approx(d.total_mass, rel=0.002)
+    assert settling.mass_total.max() == pytest.approx(settling.mass_total.min(), rel=1e-9)
+    assert record.settled_ke_pe < case.fill.settle.ke_pe_ratio
+    assert steps["static"] - steps["settle"] < d.settle_max_chunks * d.settle_chunk_steps
+    summary = json.loads((folder / "results" / "summary.json").read_text())
+    # the walls and bottom carry the weight of the clumps and the dust (measured by the meshes)
+    assert summary["force_balance"]["ratio"] == pytest.approx(1.0, abs=0.01)
+    # grains left through the outlet and the discharged mass adds up
+    assert summary["discharged_mass_kg"] > 0.2 * d.total_mass
+    fa = summary["frame_analyses"]
+    # union-volume solid fraction of the bed: a dense random packing of grains
+    assert 0.55 < fa["bulk_solid_fraction"] < 0.72
+    # Wr (free surface x union-volume solid fraction) agrees with Wf (outlet count)
+    assert fa["flow_rate_surface_over_outlet"] == pytest.approx(1.0, abs=0.15)
+    assert fa["coordination_convention"] == "per_body"

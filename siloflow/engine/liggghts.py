@@ -67,6 +67,11 @@ class LiggghtsEngine(Engine):
         exe = self._which(self.executable, "LIGGGHTS binary")
         # '-screen none' segfaults when LIGGGHTS reads an STL (ENGINE_NOTES.md): keep the screen on a pipe
         base = [exe, "-in", DECK_NAME, "-log", LOG_NAME]
+        # LIGGGHTS' screen is block-buffered on a pipe, and an ERROR on one rank ends in MPI_Abort,
+        # which loses the buffer (the message with it): line-buffer it (coreutils' stdbuf)
+        stdbuf = shutil.which("stdbuf")
+        if stdbuf:
+            base = [stdbuf, "-oL"] + base
         if ranks == 1:
             return base
         if ranks > (os.cpu_count() or 1):
