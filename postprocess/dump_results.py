@@ -43,14 +43,32 @@ def bed_regions(case, surface: float, d: float) -> list[MeasureRegion]:
     """Measurement cylinders about the silo axis in the settled bed, three grain diameters
     from the bottom and the free surface: ``bulk_core`` (two diameters from the wall: the
     bulk solid fraction) and ``cross_section`` (the whole radius, wall layers included: the
-    solid fraction that converts a free-surface speed into a mass flow rate)."""
+    solid fraction that converts a free-surface speed into a mass flow rate). A slab silo
+    gets discs through its thickness at mid-bed, the cross-section one reaching the side
+    walls only when the bed is at least as deep as the silo is wide."""
     g = case.geometry
     z0 = g.hopper_height + 3.0 * d
     z1 = surface - 3.0 * d
     if z1 - z0 < 2.0 * d:
         raise ReadError(f"the settled bed ({surface:.4g} m) is too shallow for a bulk measurement region")
+    if g.kind == "planar":
+        # a slab: discs through the thickness (cylinders along y) at mid-bed, as large as the bed allows
+        half = 0.5 * (z1 - z0)
+        mid, t = (0.0, 0.0, 0.5 * (z0 + z1)), 0.5 * g.thickness
+        return [MeasureRegion("bulk_core", "cylinder", mid, min(g.half_width - 2.0 * d, half), axis=1, t0=-t, t1=t),
+                MeasureRegion("cross_section", "cylinder", mid, min(g.half_width, half), axis=1, t0=-t, t1=t)]
     return [MeasureRegion("bulk_core", "cylinder", (0.0, 0.0, 0.0), g.radius - 2.0 * d, axis=2, t0=z0, t1=z1),
             MeasureRegion("cross_section", "cylinder", (0.0, 0.0, 0.0), g.radius, axis=2, t0=z0, t1=z1)]
+
+
+def janssen_diameter(g) -> float:
+    """The D of Janssen's p = rho g D / (4 mu K) (1 - exp(-4 mu K z / D)), m: the diameter of a
+    cylinder; for a slab 4 A / P with P the perimeter that carries wall friction (the side
+    walls, and the faces only when they have friction)."""
+    if g.kind != "planar":
+        return 2.0 * g.radius
+    perimeter = 2.0 * g.thickness + (2.0 * g.width if g.face_friction > 0 else 0.0)
+    return 4.0 * g.width * g.thickness / perimeter
 
 
 def case_regions(case) -> list[MeasureRegion]:
@@ -86,10 +104,13 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     columns = run.derived.get("contact_columns") or None
     contacts = list(read_frames(contact_files, columns=columns)) if contact_files and columns else None
 
-    R = case.geometry.radius
+    g = case.geometry
+    R = g.half_width
+    planar = g.kind == "planar"
 
     # free surface over all frames; its table also says which frames exist
-    surface = FreeSurface(radius=R, z_min=case.geometry.hopper_height, timestep=dt).run(read_frames(atoms_files))
+    surface = FreeSurface(radius=R, z_min=g.hopper_height, timestep=dt,
+                          thickness=g.thickness if planar else None).run(read_frames(atoms_files))
     surface.save(out)
     steps = surface.table.step
     if not (steps <= open_step).any():
@@ -122,7 +143,8 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     def core(frame: Frame) -> np.ndarray:
         p = frame.positions()
         top = float(p[:, 2].max()) if frame.n else 0.0
-        return ((np.hypot(p[:, 0], p[:, 1]) < R - 2 * d) & (p[:, 2] > case.geometry.hopper_height + 2 * d)
+        across = np.abs(p[:, 0]) if planar else np.hypot(p[:, 0], p[:, 1])
+        return ((across < R - 2 * d) & (p[:, 2] > g.hopper_height + 2 * d)
                 & (p[:, 2] < top - 2 * d))
 
     if contacts:
@@ -144,9 +166,9 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
         return summary
 
     # Wr (free-surface speed) against Wf (outlet count) in Wf's steady window
-    area = math.pi * R * R
+    area = surface.area
     st = surface.table
-    in_window = (st.time >= flow_rate.t_start) & (st.time <= flow_rate.t_end) & (st.surface_height > case.geometry.hopper_height + 3 * d)
+    in_window = (st.time >= flow_rate.t_start) & (st.time <= flow_rate.t_end) & (st.surface_height > g.hopper_height + 3 * d)
     wr = surface_flow_rate(st.time[in_window], st.surface_height[in_window], area, rho_p, phi_section)
     summary["flow_rate_surface"] = asdict(wr)
     summary["flow_rate_surface_over_outlet"] = wr.rate / flow_rate.rate if flow_rate.rate else float("nan")
@@ -160,8 +182,8 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     # Janssen fit of the settled profile
     static = bands_table[bands_table.z_mid < h_settled]
     try:
-        fit = fit_janssen(h_settled - static.z_mid, static.static_pressure, phi_section * rho_p, 2 * R,
-                          float(run.derived["gravity"]))
+        fit = fit_janssen(h_settled - static.z_mid, static.static_pressure, phi_section * rho_p,
+                          janssen_diameter(g), float(run.derived["gravity"]))
         summary["janssen_static"] = asdict(fit)
     except ValueError as exc:
         summary["janssen_static"] = {"error": str(exc)}

@@ -87,32 +87,50 @@ class FreeSurface(FrameAnalysis):
     of its filled bins), interpolated between bins. The surface height is the mean over the
     rings: for a crater or a heap this tracks the volume of the bed, unlike the highest grain.
     Grains below ``z_min`` (the hopper, the outlet) are ignored.
+
+    A slab silo (``thickness`` given): the cross-section is |x - x0| < ``radius`` (its half
+    width) by the thickness, cut into strips of equal width instead of rings.
     """
 
     name = "free_surface"
 
     def __init__(self, radius: float, x0: float = 0.0, y0: float = 0.0, z_min: float = 0.0,
-                 annuli: int | None = None, timestep: float = 1.0):
+                 annuli: int | None = None, timestep: float = 1.0, thickness: float | None = None):
         super().__init__()
         self.radius, self.x0, self.y0, self.z_min, self.annuli, self.dt = radius, x0, y0, z_min, annuli, timestep
+        self.thickness = thickness
+
+    @property
+    def area(self) -> float:
+        """Area of the cross-section, m2."""
+        if self.thickness is not None:
+            return 2.0 * self.radius * self.thickness
+        return np.pi * self.radius ** 2
 
     def _single_frame(self, frame, contacts):
         pos, rad = frame.positions(), frame.radii()
-        r = np.hypot(pos[:, 0] - self.x0, pos[:, 1] - self.y0)
+        if self.thickness is not None:
+            r = np.abs(pos[:, 0] - self.x0)
+        else:
+            r = np.hypot(pos[:, 0] - self.x0, pos[:, 1] - self.y0)
         keep = (r < self.radius) & (pos[:, 2] > self.z_min)
         row = {"time": frame.timestep * self.dt, "surface_height": np.nan, "grains": int(keep.sum())}
         if keep.sum() < 10:
             return [row]
         d = 2.0 * float(rad[keep].mean())
-        n = self.annuli or int(np.clip(round((self.radius / d) ** 2 / 8.0), 2, 20))
-        ring = np.minimum((n * (r[keep] / self.radius) ** 2).astype(int), n - 1)
+        if self.thickness is not None:     # strips of equal width (and area)
+            n = self.annuli or int(np.clip(round(self.radius / d / 4.0), 2, 20))
+            ring = np.minimum((n * r[keep] / self.radius).astype(int), n - 1)
+        else:                              # rings of equal area
+            n = self.annuli or int(np.clip(round((self.radius / d) ** 2 / 8.0), 2, 20))
+            ring = np.minimum((n * (r[keep] / self.radius) ** 2).astype(int), n - 1)
         z = pos[keep, 2]
         vol = 4.0 / 3.0 * np.pi * rad[keep] ** 3
         edges = np.arange(self.z_min, z.max() + 2 * d, d)
         heights = []
         for k in range(n):
             m = ring == k
-            phi = np.histogram(z[m], edges, weights=vol[m])[0] / (np.pi * self.radius ** 2 / n * d)
+            phi = np.histogram(z[m], edges, weights=vol[m])[0] / (self.area / n * d)
             filled = phi[phi > 0]
             if len(filled) < 2:
                 continue

@@ -1,4 +1,7 @@
-"""Normal wall pressure of cylinder bands from the net force on each azimuthal sector mesh.
+"""Normal wall pressure of sensor meshes (cylinder band sectors, slab wall sections) from their net force.
+
+A flat sensor (a slab silo's wall section of area A facing ``normal``) under pressure p feels
+p A along its normal. For cylinders:
 
 A sector of a cylinder (radius R, height h, angular width dtheta centred on theta_c)
 under a uniform normal pressure p feels a net horizontal force of magnitude
@@ -54,9 +57,12 @@ def band_pressures(forces: pd.DataFrame, walls: list[dict], force_sign: float = 
     for w in walls:
         if w["role"] != "band":
             continue
-        h = w["z1"] - w["z0"]
-        p = sector_pressure(force_sign * forces[f"{w['name']}_fx"], force_sign * forces[f"{w['name']}_fy"],
-                            w["radius"], h, w["theta0"], w["theta1"])
+        fx, fy = force_sign * forces[f"{w['name']}_fx"], force_sign * forces[f"{w['name']}_fy"]
+        if w.get("normal") is not None:        # the manifest says where the sensor faces
+            nx, ny = w["normal"]
+            p = (np.asarray(fx) * nx + np.asarray(fy) * ny) / w["projected_area"]
+        else:                                  # run folders written before the manifest had normals
+            p = sector_pressure(fx, fy, w["radius"], w["z1"] - w["z0"], w["theta0"], w["theta1"])
         rows.append(pd.DataFrame({"step": forces["step"].to_numpy(), "band": w["band"], "sector": w["sector"],
                                   "z_mid": 0.5 * (w["z0"] + w["z1"]), "pressure": np.asarray(p),
                                   "shear_force": -force_sign * forces[f"{w['name']}_fz"].to_numpy()}))

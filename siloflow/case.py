@@ -58,6 +58,10 @@ class CylinderGeometry(Strict):
         return self.orifice_radius
 
     @property
+    def half_width(self) -> float:
+        return self.radius
+
+    @property
     def hopper_height(self) -> float:
         return 0.0
 
@@ -76,22 +80,46 @@ class HopperGeometry(Strict):
     _outlet_fits = model_validator(mode="after")(lambda self: _smaller(self, "outlet_radius", "radius"))
 
     @property
+    def half_width(self) -> float:
+        return self.radius
+
+    @property
     def hopper_height(self) -> float:
         """Height of the cone, m."""
         return (self.radius - self.outlet_radius) / math.tan(math.radians(self.half_angle_deg))
 
 
 class PlanarGeometry(Strict):
-    """Quasi-2D slab silo (paper A): width x thickness section, 60 deg hopper (deck in a later issue)."""
+    """Quasi-2D slab silo (paper A): vertical side walls at x = +-width/2 on a wedge hopper of
+    ``half_angle_deg`` from the vertical down to a slot of ``outlet_width`` at z = 0, closed by
+    front and back faces at y = +-thickness/2 (about one grain apart). ``face_friction`` is the
+    grains' friction on the faces: 0 (default) mimics a 2D model, which has no faces. The
+    sensors are sections of both side walls (paper A: 10 per side)."""
 
     kind: Literal["planar"]
-    width: Positive = Field(description="inner width, m", le=100)
-    height: Positive = Field(description="height of the vertical walls, m", le=1000)
-    thickness: Positive = Field(description="thickness in the thin direction, m", le=100)
-    half_angle_deg: float = Field(60.0, gt=0, lt=90, allow_inf_nan=False)
-    outlet_width: Positive = Field(description="outlet width, m")
+    width: Positive = Field(description="inner width between the side walls, m", le=100)
+    height: Positive = Field(description="height of the vertical side walls above the hopper, m", le=1000)
+    thickness: Positive = Field(description="distance between the front and back faces, m", le=100)
+    half_angle_deg: float = Field(60.0, gt=0, lt=90, allow_inf_nan=False,
+                                  description="hopper half angle from the vertical, degrees")
+    outlet_width: Positive = Field(description="width of the outlet slot, m")
+    face_friction: NonNegative = Field(0.0, le=10, description="grain friction on the front and back faces")
 
     _outlet_fits = model_validator(mode="after")(lambda self: _smaller(self, "outlet_width", "width"))
+
+    @property
+    def outlet_radius(self) -> float:
+        """Half width of the outlet slot, m."""
+        return 0.5 * self.outlet_width
+
+    @property
+    def half_width(self) -> float:
+        return 0.5 * self.width
+
+    @property
+    def hopper_height(self) -> float:
+        """Height of the wedge hopper, m."""
+        return (self.width - self.outlet_width) / 2.0 / math.tan(math.radians(self.half_angle_deg))
 
 
 Geometry = Annotated[Union[CylinderGeometry, HopperGeometry, PlanarGeometry],
@@ -495,30 +523,37 @@ class Case(Strict):
         g, p, f = self.geometry, self.particles, self.fill
         problems = []
         problems += _particle_problems(self)
-        if g.kind != "planar":
-            d = 2 * p.max_radius
-            field = {"spheres": "particles.radius", "clumps": "particles.length"}.get(p.kind, "particles.radii")
-            if p.max_radius >= g.outlet_radius:
-                problems.append(f"{field} ({p.max_radius} m) must be smaller than the outlet "
-                                f"radius ({g.outlet_radius} m): nothing could leave")
-            if 3 * d > g.radius:
-                problems.append(f"{field} ({p.max_radius} m) is too large for a silo of radius "
-                                f"{g.radius} m (need radius >= 3 particle diameters)")
-            top = g.hopper_height + g.height
-            if f.height is not None and f.height >= top:
-                problems.append(f"fill.height ({f.height} m) must be below the top of the silo ({top:.6g} m)")
-            zmin = f.insertion_z_min if f.insertion_z_min is not None else None
-            zmax = f.insertion_z_max if f.insertion_z_max is not None else None
-            if zmax is not None and zmax > top:
-                problems.append(f"fill.insertion_z_max ({zmax} m) is above the top of the silo ({top:.6g} m)")
-            if zmin is not None and zmin < g.hopper_height:
-                problems.append(f"fill.insertion_z_min ({zmin} m) must be above the hopper "
-                                f"({g.hopper_height:.6g} m)")
-            if zmin is not None and zmax is not None and zmax - zmin < 2 * d:
-                problems.append("fill.insertion_z_max must exceed insertion_z_min by 2 particle diameters")
-            if self.sensors.heights is not None and self.sensors.heights[-1] > g.height:
-                problems.append(f"sensors.heights: last boundary ({self.sensors.heights[-1]} m) is above "
-                                f"the cylinder wall ({g.height} m)")
+        d = 2 * p.max_radius
+        field = {"spheres": "particles.radius", "clumps": "particles.length"}.get(p.kind, "particles.radii")
+        outlet = "geometry.outlet_width" if g.kind == "planar" else "outlet radius"
+        if p.max_radius >= g.outlet_radius:
+            problems.append(f"{field} ({p.max_radius:.6g} m) must be smaller than the {outlet} "
+                            f"(half width {g.outlet_radius} m): nothing could leave")
+        if 3 * d > g.half_width:
+            problems.append(f"{field} ({p.max_radius:.6g} m) is too large for a silo of half width "
+                            f"{g.half_width} m (need >= 3 particle diameters)")
+        if g.kind == "planar":
+            # the grains' thickness across the slab: spheres their diameter, wheat lies flat in it
+            across = p.width if p.kind == "clumps" and p.shape == "wheat" else 2 * p.max_radius
+            if p.kind == "clumps" and p.shape != "wheat":
+                problems.append("geometry.kind planar: clumps in a slab need shape 'wheat' (inserted flat)")
+            if g.thickness <= 1.01 * across:
+                problems.append(f"geometry.thickness ({g.thickness} m) must exceed the grains' thickness "
+                                f"({across:.6g} m) by 1 %")
+        top = g.hopper_height + g.height
+        if f.height is not None and f.height >= top:
+            problems.append(f"fill.height ({f.height} m) must be below the top of the silo ({top:.6g} m)")
+        zmin, zmax = f.insertion_z_min, f.insertion_z_max
+        if zmax is not None and zmax > top:
+            problems.append(f"fill.insertion_z_max ({zmax} m) is above the top of the silo ({top:.6g} m)")
+        if zmin is not None and zmin < g.hopper_height:
+            problems.append(f"fill.insertion_z_min ({zmin} m) must be above the hopper "
+                            f"({g.hopper_height:.6g} m)")
+        if zmin is not None and zmax is not None and zmax - zmin < 2 * d:
+            problems.append("fill.insertion_z_max must exceed insertion_z_min by 2 particle diameters")
+        if self.sensors.heights is not None and self.sensors.heights[-1] > g.height:
+            problems.append(f"sensors.heights: last boundary ({self.sensors.heights[-1]} m) is above "
+                            f"the vertical wall ({g.height} m)")
         if problems:
             raise ValueError("; ".join(problems))
         return self

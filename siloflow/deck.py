@@ -84,13 +84,13 @@ def check_deck(text: str) -> None:
 def _matrix(d: Derived, attr: str, particle_pairs: float | None = None) -> list[float]:
     """A peratomtypepair matrix (row-major, n_types^2) of ``attr`` from the per-type-pair
     parameters; ``particle_pairs`` overrides the particle-particle entries (frictionless fill).
-    The wall-wall entry is unused (walls do not touch walls); it repeats type 1's wall value."""
-    n, wall = d.wall_type, d.wall_type
+    Entries between wall types are unused (walls do not touch walls); they repeat type 1's."""
+    n, wall = d.n_types, d.wall_type
     out = []
     for i in range(1, n + 1):
         for j in range(1, n + 1):
             a, b = min(i, j), max(i, j)
-            if a == wall:
+            if a >= wall:         # wall-wall, face-face, wall-face: never in contact
                 a = 1
             value = getattr(d.type_pairs[(a, b)], attr)
             if particle_pairs is not None and b != wall:
@@ -104,7 +104,8 @@ def _properties(case: Case, d: Derived) -> list[dict]:
     m = case.materials
     props = []
     if m.model == "hertz":
-        moduli = [_modulus_of(case, sp.material) for sp in d.species] + [_modulus_of(case, None)]
+        moduli = [_modulus_of(case, sp.material) for sp in d.species] + [_modulus_of(case, None)] * (
+            d.n_types - len(d.species))
         props += [("youngsModulus", "peratomtype", [e for e, _ in moduli]),
                   ("poissonsRatio", "peratomtype", [nu for _, nu in moduli]),
                   ("coefficientRestitution", "peratomtypepair", _matrix(d, "restitution"))]
@@ -169,10 +170,12 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
         "contact_model": "hertz" if m.model == "hertz" else "hooke/stiffness",   # hooke: kn, kt computed here
         "rolling": uses_rolling_friction(case),
         "timestep": d.timestep, "gravity": case.gravity,
-        "walls": [w for w in walls if w.role != "outlet"],
+        "walls": [{"name": w.name, "type": d.face_type if w.role == "face" else d.wall_type}
+                  for w in walls if w.role != "outlet"],
+        "planar": d.has_faces,
         "seeds": d.seeds, "density": m.particle.density, "radius": d.particle_radius,
         "friction_restore": friction_restore(case, d),
-        "n_types": d.wall_type, "wall_type": d.wall_type,
+        "n_types": d.n_types, "wall_type": d.wall_type,
         "templates": particle_templates(case, d),
         "dust": dust_insertion(d, particle_rate),
         "clumps": d.has_clumps, "mass_weights": d.mass_weights,
@@ -238,8 +241,8 @@ def write_deck(case: Case, folder: Path) -> Derived:
     info["contact_columns"] = contact_columns(case, d)
     info["wall_contact_columns"] = contact_columns(case, d, wall=True)
     info["walls"] = [w.info() for w in walls]
-    info["sensors"] = {"sectors": case.sensors.sectors,
-                       "bands": len([w for w in walls if w.role == "band"]) // case.sensors.sectors}
+    sectors = 2 if d.has_faces else case.sensors.sectors          # a slab: one section per side wall
+    info["sensors"] = {"sectors": sectors, "bands": len([w for w in walls if w.role == "band"]) // sectors}
     write_json(folder / DERIVED_NAME, info)
     return d
 

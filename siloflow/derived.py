@@ -10,7 +10,7 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 
 from . import contact_physics as cp
-from .case import Case, CylinderGeometry, HopperGeometry
+from .case import Case, HopperGeometry, PlanarGeometry
 from .errors import CaseError
 
 #: speed at which grains are inserted downwards, m/s (keeps batches clear of the region)
@@ -140,6 +140,7 @@ class Derived:
     plate_shift: float = 0.0                              # m, sideways travel of the opening plate
     opening_speed: float = 1.0                            # m/s along the plate's path
     species: list = field(default_factory=list)           # [Species], one per atom type
+    has_faces: bool = False                               # slab silo: front/back faces, their own type
     dust_count: int = 0
     dust_batch: int = 0
     timestep_without_dust: float | None = None            # s; the dust's cost is this / timestep
@@ -148,6 +149,15 @@ class Derived:
     def wall_type(self) -> int:
         """Atom type of the walls: after the grain types (size classes, clump, dust)."""
         return len(self.species) + 1
+
+    @property
+    def face_type(self) -> int | None:
+        """Atom type of a slab silo's front and back faces (after the walls), or None."""
+        return self.wall_type + 1 if self.has_faces else None
+
+    @property
+    def n_types(self) -> int:
+        return self.wall_type + (1 if self.has_faces else 0)
 
     @property
     def plate_velocity(self) -> tuple[float, float, float]:
@@ -182,6 +192,7 @@ class Derived:
         out["type_pairs"] = {f"{i}-{j}": asdict(v) for (i, j), v in self.type_pairs.items()}
         out["species"] = [{**asdict(sp), "mass": sp.mass} for sp in self.species]
         out["wall_type"] = self.wall_type
+        out["face_type"] = self.face_type
         out["mass_weights"] = self.mass_weights
         out["planned_steps"] = self.planned_steps
         return out
@@ -211,6 +222,11 @@ def prime_seed(seed: int, salt: int) -> int:
 def bed_volume(case: Case, height: float) -> float:
     """Volume of the silo below ``height`` (m above the outlet), m3."""
     g = case.geometry
+    if isinstance(g, PlanarGeometry):       # trapezoid of the wedge hopper, then the full width
+        h_w = min(height, g.hopper_height)
+        w_top = g.outlet_width + 2.0 * h_w * math.tan(math.radians(g.half_angle_deg))
+        area = 0.5 * (g.outlet_width + w_top) * h_w + g.width * max(0.0, height - g.hopper_height)
+        return area * g.thickness
     R = g.radius
     if isinstance(g, HopperGeometry):
         hh = g.hopper_height
@@ -337,9 +353,7 @@ def derive(case: Case) -> Derived:
         for the insertion region, opening too slow, ...), naming the field.
     """
     g = case.geometry
-    if not isinstance(g, (CylinderGeometry, HopperGeometry)):
-        raise CaseError([("geometry.kind", f"'{g.kind}' has a schema but no deck yet: the planar "
-                          "silo deck is part of the particle-systems issue")])
+    planar = isinstance(g, PlanarGeometry)
     p = case.particles
     r = p.max_radius                       # geometry margins use the largest grain (clumps: bounding sphere)
     d = 2 * r
@@ -381,13 +395,27 @@ def derive(case: Case) -> Derived:
         raise CaseError([("fill", f"the expected bed ({h_bed:.4g} m at solid fraction "
                           f"{f.packing_fraction}) leaves no room to insert particles below the top "
                           f"({top:.4g} m): fill fewer particles or make the silo taller")])
-    region_radius = g.radius - 0.6 * r
-    region_volume = math.pi * region_radius ** 2 * (z_max - z_min)
+    if planar:
+        # centres only (all_in no: a clump's bounding sphere is wider than the slab); wheat is
+        # inserted lying flat in the slab, so its half thickness is its sphere radius
+        half_t = 0.5 * g.thickness - (0.5 * p.width if p.kind == "clumps" else r)
+        insertion_region = {"shape": "block", "xlo": -g.half_width + 1.05 * r, "xhi": g.half_width - 1.05 * r,
+                            "ylo": -half_t, "yhi": half_t, "z_min": z_min + r, "z_max": z_max - r}
+        region_volume = g.width * g.thickness * (z_max - z_min)
+    else:
+        region_radius = g.radius - 0.6 * r
+        insertion_region = {"shape": "cylinder", "radius": region_radius, "z_min": z_min, "z_max": z_max}
+        region_volume = math.pi * region_radius ** 2 * (z_max - z_min)
     batch = max(1, min(count, int(f.batch_volume_fraction * region_volume / (vol + dust_vol))))
 
     # time step: the shortest contact of any pair of types; dust's cost is reported
     v_impact = cp.free_fall_speed(z_max, case.gravity, INSERTION_SPEED)
     type_pairs = type_pair_parameters(case, species, v_impact)
+    if planar:        # the slab's front and back faces: the walls' law with the faces' friction
+        faces = len(species) + 2
+        for sp in species:
+            wall_pair = type_pairs[(sp.type, faces - 1)]
+            type_pairs[(sp.type, faces)] = replace(wall_pair, name=f"{sp.name}-faces", friction=g.face_friction)
     smallest = min(grains, key=lambda sp: sp.radius).type          # its contacts are the shortest
     wall_type = len(species) + 1
     pairs = {"particle_particle": replace(type_pairs[(smallest, smallest)], name="particle_particle"),
@@ -446,15 +474,16 @@ def derive(case: Case) -> Derived:
     dump_every = _steps(out.dump_interval, dt) if out.dump_interval else None
 
     margin = 2 * d
-    box = {"xlo": -g.radius - margin, "xhi": max(g.radius, plate_shift + g.outlet_radius) + margin,
-           "ylo": -g.radius - margin, "yhi": g.radius + margin,
+    half_y = 0.5 * g.thickness if planar else g.radius
+    box = {"xlo": -g.half_width - margin, "xhi": max(g.half_width, plate_shift + g.outlet_radius) + margin,
+           "ylo": -half_y - margin, "yhi": half_y + margin,
            "zlo": outlet_z - plate_travel - margin, "zhi": top + margin}
     return Derived(
         particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass, particle_count=count,
         total_mass=count * final_mass + (dust_count * dust.mass if dust is not None else 0.0), bed_height_estimate=h_bed, impact_velocity=v_impact,
         pairs=pairs, rayleigh_time=rayleigh, critical_time=t_crit, critical_time_source=source,
         timestep=dt,
-        insertion_region={"radius": region_radius, "z_min": z_min, "z_max": z_max},
+        insertion_region=insertion_region,
         insertion_batch=batch, insert_every=insert_every, insertion_speed=INSERTION_SPEED,
         fill_steps=fill_steps, settle_chunk_steps=settle_chunk, settle_max_chunks=settle_chunks,
         static_steps=_steps(s.static_window, dt), open_steps=open_steps,
@@ -470,7 +499,7 @@ def derive(case: Case) -> Derived:
                "shrink": [prime_seed(case.seed, 40 + k) for k in range(len(p.radii))]},
         radii=list(p.radii), number_fractions=list(numbers), mass_fractions=mass_fractions,
         shrink_classes=shrink_classes(p.radii, numbers) if shrink else [],
-        type_pairs=type_pairs, species=species, dust_count=dust_count,
+        type_pairs=type_pairs, species=species, dust_count=dust_count, has_faces=planar,
         dust_batch=math.ceil(batch * dust_ratio) if dust is not None else 0,
         timestep_without_dust=dt_without_dust,
     )

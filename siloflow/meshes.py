@@ -14,7 +14,7 @@ import numpy as np
 from stl import mesh as stl_mesh
 from stl import Mode
 
-from .case import Case, CylinderGeometry, HopperGeometry
+from .case import Case, CylinderGeometry, HopperGeometry, PlanarGeometry
 
 
 #: longest/shortest side of the cylinder facets
@@ -41,6 +41,8 @@ class WallMesh:
     theta0: float | None = None
     theta1: float | None = None
     radius: float | None = None
+    normal: tuple[float, float] | None = None     # sensors: horizontal direction the grains push
+    projected_area: float | None = None           # sensors: |vector area| along ``normal``, m2
 
     @property
     def area(self) -> float:
@@ -50,7 +52,8 @@ class WallMesh:
 
     def info(self) -> dict:
         """JSON-ready description (no triangles)."""
-        keys = ("name", "role", "band", "sector", "z0", "z1", "theta0", "theta1", "radius")
+        keys = ("name", "role", "band", "sector", "z0", "z1", "theta0", "theta1", "radius", "normal",
+                "projected_area")
         out = {k: getattr(self, k) for k in keys}
         out["area"] = self.area
         out["file"] = f"meshes/{self.name}.stl"
@@ -117,6 +120,8 @@ def silo_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallM
     ``outlet_z``, ``outlet_radius``: position and size of the counting disc below the orifice.
     """
     g = case.geometry
+    if isinstance(g, PlanarGeometry):
+        return slab_meshes(case, outlet_z, outlet_radius)
     if not isinstance(g, (CylinderGeometry, HopperGeometry)):
         raise NotImplementedError(f"no meshes for geometry kind {g.kind!r}")
     R = g.radius
@@ -133,8 +138,13 @@ def silo_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallM
         # (which dominates LIGGGHTS' mesh-wall cost) low
         n_ax = max(1, math.ceil((z_hi - z_lo) / (MAX_FACET_ASPECT * h_facet)))
         tris = surface_of_revolution(R, z_lo, R, z_hi, th0, th1, n_th, n_ax)
+        sensor = {}
+        if role == "band":   # a sector's net force is along its mid direction (postprocess.wall_pressure)
+            tc = 0.5 * (th0 + th1)
+            sensor = {"normal": (math.cos(tc), math.sin(tc)),
+                      "projected_area": 2.0 * R * (z_hi - z_lo) * math.sin(0.5 * (th1 - th0))}
         meshes.append(WallMesh(name, role, tris, z0=z_lo, z1=z_hi, theta0=th0, theta1=th1,
-                               radius=R, **kw))
+                               radius=R, **sensor, **kw))
 
     bounds = band_boundaries(case)
     if bounds[0] > 0:
@@ -157,6 +167,72 @@ def silo_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallM
         meshes.append(WallMesh("bottom", "bottom", disc(R, 0.0, n_ring, inner_radius=r_out)))
     meshes.append(WallMesh("plate", "plate", disc(r_out, 0.0, n_ring)))
     meshes.append(WallMesh("outlet", "outlet", disc(outlet_radius, outlet_z, n_ring)))
+    return meshes
+
+
+def rectangle(origin, e1, e2, n1: int, n2: int) -> np.ndarray:
+    """Triangles of the parallelogram origin + u e1 + v e2 (u, v in [0, 1]) on an n1 x n2 grid."""
+    u = np.linspace(0.0, 1.0, n1 + 1)
+    v = np.linspace(0.0, 1.0, n2 + 1)
+    pts = (np.asarray(origin, float)[None, None, :] + u[:, None, None] * np.asarray(e1, float)
+           + v[None, :, None] * np.asarray(e2, float))
+    return _grid_triangles(pts)
+
+
+def _divisions(length: float, facet: float) -> int:
+    return max(1, math.ceil(length / facet - 1e-9))
+
+
+def slab_meshes(case: Case, outlet_z: float, outlet_half: float) -> list[WallMesh]:
+    """Meshes of a quasi-2D slab silo (x across, y through the slab, z up; z = 0 the outlet):
+    side walls cut into sensor sections (sector 0 at x = -width/2, sector 1 at +width/2),
+    the wedge hopper, the front and back faces (role ``face``), the plate and the counting
+    rectangle ``outlet_half`` wide at ``outlet_z`` (m)."""
+    g = case.geometry
+    a, b, hh, top = g.half_width, 0.5 * g.thickness, g.hopper_height, g.hopper_height + g.height
+    w0 = g.outlet_radius
+    # faces: few large facets (every grain touches the faces: their facet count is what costs);
+    # thin walls: one facet across, at most MAX_FACET_ASPECT times longer
+    facet = max(g.width / 2.0, g.thickness)
+    long = MAX_FACET_ASPECT * g.thickness                # thin walls' facets along their length
+    meshes: list[WallMesh] = []
+
+    def side_piece(name, role, side, z_lo, z_hi, **kw):
+        x = -a if side == 0 else a
+        tris = rectangle((x, -b, z_lo), (0.0, 2 * b, 0.0), (0.0, 0.0, z_hi - z_lo), 1, _divisions(z_hi - z_lo, long))
+        sensor = {"normal": (-1.0 if side == 0 else 1.0, 0.0), "projected_area": 2 * b * (z_hi - z_lo)} \
+            if role == "band" else {}
+        meshes.append(WallMesh(name, role, tris, z0=z_lo, z1=z_hi, sector=side, **sensor, **kw))
+
+    bounds = band_boundaries(case)
+    for side in (0, 1):
+        if bounds[0] > 0:
+            side_piece(f"wall_below_s{side:02d}", "wall", side, hh, hh + bounds[0])
+    for k, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
+        for side in (0, 1):
+            side_piece(f"band{k:02d}_s{side:02d}", "band", side, hh + lo, hh + hi, band=k)
+    for side in (0, 1):
+        if bounds[-1] < g.height:
+            side_piece(f"wall_above_s{side:02d}", "wall", side, hh + bounds[-1], top)
+    slant = math.hypot(a - w0, hh)
+    for side, sign in ((0, -1.0), (1, 1.0)):
+        meshes.append(WallMesh(f"hopper_s{side:02d}", "hopper", rectangle(
+            (sign * w0, -b, 0.0), (0.0, 2 * b, 0.0), (sign * (a - w0), 0.0, hh), 1, _divisions(slant, long)), sector=side))
+    # faces: the silo's outline in x-z (wedge, then the full width), on a grid of trapezoid rows
+    nz_h, nz_v = _divisions(hh, facet), _divisions(g.height, facet)
+    z = np.concatenate([np.linspace(0.0, hh, nz_h + 1), np.linspace(hh, top, nz_v + 1)[1:]])
+    half = np.where(z < hh, w0 + (a - w0) * z / max(hh, 1e-300), a)
+    nx = _divisions(g.width, facet)
+    u = np.linspace(-1.0, 1.0, nx + 1)
+    for side, y in ((0, -b), (1, b)):
+        pts = np.stack([half[:, None] * u[None, :], np.full((len(z), nx + 1), y),
+                        np.broadcast_to(z[:, None], (len(z), nx + 1))], axis=-1)
+        meshes.append(WallMesh(f"face_s{side:02d}", "face", _grid_triangles(pts), sector=side))
+    meshes.append(WallMesh("plate", "plate", rectangle((-w0, -b, 0.0), (2 * w0, 0.0, 0.0), (0.0, 2 * b, 0.0),
+                                                       _divisions(2 * w0, facet), 1)))
+    meshes.append(WallMesh("outlet", "outlet", rectangle((-outlet_half, -1.5 * b, outlet_z),
+                                                         (2 * outlet_half, 0.0, 0.0), (0.0, 3 * b, 0.0),
+                                                         _divisions(2 * outlet_half, facet), 1)))
     return meshes
 
 

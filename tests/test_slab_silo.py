@@ -1,0 +1,146 @@
+"""The quasi-2D slab silo (paper A's geometry): meshes, derived values, deck, and a real run."""
+from __future__ import annotations
+
+import json
+import math
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from postprocess.dumps import read_frames
+from siloflow.case import case_from_dict, load_case
+from siloflow.deck import render_deck_text
+from siloflow.derived import bed_volume, derive
+from siloflow.errors import CaseError
+from siloflow.meshes import silo_meshes
+
+from conftest import ROOT, set_path
+
+SLAB = ROOT / "tests" / "data" / "slab_silo.yaml"
+
+
+def slab_dict():
+    import yaml
+    return yaml.safe_load(SLAB.read_text())
+
+
+def _area(tris) -> float:
+    return float(0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1).sum())
+
+
+def test_slab_meshes_close_the_silo_and_sense_both_side_walls():
+    case = load_case(SLAB)
+    g = case.geometry
+    d = derive(case)
+    walls = {w.name: w for w in silo_meshes(case, d.outlet_z, d.outlet_disc_radius)}
+    bands = [w for w in walls.values() if w.role == "band"]
+    assert len(bands) == 2 * case.sensors.bands                       # every section on both sides
+    for w in bands:
+        x = w.triangles[..., 0]
+        side = -1.0 if w.sector == 0 else 1.0
+        np.testing.assert_allclose(x, side * g.half_width)
+        assert w.normal == (side, 0.0)
+        assert w.area == pytest.approx(g.thickness * (w.z1 - w.z0), rel=1e-12) == w.projected_area
+    # the sections tile the vertical walls from the hopper's top to the silo's top
+    assert sum(w.area for w in bands) == pytest.approx(2 * g.thickness * g.height, rel=1e-12)
+    # each face is the silo's outline: the wedge's trapezoid plus the rectangle above
+    outline = (0.5 * (g.outlet_width + g.width) * g.hopper_height + g.width * g.height)
+    for name in ("face_s00", "face_s01"):
+        assert walls[name].area == pytest.approx(outline, rel=1e-12)
+    assert bed_volume(case, g.hopper_height + g.height) == pytest.approx(outline * g.thickness, rel=1e-12)
+    # hopper planes at the half angle from the vertical, reaching the slot's edges
+    hop = walls["hopper_s01"].triangles.reshape(-1, 3)
+    assert hop[:, 0].min() == pytest.approx(g.outlet_width / 2) and hop[:, 2].max() == pytest.approx(g.hopper_height)
+    assert math.degrees(math.atan2(g.half_width - g.outlet_width / 2, g.hopper_height)) == pytest.approx(g.half_angle_deg)
+
+
+def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
+    case = load_case(SLAB)
+    d = derive(case)
+    assert d.face_type == d.wall_type + 1 == 3 and d.n_types == 3
+    text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+    assert "create_box      3 domain" in text
+    assert "face_s00.stl type 3" in text and "band00_s00.stl type 2" in text
+    mu = case.materials.particle_particle.friction, case.materials.particle_wall.friction
+    assert f"coefficientFriction peratomtypepair 3 {mu[0]:g} {mu[1]:g} 0 " in text      # faces: 0
+    assert "region          insertion block" in text and "all_in no" in text
+    # wheat clumps in a slab: inserted flat, moving in the plane only
+    data = slab_dict()
+    data["particles"] = {"kind": "clumps", "length": 0.003, "width": 0.002, "monte_carlo_tries": 100000}
+    data["geometry"]["thickness"] = 0.0022
+    data["engine"]["ranks"] = 1
+    case = case_from_dict(data)
+    d = derive(case)
+    text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+    assert "fflag on off on tflag off on off" in text and "orientation template" in text
+    assert d.insertion_region["yhi"] == pytest.approx(0.5 * 0.0022 - 0.001)
+
+
+@pytest.mark.parametrize("path,value,field", [
+    ("geometry.thickness", 0.0025, "geometry.thickness"),          # not wider than a grain
+    ("geometry.outlet_width", 0.002, "geometry.outlet_width"),     # narrower than a grain
+    ("sensors.heights", [0.0, 0.05, 0.2], "sensors.heights"),      # above the side walls
+])
+def test_slab_input_is_refused_naming_the_field(path, value, field):
+    data = slab_dict()
+    if path == "sensors.heights":
+        data["sensors"] = {"heights": value}
+    else:
+        set_path(data, path, value)
+    with pytest.raises(CaseError) as info:
+        case_from_dict(data)
+    assert any(field in f"{p} {m}" for p, m in info.value.problems), info.value.problems
+
+
+# ---------------------------------------------------------------- a real run
+@pytest.fixture(scope="module")
+def slab_run(tmp_path_factory):
+    from postprocess.first_results import analyse
+    from siloflow.engine import LiggghtsEngine
+
+    case = load_case(SLAB)
+    folder = tmp_path_factory.mktemp("slab") / "run"
+    record = LiggghtsEngine().run(case, folder)
+    return case, folder, record, analyse(folder)
+
+
+@pytest.mark.engine
+@pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS not installed (make install-engine); "
+                    "CI installs it, so CI never skips this")
+def test_slab_run_keeps_grains_in_the_slab_and_senses_both_walls(slab_run):
+    case, folder, record, summary = slab_run
+    g = case.geometry
+    assert record.inserted == derive(case).particle_count
+    # the walls, hopper, faces and plate carry the settled bed's weight
+    assert summary["force_balance"]["ratio"] == pytest.approx(1.0, abs=0.01)
+    for frame in read_frames(folder / "output" / "dumps"):
+        inside = frame.positions()[:, 2] > 0.0                              # not yet out of the slot
+        y, r = frame.positions()[inside, 1], frame.radii()[inside]
+        assert np.all(np.abs(y) + r <= 0.5 * g.thickness + 0.05 * r)     # one layer, between the faces
+        assert np.all(np.abs(frame.positions()[inside, 0]) < g.half_width)
+    sectors = pd.read_csv(folder / "results" / "wall_pressure_sectors.csv")
+    assert set(sectors.sector) == {0, 1} and sectors.band.nunique() == case.sensors.bands
+    static = json.loads((folder / "results" / "summary.json").read_text())["bands"]
+    p = [b["static_pressure"] for b in static]
+    h = summary["frame_analyses"]["settled_surface_height_m"]
+    buried = [b for b in static if b["z_mid"] < h - 4 * 2 * case.particles.radius]
+    assert len(buried) >= 2
+    assert all(b["static_pressure"] > 0 for b in buried)
+    assert p[0] > p[1]                                                  # pressure grows with depth
+    # horizontal force balance of the resting bed: what pushes the left wall pushes the right
+    # (and hopper) back; frictionless faces take no x force
+    from postprocess.wall_pressure import wall_force_columns
+    from siloflow.engine_output import read_ave_time
+    walls = json.loads((folder / "derived.json").read_text())["walls"]
+    forces = read_ave_time(folder / "output" / "wall_forces.txt", wall_force_columns(walls))
+    still = forces[(forces.step > record.stage_steps["static"]) & (forces.step <= record.stage_steps["open"])]
+    fx = still[[c for c in still if c.endswith("_fx")]]
+    sides = still[[f"{w['name']}_fx" for w in walls if w["role"] in ("band", "wall")]].abs().sum(axis=1)
+    assert np.all(np.abs(fx.sum(axis=1)) < 0.02 * sides)
+    faces = still[[f"{w['name']}_fx" for w in walls if w["role"] == "face"]].abs().sum(axis=1)
+    assert np.all(faces < 1e-3 * sides)
+    # grains left through the slot; Wr (surface speed) agrees with Wf (outlet count)
+    assert summary["discharged_mass_kg"] > 0.3 * summary["initial_mass_kg"]
+    assert summary["frame_analyses"]["flow_rate_surface_over_outlet"] == pytest.approx(1.0, abs=0.15)
