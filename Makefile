@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench clean
+.PHONY: demo test test-fast install install-engine bench bench-dust paper-a-quick paper-b-quick paper-a paper-b clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -28,6 +28,24 @@ install-engine:
 demo: install
 	$(VENV)/bin/siloflow run decks/quick.yaml -o runs/quick --force
 
+# the papers' cases (decks/paper_*.yaml; scale factors in their comments). Quick: minutes to a
+# quarter of an hour each on 2 cores; paper scale: hours (spheres) to far beyond this machine.
+paper-a-quick: install
+	$(VENV)/bin/siloflow run decks/paper_a_spheres_quick.yaml -o runs/paper_a_spheres_quick --force
+	$(VENV)/bin/siloflow run decks/paper_a_clumps_quick.yaml -o runs/paper_a_clumps_quick --force
+
+paper-b-quick: install
+	$(VENV)/bin/siloflow run decks/paper_b_quick.yaml -o runs/paper_b_quick --force
+	$(VENV)/bin/siloflow cg runs/paper_b_quick --width 2 --unit radius
+
+paper-a: install
+	$(VENV)/bin/siloflow run decks/paper_a_spheres.yaml -o runs/paper_a_spheres --force
+	$(VENV)/bin/siloflow run decks/paper_a_clumps.yaml -o runs/paper_a_clumps --force
+
+paper-b: install
+	$(VENV)/bin/siloflow run decks/paper_b.yaml -o runs/paper_b --force
+	$(VENV)/bin/siloflow cg runs/paper_b --width 2 --unit radius
+
 # every test, the engine tests included
 test: install
 	$(PY) -m pytest -q
@@ -40,6 +58,11 @@ bench: install
 	$(PY) benchmarks/wrapper_overhead.py
 	$(PY) benchmarks/dump_reader_speed.py
 	$(PY) benchmarks/coarse_graining_speed.py
+	$(PY) benchmarks/dust_density_scaling.py
+
+# the dust time-step remedy alone (two real runs, about 10 minutes)
+bench-dust: install
+	$(PY) benchmarks/dust_density_scaling.py
 
 clean:
 	rm -rf runs .pytest_cache

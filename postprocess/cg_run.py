@@ -35,6 +35,7 @@ class CgSetup:
     step_hi: int | None = None
     wall_contacts: list | None = None
     wall_contact_columns: list | None = None
+    slab_thickness: float | None = None     # a slab silo: the grid is planar (x, z), r_max its half width
 
 
 def setup_from_run(folder: Path) -> CgSetup:
@@ -62,9 +63,13 @@ def setup_from_run(folder: Path) -> CgSetup:
         walls = None
     g = case.geometry
     top = summary.get("frame_analyses", {}).get("settled_surface_height_m") or (g.hopper_height + g.height)
-    return CgSetup(atoms, contacts, derived.get("contact_columns") or None, g.radius, float(derived["outlet_z"]),
+    if derived.get("mass_weights") and any(w != 1.0 for w in derived["mass_weights"]):
+        raise ReadError(f"{folder}: coarse-graining of clumps (multisphere: each sphere carries its "
+                        "clump's mass) is not implemented")
+    return CgSetup(atoms, contacts, derived.get("contact_columns") or None, g.half_width, float(derived["outlet_z"]),
                    float(top), 0.0, g.outlet_radius, case.materials.particle.density,
-                   int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, derived.get("wall_contact_columns"))
+                   int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, derived.get("wall_contact_columns"),
+                   slab_thickness=g.thickness if g.kind == "planar" else None)
 
 
 def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: float = 2.0, unit: str = "radius",
@@ -85,7 +90,12 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
         raise ReadError(f"no particle frames between steps {setup.step_lo} and {setup.step_hi}")
     radius = float(np.mean(first.radii()))
     kernel = make_kernel(kernel_name, width, unit, radius)
-    if grid_kind == "rz":
+    if setup.slab_thickness is not None:       # planar (x, z): one cell through the slab
+        if grid_kind == "rz":
+            raise ReadError("a slab silo has no axis: use --grid cartesian (a planar x-z grid)")
+        t = 0.5 * setup.slab_thickness
+        grid = CartesianGrid([-setup.r_max, -t, setup.z_lo], [setup.r_max, t, setup.z_hi], (nr, 1, nz))
+    elif grid_kind == "rz":
         grid = AxisymmetricGrid(setup.r_max, setup.z_lo, setup.z_hi, nr, nz)
     else:
         grid = CartesianGrid([-setup.r_max, -setup.r_max, setup.z_lo], [setup.r_max, setup.r_max, setup.z_hi],

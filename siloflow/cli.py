@@ -61,6 +61,21 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
         _fail(exc)
     out.print(f"deck written to {folder}: {d.particle_count} particles, dt = {d.timestep:.3g} s "
               f"({case.engine.timestep_fraction} x {d.critical_time_source} {d.critical_time:.3g} s)")
+    note = dust_note(d)
+    if note:
+        out.print(note)
+
+
+def dust_note(d) -> str:
+    """How much the dust shortens the time step, and the remedy (empty without dust)."""
+    if d.timestep_without_dust is None:
+        return ""
+    factor = d.timestep_without_dust / d.timestep
+    if factor <= 1.0 + 1e-9:
+        return f"dust: {d.dust_count} spheres; they do not set the time step"
+    return (f"dust: {d.dust_count} spheres shorten the time step {factor:.3g}x (without them "
+            f"{d.timestep_without_dust:.3g} s); particles.dust.density_scale s lengthens dust contacts "
+            f"sqrt(s)x (benchmarks/dust_density_scaling.py measures what it changes)")
 
 
 def _interrupt(signum, frame):
@@ -90,13 +105,16 @@ def run(case_file: Path = typer.Argument(..., help="YAML case file"),
         case = load_case(case_file)
         engine = get_engine(case.engine.name, executable=liggghts)
         engine.command(case.engine.ranks)  # binary and launcher present before anything is written
-        sizes = check_disk_space(case, derive(case), output, allow_large_output)
+        derived = derive(case)
+        sizes = check_disk_space(case, derived, output, allow_large_output)
         folder = engine.prepare(case, output, force=force)
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
     out.print(f"run folder: {folder} (expected output up to {sizes['total'] / 1e6:.0f} MB, "
               f"{sizes['frames']} dump frames)")
+    if dust_note(derived):
+        out.print(dust_note(derived))
     with _progress_bar() as bar:
         task = bar.add_task("run", total=None, stage="start", step=0)
 
