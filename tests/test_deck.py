@@ -41,10 +41,9 @@ def test_existing_folder_is_never_overwritten_silently(quick_dict, tmp_path):
 
 
 def test_failed_render_leaves_nothing(quick_dict, tmp_path):
-    quick_dict["geometry"] = {"kind": "planar", "width": 0.1, "height": 0.3, "thickness": 0.005,
-                              "outlet_width": 0.02}
+    quick_dict["fill"]["count"] = 60000        # valid on its own, but the bed would reach the top
     case = case_from_dict(quick_dict)
-    with pytest.raises(CaseError, match="geometry.kind"):
+    with pytest.raises(CaseError, match="no room to insert"):
         render(case, tmp_path / "deck")
     assert list(tmp_path.iterdir()) == []
 
