@@ -105,6 +105,19 @@ def clump_dict():
     return yaml.safe_load(CLUMPS.read_text())
 
 
+def linear_paper_a_contacts(data: dict) -> dict:
+    """Switch a clump case dict to paper A's linear springs (grains, dust, walls); returns its dust."""
+    data["materials"] = {"model": "linear", "particle": {"density": 1000.0},
+                         "particle_particle": {"friction": 0.3, "kn": 1.6e5, "kt": 0.8e5},
+                         "particle_wall": {"friction": 0.62, "kn": 2.9e5, "kt": 1.45e5}}
+    dust = data["particles"]["dust"]
+    del dust["youngs_modulus"]
+    dust.update(dust_dust={"friction": 0.3, "kn": 1.6e6, "kt": 0.8e6},
+                dust_particle={"friction": 0.3, "kn": 2.9e5, "kt": 1.45e5},
+                dust_wall={"friction": 0.3, "kn": 1.6e6, "kt": 0.8e6}, density_scale=1.0)
+    return dust
+
+
 @pytest.mark.parametrize("path,value,field", [
     ("engine.ranks", 2, "engine.ranks"),
     ("particles.dust.radius", 0.003, "particles.dust.radius"),
@@ -126,14 +139,7 @@ def test_explicit_clump_spheres_and_linear_dust_contacts():
     data = clump_dict()
     data["particles"].update(shape="spheres", spheres=[{"center": [0, 0, 0], "radius": 0.002},
                                                       {"center": [0.0015, 0, 0], "radius": 0.0015}])
-    data["materials"] = {"model": "linear", "particle": {"density": 1000.0},
-                         "particle_particle": {"friction": 0.3, "kn": 1.6e5, "kt": 0.8e5},
-                         "particle_wall": {"friction": 0.62, "kn": 2.9e5, "kt": 1.45e5}}
-    dust = data["particles"]["dust"]
-    del dust["youngs_modulus"]
-    dust.update(dust_dust={"friction": 0.3, "kn": 1.6e6, "kt": 0.8e6},
-                dust_particle={"friction": 0.3, "kn": 2.9e5, "kt": 1.45e5},
-                dust_wall={"friction": 0.3, "kn": 1.6e6, "kt": 0.8e6}, density_scale=1.0)
+    dust = linear_paper_a_contacts(data)
     case = case_from_dict(data)
     d = derive(case)
     assert d.species[0].volume == pytest.approx(union_volume([[0, 0, 0], [0.0015, 0, 0]], [0.002, 0.0015]))
@@ -151,15 +157,7 @@ def test_explicit_clump_spheres_and_linear_dust_contacts():
 
 def test_dust_density_scaling_lengthens_the_time_step_as_its_square_root():
     data = clump_dict()
-    set_path(data, "materials.model", "linear")
-    data["materials"] = {"model": "linear", "particle": {"density": 1000.0},
-                         "particle_particle": {"friction": 0.3, "kn": 1.6e5, "kt": 0.8e5},
-                         "particle_wall": {"friction": 0.62, "kn": 2.9e5, "kt": 1.45e5}}
-    dust = data["particles"]["dust"]
-    del dust["youngs_modulus"]
-    dust.update(dust_dust={"friction": 0.3, "kn": 1.6e6, "kt": 0.8e6},
-                dust_particle={"friction": 0.3, "kn": 2.9e5, "kt": 1.45e5},
-                dust_wall={"friction": 0.3, "kn": 1.6e6, "kt": 0.8e6})
+    dust = linear_paper_a_contacts(data)
     steps = {}
     for scale in (1.0, 4.0):
         dust["density_scale"] = scale

@@ -22,12 +22,21 @@ pytestmark = [pytest.mark.engine,
 POLY = ROOT / "tests" / "data" / "poly_silo.yaml"
 
 
+def run_case(path, tmp_path_factory, name: str, post: bool = False):
+    """(case, folder, run record) of a real run of the case file at ``path``; ``post``: also
+    compute its results."""
+    case = load_case(path)
+    folder = tmp_path_factory.mktemp(name) / "run"
+    record = LiggghtsEngine().run(case, folder)
+    if post:
+        from postprocess.first_results import analyse
+        analyse(folder)
+    return case, folder, record
+
+
 @pytest.fixture(scope="module")
 def poly_run(tmp_path_factory):
-    case = load_case(POLY)
-    folder = tmp_path_factory.mktemp("poly") / "run"
-    record = LiggghtsEngine().run(case, folder)
-    return case, folder, record
+    return run_case(POLY, tmp_path_factory, "poly")
 
 
 def test_inserted_size_distribution_matches_the_request(poly_run):
@@ -155,12 +164,7 @@ CLUMPS = ROOT / "tests" / "data" / "clump_silo.yaml"
 
 @pytest.fixture(scope="module")
 def clump_run(tmp_path_factory):
-    case = load_case(CLUMPS)
-    folder = tmp_path_factory.mktemp("clumps") / "run"
-    record = LiggghtsEngine().run(case, folder)
-    from postprocess.first_results import analyse
-    analyse(folder)
-    return case, folder, record
+    return run_case(CLUMPS, tmp_path_factory, "clumps", post=True)
 
 
 def _settled(folder, record):
