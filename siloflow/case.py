@@ -412,6 +412,9 @@ class Fill(Strict):
     insertion_z_max: Optional[Positive] = Field(None, description="top of the insertion region, m")
     batch_volume_fraction: float = Field(0.15, gt=0, le=0.4, allow_inf_nan=False,
                                          description="solid fraction of one insertion batch in the region")
+    pour_radius: Optional[Positive] = Field(None, le=100, description="radius (a slab: half width) of the "
+                                            "pouring region about the axis, m; default the whole cross-section "
+                                            "(distributed fill); small: a central fill (paper A)")
     frictionless: bool = Field(False, description="paper A: particle-particle friction is 0 while pouring and "
                                "restored to its value before settling (a denser bed)")
     settle: Settle = Settle()
@@ -551,6 +554,9 @@ class Case(Strict):
                             f"({g.hopper_height:.6g} m)")
         if zmin is not None and zmax is not None and zmax - zmin < 2 * d:
             problems.append("fill.insertion_z_max must exceed insertion_z_min by 2 particle diameters")
+        if f.pour_radius is not None and not 2 * d <= f.pour_radius <= g.half_width:
+            problems.append(f"fill.pour_radius ({f.pour_radius} m) must be between two grain diameters "
+                            f"({2 * d:.6g} m) and the silo's half width ({g.half_width} m)")
         if self.sensors.heights is not None and self.sensors.heights[-1] > g.height:
             problems.append(f"sensors.heights: last boundary ({self.sensors.heights[-1]} m) is above "
                             f"the vertical wall ({g.height} m)")

@@ -6,6 +6,7 @@ siloflow's named errors, mapped here to a message and exit code 1.
 from __future__ import annotations
 
 import json
+import math
 import signal
 from pathlib import Path
 from typing import List, Optional
@@ -61,9 +62,19 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
         _fail(exc)
     out.print(f"deck written to {folder}: {d.particle_count} particles, dt = {d.timestep:.3g} s "
               f"({case.engine.timestep_fraction} x {d.critical_time_source} {d.critical_time:.3g} s)")
-    note = dust_note(d)
-    if note:
-        out.print(note)
+    for line in (clump_note(d), dust_note(d)):
+        if line:
+            out.print(line)
+
+
+def clump_note(d) -> str:
+    """A clump shape's union volume and mass (empty without clumps)."""
+    clump = next((sp for sp in d.species if sp.kind == "clump"), None)
+    if clump is None:
+        return ""
+    spheres = sum(4.0 / 3.0 * math.pi * s[3] ** 3 for s in clump.spheres)
+    return (f"clump: {clump.n_spheres} spheres, union volume {clump.volume * 1e9:.4g} mm3 (the spheres' sum "
+            f"{spheres * 1e9:.4g} mm3), mass {clump.mass * 1e3:.4g} g")
 
 
 def dust_note(d) -> str:

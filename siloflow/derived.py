@@ -395,15 +395,17 @@ def derive(case: Case) -> Derived:
         raise CaseError([("fill", f"the expected bed ({h_bed:.4g} m at solid fraction "
                           f"{f.packing_fraction}) leaves no room to insert particles below the top "
                           f"({top:.4g} m): fill fewer particles or make the silo taller")])
+    pour = f.pour_radius if f.pour_radius is not None else g.half_width      # central or distributed fill
     if planar:
         # centres only (all_in no: a clump's bounding sphere is wider than the slab); wheat is
         # inserted lying flat in the slab, so its half thickness is its sphere radius
         half_t = 0.5 * g.thickness - (0.5 * p.width if p.kind == "clumps" else r)
-        insertion_region = {"shape": "block", "xlo": -g.half_width + 1.05 * r, "xhi": g.half_width - 1.05 * r,
+        half_x = min(pour, g.half_width - 1.05 * r)
+        insertion_region = {"shape": "block", "xlo": -half_x, "xhi": half_x,
                             "ylo": -half_t, "yhi": half_t, "z_min": z_min + r, "z_max": z_max - r}
-        region_volume = g.width * g.thickness * (z_max - z_min)
+        region_volume = 2 * half_x * g.thickness * (z_max - z_min)
     else:
-        region_radius = g.radius - 0.6 * r
+        region_radius = min(pour, g.radius - 0.6 * r)
         insertion_region = {"shape": "cylinder", "radius": region_radius, "z_min": z_min, "z_max": z_max}
         region_volume = math.pi * region_radius ** 2 * (z_max - z_min)
     batch = max(1, min(count, int(f.batch_volume_fraction * region_volume / (vol + dust_vol))))

@@ -144,3 +144,17 @@ def test_slab_run_keeps_grains_in_the_slab_and_senses_both_walls(slab_run):
     # grains left through the slot; Wr (surface speed) agrees with Wf (outlet count)
     assert summary["discharged_mass_kg"] > 0.3 * summary["initial_mass_kg"]
     assert summary["frame_analyses"]["flow_rate_surface_over_outlet"] == pytest.approx(1.0, abs=0.15)
+
+
+@pytest.mark.parametrize("deck", ["slab", "cylinder"])
+def test_central_fill_pours_from_a_narrow_region(deck, quick_dict):
+    data = slab_dict() if deck == "slab" else quick_dict
+    distributed = derive(case_from_dict(data))
+    data["fill"]["pour_radius"] = 0.01
+    central = derive(case_from_dict(data))
+    r = central.insertion_region
+    assert (r["xhi"] if deck == "slab" else r["radius"]) == pytest.approx(0.01)
+    assert central.insertion_batch < distributed.insertion_batch       # same solid fraction per batch
+    data["fill"]["pour_radius"] = 0.001                                 # narrower than two grains
+    with pytest.raises(CaseError, match="fill.pour_radius"):
+        case_from_dict(data)
