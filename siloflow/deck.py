@@ -187,6 +187,10 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
         "particle_rate": particle_rate,
         "insert_every": d.insert_every, "insertion_speed": d.insertion_speed,
         "check_timestep": m.model == "hertz",
+        # check/timestep/gran warns when dt exceeds this fraction of the Rayleigh or Hertz time it
+        # measures; siloflow's dt is timestep_fraction of its own estimate, so a warning means
+        # impacts far faster than estimated, and stops the run (siloflow.engine.liggghts_log)
+        "timestep_guard": min(1.0, 1.5 * case.engine.timestep_fraction),
         "thermo_every": d.thermo_every, "sample_every": d.sample_every,
         "sample_repeat": d.sample_repeat, "sample_freq": d.sample_freq,
         "dump_every": d.dump_every, "vtk": case.outputs.vtk,

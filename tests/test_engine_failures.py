@@ -115,3 +115,28 @@ def test_error_that_aborts_mpi_still_reaches_the_message(tmp_path, quick_dict):
         engine.execute(folder)
     assert "random seeds" in str(info.value) + info.value.log_tail
     assert info.value.returncode != 0
+
+
+def test_time_step_verdict_of_the_engine_stops_the_run(tmp_path, quick_dict):
+    """check/timestep/gran only warns; siloflow treats its verdict as a failure and stops the
+    engine at once instead of letting a wrong run go on for hours."""
+    import time
+
+    quick_dict["engine"]["ranks"] = 1
+    exe = _fake_engine(tmp_path, "echo 'SILOFLOW_STAGE fill 100'\necho '   50 0.1 10 0 0 0 0 0'\n"
+                                 "echo 'WARNING: time-step is 45.676620 % of hertz time "
+                                 "(./src/fix_check_timestep_gran.cpp:200)'\nsleep 60\necho 'SILOFLOW_DONE'\n")
+    engine = LiggghtsEngine(executable=exe)
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    start = time.perf_counter()
+    with pytest.raises(EngineRunError) as info:
+        engine.execute(folder)
+    assert time.perf_counter() - start < 30                       # stopped, not waited for
+    msg = str(info.value)
+    assert "hertz time" in msg and "timestep_fraction" in msg
+    assert info.value.returncode != 0
+    assert read_status(folder)["state"] == "failed"
+    deck = (folder / "in.liggghts").read_text()
+    guard = min(1.0, 1.5 * quick_dict["engine"]["timestep_fraction"])
+    line = next(ln for ln in deck.splitlines() if "check/timestep/gran" in ln)
+    assert [float(v) for v in line.split()[-2:]] == pytest.approx([guard, guard])

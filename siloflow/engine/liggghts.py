@@ -106,6 +106,9 @@ class LiggghtsEngine(Engine):
                     tail.append(line.rstrip())
                     if state.feed(line) and progress is not None:
                         progress(state.stage or "start", state.step, state.total_steps(planned))
+                    if state.fatal:                  # nothing good comes of running on
+                        _stop(proc)
+                        break
             returncode = proc.wait()
         except BaseException:  # Ctrl-C or SIGTERM turned into an exception: stop the whole group
             _stop(proc)

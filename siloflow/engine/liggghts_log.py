@@ -12,6 +12,8 @@ _MARK = re.compile(r"^SILOFLOW_(INSERTED|SETTLED|NOT_SETTLED|DONE)\s*(\S*)\s*$")
 _THERMO = re.compile(r"^\s*(\d+)\s+([-+0-9.eE]+)\s+(\d+)(\s+[-+0-9.eEnaif]+)*\s*$")
 _ERROR = re.compile(r"^(ERROR( on proc \d+)?:.*)$")
 _WARNING = re.compile(r"^(WARNING:.*)$")
+#: check/timestep/gran's verdict that the time step is too large: a failure, not a warning
+_TIMESTEP = re.compile(r"time-step is .* of (rayleigh|hertz) time", re.I)
 
 STAGE_ORDER = ("fill", "settle", "shrink", "static", "open", "discharge")
 
@@ -35,6 +37,7 @@ class LogState:
     done: bool = False
     errors: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    fatal: bool = False             # the run must be stopped (an error the engine itself does not end on)
 
     def feed(self, line: str) -> bool:
         """Read one line; return True when the progress (step or stage) changed."""
@@ -67,7 +70,10 @@ class LogState:
             self.errors.append(m.group(1).strip())
             return False
         m = _WARNING.match(line)
-        if m and m.group(1) not in self.warnings and len(self.warnings) < 50:
+        if m and _TIMESTEP.search(line) and not self.fatal:
+            self.errors.append(m.group(1).strip())
+            self.fatal = True
+        elif m and m.group(1) not in self.warnings and len(self.warnings) < 50:
             self.warnings.append(m.group(1).strip())
         return False
 
@@ -98,6 +104,10 @@ def decode(raw: bytes) -> str:
 
 # ----------------------------------------------------------------- diagnosis
 _KNOWN = [
+    (_TIMESTEP,
+     "the time step is too large for the contacts this run sees (LIGGGHTS' check/timestep/gran: faster "
+     "impacts or smaller grains than siloflow's estimate); the run was stopped",
+     "lower engine.timestep_fraction (or, with dust, raise particles.dust.density_scale)"),
     (re.compile(r"Cannot open mesh file|Cannot open STL|Can not open file", re.I),
      "a mesh file named in the deck is missing or unreadable",
      "re-render the deck with 'siloflow render' and do not move files out of the run folder"),
