@@ -158,3 +158,30 @@ def test_central_fill_pours_from_a_narrow_region(deck, quick_dict):
     data["fill"]["pour_radius"] = 0.001                                 # narrower than two grains
     with pytest.raises(CaseError, match="fill.pour_radius"):
         case_from_dict(data)
+
+
+def test_free_surface_of_a_slab_with_a_sloped_heap_tracks_its_volume():
+    from postprocess.flow_rate import FreeSurface
+    from test_post_analyses import frame_of
+
+    rng = np.random.default_rng(11)
+    a, t, r, n = 0.1, 0.003, 0.001, 30000
+    # grains filling the slab up to h(x) = 0.08 + 0.04 |x| / a (a V-shaped crater), mean height 0.1
+    x = rng.uniform(-a, a, n)
+    z = rng.random(n) * (0.08 + 0.04 * np.abs(x) / a)
+    frame = frame_of(np.column_stack([x, rng.uniform(-t / 2, t / 2, n), z]), np.full(n, r))
+    fs = FreeSurface(radius=a, thickness=t, annuli=8)
+    h = fs.run([frame]).table.surface_height.iloc[0]
+    assert h == pytest.approx(0.1, abs=2 * r)
+    assert fs.area == pytest.approx(2 * a * t)
+
+
+def test_janssen_diameter_of_a_slab_counts_the_walls_with_friction():
+    from postprocess.dump_results import janssen_diameter
+
+    g = load_case(SLAB).geometry
+    assert janssen_diameter(g) == pytest.approx(2 * g.width)           # side walls only: 4 W T / 2 T
+    data = slab_dict()
+    data["geometry"]["face_friction"] = 0.3
+    g = case_from_dict(data).geometry
+    assert janssen_diameter(g) == pytest.approx(4 * g.width * g.thickness / (2 * (g.width + g.thickness)))
