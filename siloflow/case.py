@@ -491,6 +491,22 @@ class MeasurementRegion(Strict):
         return self
 
 
+class WallInsert(Strict):
+    """A wall read from the user's STL file (ASCII or binary): an insert, a baffle, a roof. It is
+    read as a mesh, checked (finite, no degenerate triangles, inside the silo) and written anew
+    by siloflow into the run folder as ``meshes/insert_<name>.stl``: the file's bytes never
+    reach the deck. Its net force is recorded like every wall's."""
+
+    name: SafeName
+    file: str = Field(min_length=1, max_length=4096, description="STL file; relative paths are relative "
+                      "to the case file")
+    scale: Positive = Field(1.0, le=1000.0, description="factor from the file's units to m (0.001 for mm)")
+
+    @property
+    def mesh_name(self) -> str:
+        return f"insert_{self.name}"
+
+
 class Analysis(Strict):
     """What the post-processing measures beyond the defaults."""
 
@@ -519,6 +535,8 @@ class Case(Strict):
     outputs: Outputs = Outputs()
     engine: EngineSettings = EngineSettings()
     analysis: Analysis = Analysis()
+    inserts: list[WallInsert] = Field(default_factory=list, max_length=20,
+                                      description="extra walls from STL files (inserts, baffles)")
     seed: int = Field(12345, ge=0, le=2**31 - 1)
 
     @model_validator(mode="after")
@@ -557,6 +575,9 @@ class Case(Strict):
         if f.pour_radius is not None and not 2 * d <= f.pour_radius <= g.half_width:
             problems.append(f"fill.pour_radius ({f.pour_radius} m) must be between two grain diameters "
                             f"({2 * d:.6g} m) and the silo's half width ({g.half_width} m)")
+        names = [i.name for i in self.inserts]
+        if len(set(names)) != len(names):
+            problems.append("inserts: names must be unique")
         if self.sensors.heights is not None and self.sensors.heights[-1] > g.height:
             problems.append(f"sensors.heights: last boundary ({self.sensors.heights[-1]} m) is above "
                             f"the vertical wall ({g.height} m)")
@@ -655,6 +676,26 @@ def case_from_dict(data, source: str = "case") -> Case:
         raise CaseError(validation_problems(exc), source) from None
 
 
+def check_inserts(case: Case, base: Path, source: str = "case") -> Case:
+    """Resolve the inserts' files against ``base`` (the case file's folder), read and check each
+    as a mesh; return the case with absolute file paths. Raises ``CaseError`` naming the insert."""
+    if not case.inserts:
+        return case
+    from .meshes import MeshError, read_user_mesh, check_inside
+    problems, resolved = [], []
+    for k, ins in enumerate(case.inserts):
+        path = Path(ins.file)
+        path = path if path.is_absolute() else (base / path)
+        try:
+            check_inside(case, read_user_mesh(path, ins.scale))
+        except MeshError as exc:
+            problems.append((f"inserts[{k}].file", str(exc)))
+        resolved.append(ins.model_copy(update={"file": str(path.resolve())}))
+    if problems:
+        raise CaseError(problems, source)
+    return case.model_copy(update={"inserts": resolved})
+
+
 def load_case(path) -> Case:
     """Read and validate a YAML case file, raising ``CaseError`` on any problem."""
     path = Path(path)
@@ -674,7 +715,7 @@ def load_case(path) -> Case:
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
         problem = getattr(exc, "problem", None) or str(exc)
         raise CaseError([("(yaml)", f"{where}{problem}")], str(path)) from None
-    return case_from_dict(data, str(path))
+    return check_inserts(case_from_dict(data, str(path)), path.parent, str(path))
 
 
 def case_to_yaml(case: Case) -> str:

@@ -236,7 +236,10 @@ def write_deck(case: Case, folder: Path) -> Derived:
     for w in walls:
         write_stl(w, folder / "meshes" / f"{w.name}.stl")
     write_text(folder / DECK_NAME, text)
-    write_text(folder / CASE_NAME, case_to_yaml(case))
+    # the run folder is self-contained: its case names the inserts' copies, already in metres
+    stored = case.model_copy(update={"inserts": [
+        ins.model_copy(update={"file": f"meshes/{ins.mesh_name}.stl", "scale": 1.0}) for ins in case.inserts]})
+    write_text(folder / CASE_NAME, case_to_yaml(stored))
     info = d.to_json()
     info["siloflow_version"] = __version__
     info["engine"] = case.engine.name

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from stl import mesh as stl_mesh
@@ -115,15 +116,23 @@ def band_boundaries(case: Case) -> list[float]:
 
 
 def silo_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallMesh]:
-    """All meshes of a cylindrical silo or hopper, in the order the deck lists them.
+    """All meshes of a silo (cylinder, hopper or slab) and its inserts, in the order the deck lists them.
 
     ``outlet_z``, ``outlet_radius``: position and size of the counting disc below the orifice.
     """
     g = case.geometry
     if isinstance(g, PlanarGeometry):
-        return slab_meshes(case, outlet_z, outlet_radius)
-    if not isinstance(g, (CylinderGeometry, HopperGeometry)):
+        meshes = slab_meshes(case, outlet_z, outlet_radius)
+    elif isinstance(g, (CylinderGeometry, HopperGeometry)):
+        meshes = cylinder_meshes(case, outlet_z, outlet_radius)
+    else:
         raise NotImplementedError(f"no meshes for geometry kind {g.kind!r}")
+    return meshes[:-1] + insert_meshes(case) + meshes[-1:]          # the counting mesh stays last
+
+
+def cylinder_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallMesh]:
+    """Meshes of a cylindrical silo or hopper (see :func:`silo_meshes`)."""
+    g = case.geometry
     R = g.radius
     base = g.hopper_height
     n_seg = g.mesh_segments
@@ -234,6 +243,62 @@ def slab_meshes(case: Case, outlet_z: float, outlet_half: float) -> list[WallMes
                                                          (2 * outlet_half, 0.0, 0.0), (0.0, 3 * b, 0.0),
                                                          _divisions(2 * outlet_half, facet), 1)))
     return meshes
+
+
+class MeshError(ValueError):
+    """A user mesh file that cannot be used (unreadable, not STL, non-finite, degenerate, outside)."""
+
+
+#: user STL files larger than this are refused (a silo insert needs far fewer triangles)
+MAX_USER_MESH_BYTES = 50_000_000
+
+
+def read_user_mesh(path, scale: float = 1.0) -> np.ndarray:
+    """Triangles (n, 3, 3), m, of a user's ASCII or binary STL file, checked: finite vertices and
+    no degenerate (zero-area) triangle. Raises ``MeshError`` saying what is wrong."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise MeshError(f"cannot read {path}: {exc.strerror}") from None
+    if size > MAX_USER_MESH_BYTES:
+        raise MeshError(f"{path} is larger than {MAX_USER_MESH_BYTES} bytes")
+    try:
+        tris = np.array(stl_mesh.Mesh.from_file(str(path)).vectors, dtype=float)
+    except Exception as exc:        # numpy-stl raises many kinds on foreign bytes
+        raise MeshError(f"{path} is not an STL file ({type(exc).__name__}: {str(exc)[:120]})") from None
+    if tris.ndim != 3 or len(tris) == 0:
+        raise MeshError(f"{path} holds no triangles")
+    tris = tris * scale
+    if not np.all(np.isfinite(tris)):
+        raise MeshError(f"{path} has non-finite vertex coordinates")
+    area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    extent = float(np.ptp(tris.reshape(-1, 3), axis=0).max())
+    bad = int((area <= 1e-12 * extent * extent).sum())
+    if bad:
+        raise MeshError(f"{path} has {bad} degenerate (zero-area) triangle(s) of {len(tris)}")
+    return tris
+
+
+def check_inside(case: Case, tris: np.ndarray) -> None:
+    """Refuse a mesh that reaches outside the silo (LIGGGHTS needs walls inside its box)."""
+    g = case.geometry
+    p = tris.reshape(-1, 3)
+    top = g.hopper_height + g.height
+    if isinstance(g, PlanarGeometry):
+        inside = (np.abs(p[:, 0]) <= g.half_width) & (np.abs(p[:, 1]) <= 0.5 * g.thickness)
+    else:
+        inside = np.hypot(p[:, 0], p[:, 1]) <= g.radius
+    inside &= (p[:, 2] >= 0.0) & (p[:, 2] <= top)
+    if not inside.all():
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        raise MeshError(f"the mesh reaches outside the silo (it spans x {lo[0]:.4g}..{hi[0]:.4g}, y "
+                        f"{lo[1]:.4g}..{hi[1]:.4g}, z {lo[2]:.4g}..{hi[2]:.4g} m; check 'scale')")
+
+
+def insert_meshes(case: Case) -> list[WallMesh]:
+    """The case's user walls, read from their files (relative paths from the working folder)."""
+    return [WallMesh(ins.mesh_name, "insert", read_user_mesh(ins.file, ins.scale)) for ins in case.inserts]
 
 
 def write_stl(wall: WallMesh, path) -> None:
