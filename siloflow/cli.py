@@ -101,8 +101,10 @@ def _progress_bar():
 
 
 @app.command()
-def run(case_file: Path = typer.Argument(..., help="YAML case file"),
-        output: Path = typer.Option(..., "-o", "--output", help="run folder to create"),
+def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
+        output: Optional[Path] = typer.Option(None, "-o", "--output", help="run folder to create"),
+        resume: Optional[Path] = typer.Option(None, "--resume", help="finish this interrupted run folder "
+                                              "(from its settled bed's restart file if it got that far)"),
         force: bool = typer.Option(False, "--force", help="replace an existing run folder"),
         liggghts: Optional[str] = typer.Option(None, "--liggghts", envvar="SILOFLOW_LIGGGHTS",
                                                help="LIGGGHTS binary (default: liggghts on PATH)"),
@@ -112,6 +114,13 @@ def run(case_file: Path = typer.Argument(..., help="YAML case file"),
     from .derived import derive
     from .disk_estimate import check_disk_space
     from .engine import get_engine
+    if resume is not None:
+        if case_file is not None or output is not None:
+            _fail(SiloflowError("--resume DIR takes no case file and no --output: the folder has both"))
+        _resume(resume, liggghts, post_process)
+        return
+    if case_file is None or output is None:
+        _fail(SiloflowError("give a case file and -o/--output (or --resume DIR)"))
     try:
         case = load_case(case_file)
         engine = get_engine(case.engine.name, executable=liggghts)
@@ -126,6 +135,13 @@ def run(case_file: Path = typer.Argument(..., help="YAML case file"),
               f"{sizes['frames']} dump frames)")
     if dust_note(derived):
         out.print(dust_note(derived))
+    _drive(folder, lambda progress: (engine.execute(folder, progress=progress), engine.collect(folder))[1],
+           post_process)
+
+
+def _drive(folder: Path, work, post_process: bool) -> None:
+    """Run ``work(progress)`` (an engine run returning its record) under a progress bar; Ctrl-C
+    and SIGTERM stop it with the folder marked interrupted; then the first results."""
     with _progress_bar() as bar:
         task = bar.add_task("run", total=None, stage="start", step=0)
 
@@ -133,12 +149,11 @@ def run(case_file: Path = typer.Argument(..., help="YAML case file"),
             bar.update(task, completed=step, total=total, stage=stage, step=f"{step}/{total}")
 
         try:
-            engine.execute(folder, progress=progress)
-            record = engine.collect(folder)
+            record = work(progress)
             bar.update(task, completed=bar.tasks[0].total, stage="done")
         except KeyboardInterrupt:
             err.print(f"[yellow]interrupted: the engine was stopped; the run folder {folder} is kept "
-                      "and marked interrupted[/yellow]")
+                      f"and marked interrupted (finish it with: siloflow run --resume {folder})[/yellow]")
             raise typer.Exit(130)
         except SiloflowError as exc:
             bar.stop()
@@ -146,6 +161,21 @@ def run(case_file: Path = typer.Argument(..., help="YAML case file"),
     out.print(f"engine finished in {record.wall_time:.1f} s")
     if post_process:
         _post(folder)
+
+
+def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
+    from .engine import get_engine
+    from .engine.base import run_state
+    try:
+        case = load_case(folder / "case.yaml")
+        engine = get_engine(case.engine.name, executable=liggghts)
+        engine.command(case.engine.ranks)
+        state = run_state(folder).get("state")
+    except SiloflowError as exc:
+        _fail(exc)
+    signal.signal(signal.SIGTERM, _interrupt)
+    out.print(f"resuming {folder} (it was {state})")
+    _drive(folder, lambda progress: engine.resume(folder, progress=progress), post_process)
 
 
 def _post(folder: Path, measured: Path | None = None) -> None:

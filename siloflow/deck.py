@@ -24,6 +24,9 @@ from .errors import SiloflowError
 from .meshes import silo_meshes, write_stl
 
 DECK_NAME = "in.liggghts"
+RESUME_DECK_NAME = "in.resume.liggghts"
+#: the settled bed, written by every deck once settling (and shrinking) ended; --resume starts there
+RESTART_FILE = "output/restart/settled.restart"
 DERIVED_NAME = "derived.json"
 CASE_NAME = "case.yaml"
 
@@ -31,7 +34,7 @@ CASE_NAME = "case.yaml"
 ALLOWED_COMMANDS = frozenset("""
 atom_style atom_modify boundary newton communicate units processors region create_box neighbor
 neigh_modify hard_particles fix pair_style pair_coeff timestep compute variable thermo_style thermo
-thermo_modify dump dump_modify print run unfix label next jump if set group
+thermo_modify dump dump_modify print run unfix label next jump if set group read_restart write_restart
 """.split())
 FORBIDDEN_WORDS = re.compile(r"\b(shell|include|python|system|popen)\b", re.IGNORECASE)
 _SAFE = re.compile(SAFE_NAME_PATTERN.replace("{0,63}", "{0,127}").replace("_.-", "_./-"))
@@ -99,7 +102,7 @@ def _matrix(d: Derived, attr: str, particle_pairs: float | None = None) -> list[
     return out
 
 
-def _properties(case: Case, d: Derived) -> list[dict]:
+def _properties(case: Case, d: Derived, restored: bool = False) -> list[dict]:
     """``fix property/global`` entries: atom types 1..K are the size classes, type K+1 the walls."""
     m = case.materials
     props = []
@@ -111,7 +114,8 @@ def _properties(case: Case, d: Derived) -> list[dict]:
                   ("coefficientRestitution", "peratomtypepair", _matrix(d, "restitution"))]
     else:
         props += [(name, "peratomtypepair", _matrix(d, name)) for name in ("kn", "kt", "gamman", "gammat")]
-    friction = _matrix(d, "friction", 0.0 if case.fill.frictionless else None)   # restored: friction_restore()
+    poured = case.fill.frictionless and not restored      # restored later: friction_restore()
+    friction = _matrix(d, "friction", 0.0 if poured else None)
     props.append(("coefficientFriction", "peratomtypepair", friction))
     if uses_rolling_friction(case):
         props.append(("coefficientRollingFriction", "peratomtypepair", _matrix(d, "rolling_friction")))
@@ -157,7 +161,7 @@ def uses_rolling_friction(case: Case) -> bool:
     return m.particle_particle.rolling_friction > 0 or m.particle_wall.rolling_friction > 0
 
 
-def deck_context(case: Case, d: Derived, walls) -> dict:
+def deck_context(case: Case, d: Derived, walls, resume: bool = False) -> dict:
     """Everything the LIGGGHTS template places, already computed and checked."""
     m = case.materials
     youngs = [e for e, _ in [_modulus_of(case, sp.material) for sp in d.species] + [_modulus_of(case, None)]
@@ -166,7 +170,7 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
     return {
         "name": case.name, "box": d.box, "skin": d.skin,
         "hard_particles": any(e > 1e9 for e in youngs),
-        "properties": _properties(case, d),
+        "properties": _properties(case, d, restored=resume),     # a resumed bed is past the fill
         "contact_model": "hertz" if m.model == "hertz" else "hooke/stiffness",   # hooke: kn, kt computed here
         "rolling": uses_rolling_friction(case),
         "timestep": d.timestep, "gravity": case.gravity,
@@ -205,11 +209,12 @@ def deck_context(case: Case, d: Derived, walls) -> dict:
     }
 
 
-def render_deck_text(case: Case, d: Derived, walls) -> str:
-    """The rendered, checked ``in.liggghts`` text."""
+def render_deck_text(case: Case, d: Derived, walls, resume: bool = False) -> str:
+    """The rendered, checked ``in.liggghts`` text; with ``resume``, the deck that reads the settled
+    bed's restart file and goes on from the static stage."""
     try:
         text = template_environment("liggghts").get_template("in.liggghts.j2").render(
-            deck_context(case, d, walls))
+            {**deck_context(case, d, walls, resume), "resume": resume, "restart_file": RESTART_FILE})
     except jinja2.UndefinedError as exc:
         raise DeckError(f"template needs a value siloflow did not provide: {exc}") from exc
     check_deck(text)
@@ -230,7 +235,7 @@ def write_deck(case: Case, folder: Path) -> Derived:
     walls = silo_meshes(case, d.outlet_z, d.outlet_disc_radius)
     text = render_deck_text(case, d, walls)
     (folder / "meshes").mkdir()
-    for sub in ["output"] + (["output/dumps"] if d.dump_every else []) + (
+    for sub in ["output", "output/restart"] + (["output/dumps"] if d.dump_every else []) + (
             ["output/vtk"] if d.dump_every and case.outputs.vtk else []):
         (folder / sub).mkdir()
     for w in walls:
@@ -252,6 +257,18 @@ def write_deck(case: Case, folder: Path) -> Derived:
     info["sensors"] = {"sectors": sectors, "bands": len([w for w in walls if w.role == "band"]) // sectors}
     write_json(folder / DERIVED_NAME, info)
     return d
+
+
+def write_resume_deck(folder) -> Path:
+    """Write ``in.resume.liggghts`` into a run folder, from its own case.yaml (whose inserts point at
+    the folder's mesh copies); the other files of the folder are left as they are."""
+    from .case import load_case
+    folder = Path(folder)
+    case = load_case(folder / CASE_NAME)
+    d = derive(case)
+    text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius), resume=True)
+    write_text(folder / RESUME_DECK_NAME, text)
+    return folder / RESUME_DECK_NAME
 
 
 def render(case: Case, folder, force: bool = False) -> Path:

@@ -90,6 +90,10 @@ class Engine(ABC):
         """Run the engine in a prepared folder; raise ``EngineRunError`` if it fails."""
 
     @abstractmethod
+    def resume(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
+        """Finish an interrupted run in ``folder`` from its last restart point; return its record."""
+
+    @abstractmethod
     def collect(self, folder: Path) -> RunRecord:
         """Read a finished run's folder and check it completed; raise ``EngineRunError`` if not."""
 

@@ -12,15 +12,21 @@ from pathlib import Path
 from typing import Optional
 
 from ..case import Case
-from ..deck import DECK_NAME, DERIVED_NAME, render
+from ..deck import DECK_NAME, DERIVED_NAME, RESTART_FILE, RESUME_DECK_NAME, render, write_resume_deck
 from ..engine_output import FLOW_COLUMNS, read_ave_time
+from ..atomic_files import write_text
 from ..errors import EngineRunError, ReadError, SetupError
-from .base import Engine, ProgressCallback, RunRecord, write_status
+from .base import Engine, ProgressCallback, RunRecord, run_state, write_status
 from .liggghts_log import LogState, decode, diagnose, parse_log_text
 
 LOG_NAME = "log.liggghts"
 SCREEN_NAME = "screen.txt"
 RECORD_NAME = "run_record.json"
+#: a resumed run's own log and screen (the first part's stay as they were)
+RESUME_LOG_NAME = "log.resume.liggghts"
+RESUME_SCREEN_NAME = "screen.resume.txt"
+#: the ave/time tables a resumed run continues (the first part's rows are kept up to the restart)
+CONTINUED_TABLES = ("output/flow.txt", "output/wall_forces.txt")
 
 
 class LiggghtsEngine(Engine):
@@ -62,11 +68,11 @@ class LiggghtsEngine(Engine):
         write_status(folder, "rendered")
         return folder
 
-    def command(self, ranks: int) -> list[str]:
+    def command(self, ranks: int, deck: str = DECK_NAME, log: str = LOG_NAME) -> list[str]:
         """The command line that runs the deck in its folder."""
         exe = self._which(self.executable, "LIGGGHTS binary")
         # '-screen none' segfaults when LIGGGHTS reads an STL (ENGINE_NOTES.md): keep the screen on a pipe
-        base = [exe, "-in", DECK_NAME, "-log", LOG_NAME]
+        base = [exe, "-in", deck, "-log", log]
         # LIGGGHTS' screen is block-buffered on a pipe, and an ERROR on one rank ends in MPI_Abort,
         # which loses the buffer (the message with it): line-buffer it (coreutils' stdbuf)
         stdbuf = shutil.which("stdbuf")
@@ -83,14 +89,16 @@ class LiggghtsEngine(Engine):
         return launcher + base
 
     # ------------------------------------------------------------------ run
-    def execute(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
+    def execute(self, folder: Path, progress: Optional[ProgressCallback] = None, resume: bool = False) -> RunRecord:
         folder = Path(folder)
         derived = _read_derived(folder)
+        deck, log, screen_name = (RESUME_DECK_NAME, RESUME_LOG_NAME, RESUME_SCREEN_NAME) if resume else (
+            DECK_NAME, LOG_NAME, SCREEN_NAME)
         missing = [w["file"] for w in derived["walls"] if not (folder / w["file"]).is_file()]
-        if missing or not (folder / DECK_NAME).is_file():
-            raise SetupError(f"{folder} is incomplete: missing {', '.join(missing) or DECK_NAME}; "
+        if missing or not (folder / deck).is_file():
+            raise SetupError(f"{folder} is incomplete: missing {', '.join(missing) or deck}; "
                              "re-render it with 'siloflow render'")
-        cmd = self.command(int(derived["engine_ranks"]))
+        cmd = self.command(int(derived["engine_ranks"]), deck, log)
         planned = {k: int(v) for k, v in derived["planned_steps"].items()}
         state = LogState()
         tail: deque[str] = deque(maxlen=25)
@@ -99,7 +107,7 @@ class LiggghtsEngine(Engine):
                                 stdin=subprocess.DEVNULL, start_new_session=True, preexec_fn=_die_with_parent)
         write_status(folder, "running", command=cmd, engine_pid=proc.pid, siloflow_pid=os.getpid())
         try:
-            with open(folder / SCREEN_NAME, "wb") as screen:
+            with open(folder / screen_name, "wb") as screen:
                 for raw in proc.stdout:
                     screen.write(raw)
                     line = decode(raw)
@@ -127,16 +135,41 @@ class LiggghtsEngine(Engine):
                                  cause=cause, fix=fix, log_tail="\n".join(tail))
         return record
 
+    def resume(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
+        """Finish an interrupted run: from the settled bed's restart file if the run got that far
+        (the static, opening and discharge stages are run again), else from the start."""
+        folder = Path(folder)
+        state = run_state(folder).get("state")
+        if state in ("running", "complete"):
+            raise SetupError(f"{folder} is {state}: there is nothing to resume")
+        restart = folder / RESTART_FILE
+        step = _restart_step(folder)
+        if not restart.is_file() or step is None:          # interrupted before the bed settled
+            self.execute(folder, progress)
+            return self.collect(folder)
+        for name in CONTINUED_TABLES:                       # the first part's tables, kept aside
+            if (folder / name).is_file():
+                os.replace(folder / name, folder / (name + ".before_resume"))
+        write_resume_deck(folder)
+        try:
+            self.execute(folder, progress, resume=True)
+        finally:
+            for name in CONTINUED_TABLES:
+                _splice_table(folder / (name + ".before_resume"), folder / name, step)
+        return self.collect(folder)
+
     def collect(self, folder: Path) -> RunRecord:
         """Check the run: every stage reached, insertion complete, no particle lost through a wall."""
         folder = Path(folder)
         derived = _read_derived(folder)
         try:
-            text = decode((folder / LOG_NAME).read_bytes())
+            text = _log_text(folder)
             record = RunRecord(**json.loads((folder / RECORD_NAME).read_text()))
         except (OSError, ValueError, TypeError) as exc:
             raise ReadError(f"{folder} holds no finished LIGGGHTS run ({exc})") from None
         state = parse_log_text(text)
+        record.stage_steps, record.inserted, record.completed = state.stage_steps, state.inserted, state.done
+        record.settled_ke_pe = state.settled_ke_pe
         tail = "\n".join(text.splitlines()[-15:])
 
         def fail(message, cause="", fix=""):
@@ -166,8 +199,57 @@ class LiggghtsEngine(Engine):
                  f"at step {int(first.step)})",
                  "particles escaped through a wall: time step too large for the contact stiffness, or "
                  "walls too soft for the load", "lower engine.timestep_fraction or stiffen the walls")
+        write_text(folder / RECORD_NAME, json.dumps(record.to_json(), indent=2))
         write_status(folder, "complete")
         return record
+
+
+_RESTART_MARK = "SILOFLOW_RESTART "
+
+
+def _restart_step(folder: Path) -> Optional[int]:
+    """The step of the settled bed's restart file, from the first part's log (None if not written)."""
+    try:
+        text = decode((folder / LOG_NAME).read_bytes())
+    except OSError:
+        return None
+    for line in text.splitlines():
+        if line.startswith(_RESTART_MARK):
+            return int(float(line.split()[1]))
+    return None
+
+
+def _log_text(folder: Path) -> str:
+    """The run's log: the first part, and for a resumed run its part up to the restart followed by
+    the resumed part's log."""
+    text = decode((folder / LOG_NAME).read_bytes())
+    resumed = folder / RESUME_LOG_NAME
+    if not resumed.is_file():
+        return text
+    lines = text.splitlines()
+    cut = next((k for k, line in enumerate(lines) if line.startswith(_RESTART_MARK)), len(lines))
+    return "\n".join(lines[:cut + 1]) + "\n" + decode(resumed.read_bytes())
+
+
+def _splice_table(before: Path, after: Path, step: int) -> None:
+    """One ave/time table from the first part's rows before ``step`` and the resumed part's rows
+    (headers of the first part), written atomically over ``after``."""
+    if not before.is_file():
+        return
+    old = before.read_text(errors="replace").splitlines()
+    new = after.read_text(errors="replace").splitlines() if after.is_file() else []
+
+    def step_of(line):
+        try:
+            return int(line.split()[0])
+        except (IndexError, ValueError):
+            return None
+
+    head = [ln for ln in old if ln.startswith("#")]
+    rows = [ln for ln in old if not ln.startswith("#") and (step_of(ln) is not None and step_of(ln) < step)]
+    rows += [ln for ln in new if not ln.startswith("#") and step_of(ln) is not None]
+    write_text(after, "\n".join(head + rows) + "\n")
+    before.unlink()
 
 
 def _read_derived(folder: Path) -> dict:
