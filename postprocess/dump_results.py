@@ -8,7 +8,6 @@ from the bottom and the free surface).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import asdict
 
 import numpy as np
