@@ -140,3 +140,27 @@ def test_time_step_verdict_of_the_engine_stops_the_run(tmp_path, quick_dict):
     guard = min(1.0, 1.5 * quick_dict["engine"]["timestep_fraction"])
     line = next(ln for ln in deck.splitlines() if "check/timestep/gran" in ln)
     assert [float(v) for v in line.split()[-2:]] == pytest.approx([guard, guard])
+
+
+def test_resume_refuses_running_and_complete_runs(tmp_path, quick_dict):
+    from siloflow.engine.base import write_status
+
+    engine = LiggghtsEngine(executable="sh")
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    write_status(folder, "complete")
+    with pytest.raises(SetupError, match="complete: there is nothing to resume"):
+        engine.resume(folder)
+    write_status(folder, "running", engine_pid=os.getpid(), siloflow_pid=os.getpid())   # alive
+    with pytest.raises(SetupError, match="running"):
+        engine.resume(folder)
+
+
+def test_splice_keeps_the_first_part_before_the_restart_and_the_resumed_rows(tmp_path):
+    from siloflow.engine.liggghts import _splice_table
+
+    before, after = tmp_path / "flow.txt.before_resume", tmp_path / "flow.txt"
+    before.write_text("# header 1\n# step a b\n0 1 2\n100 1 2\n200 9 9\n300 9 9\n")   # 200, 300: lost part
+    after.write_text("# header 1\n# step a b\n200 3 4\n300 5 6\n")
+    _splice_table(before, after, 200)
+    assert after.read_text() == "# header 1\n# step a b\n0 1 2\n100 1 2\n200 3 4\n300 5 6\n"
+    assert not before.exists()
