@@ -36,7 +36,7 @@ paper-a-quick: install
 
 paper-b-quick: install
 	$(VENV)/bin/siloflow run decks/paper_b_quick.yaml -o runs/paper_b_quick --force
-	$(VENV)/bin/siloflow cg runs/paper_b_quick --width 2 --unit radius
+	$(VENV)/bin/siloflow cg runs/paper_b_quick --width 2 --unit radius --nr 50 --nz 150
 
 paper-a: install
 	$(VENV)/bin/siloflow run decks/paper_a_spheres.yaml -o runs/paper_a_spheres --force
