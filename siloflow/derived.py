@@ -151,6 +151,13 @@ class Derived:
         return len(self.species) + 1
 
     @property
+    def expected_atoms(self) -> int:
+        """Atoms (spheres) the fill inserts: every sphere of every clump, and the dust."""
+        grains = [sp for sp in self.species if sp.stream == "grains"]
+        per_grain = sum(sp.number_fraction * sp.n_spheres for sp in grains)
+        return round(self.particle_count * per_grain) + self.dust_count
+
+    @property
     def face_type(self) -> int | None:
         """Atom type of a slab silo's front and back faces (after the walls), or None."""
         return self.wall_type + 1 if self.has_faces else None
@@ -193,6 +200,7 @@ class Derived:
         out["species"] = [{**asdict(sp), "mass": sp.mass} for sp in self.species]
         out["wall_type"] = self.wall_type
         out["face_type"] = self.face_type
+        out["expected_atoms"] = self.expected_atoms
         out["mass_weights"] = self.mass_weights
         out["planned_steps"] = self.planned_steps
         return out

@@ -184,6 +184,8 @@ def test_clump_deck_uses_multisphere_and_keeps_dust_on_its_own_integrator():
 
 # ---------------------------------------------------------------- porosity of clumps
 def test_porosity_of_clumps_counts_each_union_once():
+    from postprocess import porosity
+    porosity._UNION_CACHE.clear()       # shapes are cached to 1e-4 of a radius: start from exact ones
     grain = wheat_grain()
     rng = np.random.default_rng(7)
     centers = np.array([(x, y, z) for x in range(4) for y in range(4) for z in range(4)], float) * 0.01
