@@ -137,10 +137,10 @@ def test_slab_run_keeps_grains_in_the_slab_and_senses_both_walls(slab_run):
     forces = read_ave_time(folder / "output" / "wall_forces.txt", wall_force_columns(walls))
     still = forces[(forces.step > record.stage_steps["static"]) & (forces.step <= record.stage_steps["open"])]
     fx = still[[c for c in still if c.endswith("_fx")]]
-    sides = still[[f"{w['name']}_fx" for w in walls if w["role"] in ("band", "wall")]].abs().sum(axis=1)
-    assert np.all(np.abs(fx.sum(axis=1)) < 0.02 * sides)
+    load = fx.abs().sum(axis=1)                      # every wall's horizontal load, hopper and plate too
+    assert np.all(np.abs(fx.sum(axis=1)) < 0.03 * load)   # a bed at rest (KE/PE < 1e-5): sampled 1-2 %
     faces = still[[f"{w['name']}_fx" for w in walls if w["role"] == "face"]].abs().sum(axis=1)
-    assert np.all(faces < 1e-3 * sides)
+    assert np.all(faces < 1e-3 * load)
     # grains left through the slot; Wr (surface speed) agrees with Wf (outlet count)
     assert summary["discharged_mass_kg"] > 0.3 * summary["initial_mass_kg"]
     assert summary["frame_analyses"]["flow_rate_surface_over_outlet"] == pytest.approx(1.0, abs=0.15)
