@@ -36,7 +36,7 @@ def measure(data: dict, folder: Path) -> dict:
     d = derive(case)
     record = LiggghtsEngine().run(case, folder)
     summary = analyse(folder)
-    dust_mass = d.dust_count * next(sp.mass for sp in d.species if sp.stream == "dust")
+    dust_mass = d.dust_count * d.dust.mass
     fa = summary.get("frame_analyses", {})
     return {"scale": case.particles.dust.density_scale, "seed": case.seed, "dt": d.timestep,
             "dt_without_dust": d.timestep_without_dust, "wall_s": record.wall_time,

@@ -132,6 +132,14 @@ def clump_bodies(frame):
     return body, int(multi.sum())
 
 
+def _rows_by_body(body: np.ndarray, rows: np.ndarray):
+    """The given rows grouped by their body index (>= 0), one array per body, by one sort."""
+    rows = rows[body[rows] >= 0]
+    rows = rows[np.argsort(body[rows], kind="stable")]
+    cuts = np.flatnonzero(np.diff(body[rows])) + 1
+    return np.split(rows, cuts) if len(rows) else []
+
+
 _UNION_CACHE: dict = {}
 
 
@@ -150,13 +158,10 @@ def grain_weights(frame) -> np.ndarray | None:
     found = clump_bodies(frame)
     if found is None:
         return None
-    body, n_bodies = found
+    body, _ = found
     pos, rad = frame.positions(), frame.radii()
     weights = np.ones(frame.n)
-    order = np.argsort(body, kind="stable")
-    starts = np.searchsorted(body[order], np.arange(n_bodies + 1))
-    for b in range(n_bodies):
-        rows = order[starts[b]:starts[b + 1]]
+    for rows in _rows_by_body(body, np.arange(frame.n)):
         key = _clump_key(pos[rows], rad[rows])
         if key not in _UNION_CACHE:
             _UNION_CACHE[key] = union_volume(pos[rows], rad[rows]) / float((4.0 / 3.0 * np.pi * rad[rows] ** 3).sum())
@@ -175,10 +180,8 @@ def section_weights(frame, axis: int, plane: float) -> np.ndarray | None:
     h = np.abs(pos[:, axis] - plane)
     cut = (h < rad) & (body >= 0)
     weights = np.ones(frame.n)
-    rows_cut = np.flatnonzero(cut)
     keep = [k for k in range(3) if k != axis]
-    for b in np.unique(body[rows_cut]):
-        rows = rows_cut[body[rows_cut] == b]
+    for rows in _rows_by_body(body, np.flatnonzero(cut)):
         if len(rows) < 2:
             continue
         circle = np.sqrt(rad[rows] ** 2 - h[rows] ** 2)
@@ -206,10 +209,16 @@ class Porosity(FrameAnalysis):
         pos, rad = frame.positions(), frame.radii()
         tree = cKDTree(pos) if len(pos) else None
         volume_weights = grain_weights(frame)
+        sections = {}                        # circle regions often share a plane (paper A: nine)
         rows = []
         for region in self.regions:
-            weights = (section_weights(frame, region.axis, region.plane) if region.shape == "circle"
-                       else volume_weights)
+            if region.shape == "circle":
+                plane = (region.axis, region.plane)
+                if plane not in sections:
+                    sections[plane] = section_weights(frame, *plane)
+                weights = sections[plane]
+            else:
+                weights = volume_weights
             solid = region.solid(pos, rad, tree, weights) if tree is not None else 0.0
             phi = solid / region.measure
             row = {"region": region.name, "shape": region.shape, "solid_fraction": phi, "porosity": 1.0 - phi}

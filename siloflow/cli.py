@@ -6,7 +6,6 @@ siloflow's named errors, mapped here to a message and exit code 1.
 from __future__ import annotations
 
 import json
-import math
 import signal
 from pathlib import Path
 from typing import List, Optional
@@ -69,10 +68,11 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
 
 def clump_note(d) -> str:
     """A clump shape's union volume and mass (empty without clumps)."""
-    clump = next((sp for sp in d.species if sp.kind == "clump"), None)
+    from .contact_physics import sphere_volume
+    clump = next((sp for sp in d.grains if sp.kind == "clump"), None)
     if clump is None:
         return ""
-    spheres = sum(4.0 / 3.0 * math.pi * s[3] ** 3 for s in clump.spheres)
+    spheres = sum(sphere_volume(s[3]) for s in clump.spheres)
     return (f"clump: {clump.n_spheres} spheres, union volume {clump.volume * 1e9:.4g} mm3 (the spheres' sum "
             f"{spheres * 1e9:.4g} mm3), mass {clump.mass * 1e3:.4g} g")
 

@@ -102,13 +102,19 @@ def _matrix(d: Derived, attr: str, particle_pairs: float | None = None) -> list[
     return out
 
 
+def _type_moduli(case: Case, d: Derived) -> list[tuple]:
+    """(Young's modulus, Poisson ratio) per atom type: the species' materials, then the walls
+    (and a slab's faces). None for the linear models, which have no modulus."""
+    walls = [_modulus_of(case, None)] * (d.n_types - len(d.species))
+    return [_modulus_of(case, sp.material) for sp in d.species] + walls
+
+
 def _properties(case: Case, d: Derived, restored: bool = False) -> list[dict]:
     """``fix property/global`` entries: atom types 1..K are the size classes, type K+1 the walls."""
     m = case.materials
     props = []
     if m.model == "hertz":
-        moduli = [_modulus_of(case, sp.material) for sp in d.species] + [_modulus_of(case, None)] * (
-            d.n_types - len(d.species))
+        moduli = _type_moduli(case, d)
         props += [("youngsModulus", "peratomtype", [e for e, _ in moduli]),
                   ("poissonsRatio", "peratomtype", [nu for _, nu in moduli]),
                   ("coefficientRestitution", "peratomtypepair", _matrix(d, "restitution"))]
@@ -126,7 +132,7 @@ def _properties(case: Case, d: Derived, restored: bool = False) -> list[dict]:
 def particle_templates(case: Case, d: Derived) -> list[dict]:
     """The grain templates of the distribution (spheres per size class, or the clump shape);
     with paper B's shrinking, only the poured largest size."""
-    grains = [sp for sp in d.species if sp.stream == "grains"]
+    grains = d.grains
     if d.shrink_classes:
         grains = [max(grains, key=lambda sp: sp.radius)]
         weights = [1.0]
@@ -139,7 +145,7 @@ def particle_templates(case: Case, d: Derived) -> list[dict]:
 
 def dust_insertion(d: Derived, particle_rate: float) -> dict | None:
     """Dust template and insertion (None without dust): batches in proportion to the grains'."""
-    dust = next((sp for sp in d.species if sp.stream == "dust"), None)
+    dust = d.dust
     if dust is None:
         return None
     return {"type": dust.type, "seed": d.seeds["templates"][dust.type - 1], "density": dust.density,
@@ -164,8 +170,7 @@ def uses_rolling_friction(case: Case) -> bool:
 def deck_context(case: Case, d: Derived, walls, resume: bool = False) -> dict:
     """Everything the LIGGGHTS template places, already computed and checked."""
     m = case.materials
-    youngs = [e for e, _ in [_modulus_of(case, sp.material) for sp in d.species] + [_modulus_of(case, None)]
-              if e is not None]
+    youngs = [e for e, _ in _type_moduli(case, d) if e is not None]
     particle_rate = d.insertion_batch / (d.insert_every * d.timestep)
     return {
         "name": case.name, "box": d.box, "skin": d.skin,

@@ -151,10 +151,19 @@ class Derived:
         return len(self.species) + 1
 
     @property
+    def grains(self) -> list[Species]:
+        """The species of the case's particles (size classes or the clump shape)."""
+        return [sp for sp in self.species if sp.stream == "grains"]
+
+    @property
+    def dust(self) -> Species | None:
+        """The dust species, if any."""
+        return next((sp for sp in self.species if sp.stream == "dust"), None)
+
+    @property
     def expected_atoms(self) -> int:
         """Atoms (spheres) the fill inserts: every sphere of every clump, and the dust."""
-        grains = [sp for sp in self.species if sp.stream == "grains"]
-        per_grain = sum(sp.number_fraction * sp.n_spheres for sp in grains)
+        per_grain = sum(sp.number_fraction * sp.n_spheres for sp in self.grains)
         return round(self.particle_count * per_grain) + self.dust_count
 
     @property

@@ -64,7 +64,7 @@ def test_paper_a_decks_carry_tables_1_and_2(name):
     d = derive(case)
     if quick:       # the dust remedy: the dust's cost falls from 67x to about 3x, at 8 % of the mass
         assert d.timestep_without_dust / d.timestep < 4
-        dust_mass = d.dust_count * next(sp.mass for sp in d.species if sp.stream == "dust")
+        dust_mass = d.dust_count * d.dust.mass
         assert dust_mass < 0.1 * d.total_mass
     else:
         assert d.timestep_without_dust / d.timestep > 50
