@@ -154,6 +154,26 @@ def _ring_moments(kind, norm, cutoff, width, d0, two_rr, gl_x, gl_w, u_x, u_w):
 
 
 @njit(parallel=True, cache=True)
+def _moment_table(kind, norm, cutoff, width, r_nodes, rho_src, dz_vals, gl_x, gl_w, u_x, u_w, out):
+    """out[:, q, ir, j] = ring moments (<phi>, <phi cos a>, <phi cos^2 a>) for a node at radius
+    r_nodes[ir] and a source at signed radius rho_src[j], dz_vals[q] apart in z. A negative
+    radius is the mirror image through the axis: <phi cos a> changes sign (cg_lattice)."""
+    c2 = cutoff * cutoff
+    for q in prange(dz_vals.shape[0]):
+        for ir in range(r_nodes.shape[0]):
+            r = r_nodes[ir]
+            for j in range(rho_src.shape[0]):
+                rho = abs(rho_src[j])
+                d0 = (r - rho) * (r - rho) + dz_vals[q] * dz_vals[q]
+                if d0 >= c2:
+                    continue
+                m0, m1, mc2 = _ring_moments(kind, norm, cutoff, width, d0, 2.0 * r * rho, gl_x, gl_w, u_x, u_w)
+                out[0, q, ir, j] = m0
+                out[1, q, ir, j] = m1 if rho_src[j] >= 0.0 else -m1
+                out[2, q, ir, j] = mc2
+
+
+@njit(parallel=True, cache=True)
 def _accumulate_rz(dr, nr, z0, dz_cell, nz, rho_s, z_s, weights, codes, dest, lo, hi,
                    kind, norm, cutoff, width, gl_x, gl_w, u_x, u_w, out):
     """Axisymmetric accumulation: out[iz, ir, dest + c, slot] += weights * kernel moment."""
@@ -290,24 +310,44 @@ def contact_points(pos_i, pos_j, force, n_s=None, kernel: Kernel | None = None):
 
     ``n_s``: points per contact (int), or None to choose per contact by
     :func:`line_points_needed` for ``kernel``. Returns (points (k, 3), tensors (k, 3, 3))."""
-    pos_i = np.asarray(pos_i, float)
-    pos_j = np.asarray(pos_j, float)
-    force = np.asarray(force, float)
+    pos_i = np.ascontiguousarray(pos_i, float)
+    pos_j = np.ascontiguousarray(pos_j, float)
+    force = np.ascontiguousarray(force, float)
     if n_s is None:
         if kernel is None:
             raise ValueError("contact_points needs n_s or the kernel")
         need = line_points_needed(np.linalg.norm(pos_i - pos_j, axis=1), kernel)
-        parts = [contact_points(pos_i[need == n], pos_j[need == n], force[need == n], int(n))
-                 for n in np.unique(need)]
-        if not parts:
-            return np.empty((0, 3)), np.empty((0, 3, 3))
-        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
-    b = pos_i - pos_j
-    s, w = gl_line_points(n_s)
-    pts = np.asarray(pos_j, float)[:, None, :] + s[None, :, None] * b[:, None, :]
-    t = np.asarray(force, float)[:, :, None] * b[:, None, :]
-    tens = w[None, :, None, None] * t[:, None, :, :]
-    return pts.reshape(-1, 3), tens.reshape(-1, 3, 3)
+    else:
+        need = np.full(len(pos_i), int(n_s))
+    need = need.astype(np.int64)
+    start = np.concatenate([[0], np.cumsum(need)]).astype(np.int64)
+    nmax = int(need.max(initial=1))
+    nodes = np.zeros((nmax + 1, nmax))
+    weights = np.zeros((nmax + 1, nmax))
+    for n in np.unique(need):
+        nodes[n, :n], weights[n, :n] = gl_line_points(int(n))
+    pts = np.empty((start[-1], 3))
+    tens = np.empty((start[-1], 3, 3))
+    _line_sources(pos_i, pos_j, force, need, start, nodes, weights, pts, tens)
+    return pts, tens
+
+
+@njit(cache=True)
+def _line_sources(pos_i, pos_j, force, need, start, nodes, weights, pts, tens):
+    """Points r_j + s b and tensors w_s f (x) b of every contact's Gauss-Legendre rule."""
+    for c in range(pos_i.shape[0]):
+        n = need[c]
+        for q in range(n):
+            k = start[c] + q
+            s = nodes[n, q]
+            w = weights[n, q]
+            for a in range(3):
+                b_a = pos_i[c, a] - pos_j[c, a]
+                pts[k, a] = pos_j[c, a] + s * b_a
+            for a in range(3):
+                fa = w * force[c, a]
+                for b in range(3):
+                    tens[k, a, b] = fa * (pos_i[c, b] - pos_j[c, b])
 
 
 def _z_ranges(z_sorted, z_nodes, cutoff):
@@ -364,17 +404,28 @@ class CartesianGrid:
 
 class AxisymmetricGrid:
     """(r, z) grid: ``nr`` cells over 0..r_max about the z axis through (x0, y0), ``nz`` cells
-    over z_lo..z_hi; fields are azimuthal averages per unit volume at cell centres."""
+    over z_lo..z_hi; fields are azimuthal averages per unit volume at cell centres.
+
+    ``method``: ``"exact"`` (every source against every node within reach, moments by
+    quadrature: agrees with a brute-force sum to round-off) or ``"lattice"`` (sources spread
+    onto a lattice ``refine`` times finer, tabulated moments, BLAS: many times faster for large
+    frames, with a small interpolation error; see :mod:`postprocess.cg_lattice`)."""
 
     kind = "rz"
+    METHODS = ("exact", "lattice")
 
-    def __init__(self, r_max: float, z_lo: float, z_hi: float, nr: int, nz: int, x0: float = 0.0, y0: float = 0.0):
+    def __init__(self, r_max: float, z_lo: float, z_hi: float, nr: int, nz: int, x0: float = 0.0, y0: float = 0.0,
+                 method: str = "exact", refine: int = 2):
         if not (r_max > 0 and z_hi > z_lo and nr >= 1 and nz >= 1):
             raise ValueError("RZ grid: r_max > 0, z_hi > z_lo, nr and nz >= 1")
+        if method not in self.METHODS:
+            raise ValueError(f"RZ grid: method must be one of {', '.join(self.METHODS)}")
         self.r_max, self.z_lo, self.z_hi, self.nr, self.nz = float(r_max), float(z_lo), float(z_hi), int(nr), int(nz)
         self.x0, self.y0 = float(x0), float(y0)
         self.dr = self.r_max / self.nr
         self.dz = (self.z_hi - self.z_lo) / self.nz
+        self.method, self.refine = method, int(refine)
+        self._lattices = {}
 
     def axes(self) -> dict:
         return {"r": (np.arange(self.nr) + 0.5) * self.dr, "z": self.z_lo + (np.arange(self.nz) + 0.5) * self.dz}
@@ -399,14 +450,27 @@ class AxisymmetricGrid:
     def contact_frame(self, pts, tens):
         p = self._shift(pts)
         rho, _, c, s = to_cylindrical(p, np.zeros_like(p))
-        rot = np.zeros((len(p), 3, 3))           # rows: e_r, e_theta, e_z in Cartesian components
-        rot[:, 0, 0], rot[:, 0, 1] = c, s
-        rot[:, 1, 0], rot[:, 1, 1] = -s, c
-        rot[:, 2, 2] = 1.0
-        local = np.einsum("nai,nij,nbj->nab", rot, tens, rot)
-        return np.column_stack([rho, np.zeros_like(rho), p[:, 2]]), local.reshape(-1, 9)
+        t = tens.reshape(-1, 9)                  # R T R^T, R's rows e_r = (c, s, 0), e_theta = (-s, c, 0), e_z
+        xx, xy, xz, yx, yy, yz, zx, zy, zz = t.T
+        cc, ss, cs = c * c, s * s, c * s
+        local = np.column_stack([cc * xx + cs * (xy + yx) + ss * yy,
+                                 cc * xy - ss * yx + cs * (yy - xx),
+                                 c * xz + s * yz,
+                                 cc * yx - ss * xy + cs * (yy - xx),
+                                 ss * xx - cs * (xy + yx) + cc * yy,
+                                 c * yz - s * xz,
+                                 c * zx + s * zy,
+                                 c * zy - s * zx,
+                                 zz])
+        return np.column_stack([rho, np.zeros_like(rho), p[:, 2]]), local
 
     def accumulate(self, kernel: Kernel, pos, weights, dest, nfields, codes):
+        if self.method == "lattice":
+            from .cg_lattice import RingMomentLattice
+
+            if kernel not in self._lattices:             # tables: once per kernel, reused by every frame
+                self._lattices[kernel] = RingMomentLattice(self, kernel, self.refine)
+            return self._lattices[kernel].accumulate(pos, weights, dest, nfields, codes)
         order = np.argsort(pos[:, 2], kind="stable")
         z_nodes = self.axes()["z"]
         lo, hi = _z_ranges(pos[order, 2], z_nodes, kernel.cutoff)

@@ -127,6 +127,7 @@ def analyse(folder, measured_pressure=None) -> dict:
 
     summary = {
         "particles_inserted": run.record.get("inserted"),
+        "fill_losses": run.record.get("fill_losses", 0),
         "initial_mass_kg": initial_mass,
         "settled_ke_pe": run.record.get("settled_ke_pe"),
         "time_open_s": t_open,
@@ -171,7 +172,9 @@ def report_text(summary: dict, run: RunOutputs) -> str:
     """A short human-readable report of a run's results (Markdown)."""
     fb, fr = summary["force_balance"], summary["flow_rate"]
     lines = [f"# Run report: {run.folder.name}", "",
-             f"- particles inserted: {summary['particles_inserted']}, mass {_fmt(summary['initial_mass_kg'] * 1000)} g",
+             f"- particles inserted: {summary['particles_inserted']}, mass {_fmt(summary['initial_mass_kg'] * 1000)} g"
+             + (f" ({summary['fill_losses']} atoms left the box while pouring; the bed settled without them)"
+                if summary.get("fill_losses") else ""),
              f"- settled at KE/PE = {_fmt(summary['settled_ke_pe'], '.2e')}; outlet opened at t = "
              f"{_fmt(summary['time_open_s'])} s",
              f"- force balance of the settled bed: walls + bottom carry {_fmt(fb['ratio'], '.4f')} x the weight "

@@ -164,3 +164,25 @@ def test_splice_keeps_the_first_part_before_the_restart_and_the_resumed_rows(tmp
     _splice_table(before, after, 200)
     assert after.read_text() == "# header 1\n# step a b\n0 1 2\n100 1 2\n200 3 4\n300 5 6\n"
     assert not before.exists()
+
+
+@pytest.mark.parametrize("templates, atoms, expected", [
+    (3990, 3990, "insertion fell short: 3990 of 4000 grains"),          # the fixes did not place them all
+    (4000, 3900, r"100 of 4000 atoms \(spheres\) left the box during the fill"),   # placed, then lost: > 1 %
+    (4000, 3999, "the run ended before the discharge stage finished"),  # 1 lost: recorded, not the failure
+])
+def test_short_insertion_and_fill_losses_are_told_apart(tmp_path, quick_dict, templates, atoms, expected):
+    quick_dict["engine"]["ranks"] = 1
+    quick_dict["fill"] = {"count": 4000}
+    half = templates // 2
+    log = "\n".join(["SILOFLOW_STAGE fill 100",
+                     f"INFO: Particle insertion ins: inserted {half} particle templates (mass 1e-3) at step 1",
+                     f"INFO: Particle insertion ins: inserted {templates - half} particle templates (mass 1e-3) at step 50",
+                     f"   100 0.1 {atoms} 0 0 0 0 0", f"SILOFLOW_INSERTED {atoms}"])
+    # the engine writes its log (-log log.liggghts, the command's last argument) and stops after the fill
+    exe = _fake_engine(tmp_path, f"for a; do last=$a; done\nprintf '%s\\n' '{log}' | tee \"$last\"\nexit 0\n")
+    engine = LiggghtsEngine(executable=exe)
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    engine.execute(folder)
+    with pytest.raises(EngineRunError, match=expected):
+        engine.collect(folder)

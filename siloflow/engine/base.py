@@ -38,6 +38,8 @@ class RunRecord:
     settled_ke_pe: Optional[float]
     completed: bool
     warnings: list[str] = field(default_factory=list)
+    templates_inserted: Optional[int] = None   # grains + dust spheres the insertion fixes placed
+    fill_losses: int = 0                       # atoms that left the box during the fill (recorded, < 1 %)
 
     def to_json(self) -> dict:
         return asdict(self)

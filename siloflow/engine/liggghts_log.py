@@ -10,6 +10,8 @@ from typing import Optional
 _STAGE = re.compile(r"^SILOFLOW_STAGE (\w+) (\d+)\s*$")
 _MARK = re.compile(r"^SILOFLOW_(INSERTED|SETTLED|NOT_SETTLED|DONE)\s*(\S*)\s*$")
 _THERMO = re.compile(r"^\s*(\d+)\s+([-+0-9.eE]+)\s+(\d+)(\s+[-+0-9.eEnaif]+)*\s*$")
+#: an insertion fix's report of one batch (fix id, templates: a clump or a sphere each)
+_INSERT_BATCH = re.compile(r"^INFO: Particle insertion (\S+): inserted (\d+) particle templates")
 _ERROR = re.compile(r"^(ERROR( on proc \d+)?:.*)$")
 _WARNING = re.compile(r"^(WARNING:.*)$")
 #: check/timestep/gran's verdict that the time step is too large: a failure, not a warning
@@ -31,7 +33,8 @@ class LogState:
     stage: Optional[str] = None
     step: int = 0
     atoms: Optional[int] = None
-    inserted: Optional[int] = None
+    inserted: Optional[int] = None              # atoms (spheres) in the box after the fill
+    templates: dict[str, int] = field(default_factory=dict)   # per insertion fix: grains or dust spheres
     settled_ke_pe: Optional[float] = None
     not_settled_ke_pe: Optional[float] = None
     done: bool = False
@@ -64,6 +67,10 @@ class LogState:
                 self.not_settled_ke_pe = float(value)
             elif kind == "DONE":
                 self.done = True
+            return False
+        m = _INSERT_BATCH.match(line)
+        if m:
+            self.templates[m.group(1)] = self.templates.get(m.group(1), 0) + int(m.group(2))
             return False
         m = _ERROR.match(line)
         if m:
