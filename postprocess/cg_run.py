@@ -74,7 +74,7 @@ def setup_from_run(folder: Path) -> CgSetup:
 
 def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: float = 2.0, unit: str = "radius",
            nr: int = 100, nz: int = 300, species: str | None = "radius", per_frame: bool = False,
-           grid_kind: str = "rz", every: int = 1) -> dict:
+           grid_kind: str = "rz", every: int = 1, method: str = "exact", refine: int = 2) -> dict:
     """Coarse-grain the frames in the window; write fields.nc, profiles, summary and figures to ``out``."""
     out.mkdir(parents=True, exist_ok=True)
 
@@ -96,7 +96,7 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
         t = 0.5 * setup.slab_thickness
         grid = CartesianGrid([-setup.r_max, -t, setup.z_lo], [setup.r_max, t, setup.z_hi], (nr, 1, nz))
     elif grid_kind == "rz":
-        grid = AxisymmetricGrid(setup.r_max, setup.z_lo, setup.z_hi, nr, nz)
+        grid = AxisymmetricGrid(setup.r_max, setup.z_lo, setup.z_hi, nr, nz, method=method, refine=refine)
     else:
         grid = CartesianGrid([-setup.r_max, -setup.r_max, setup.z_lo], [setup.r_max, setup.r_max, setup.z_hi],
                              (nr, nr, nz))
@@ -111,6 +111,8 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
     summary = {"frames": len(cg.steps), "steps": [cg.steps[0], cg.steps[-1]], "grid": grid_kind,
                "contacts": setup.contacts is not None, "wall_contacts": setup.wall_contacts is not None,
                "outlet_radius_m": setup.outlet_radius,
+               "method": method if grid_kind == "rz" else "exact", **({"lattice_refine": refine} if
+                                                                       grid_kind == "rz" and method == "lattice" else {}),
                "z_outlet_m": setup.z_outlet, **kernel.describe()}
     if grid_kind == "rz":
         prof = outlet_profiles(ds, setup.z_outlet, setup.outlet_radius)

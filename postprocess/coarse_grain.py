@@ -355,6 +355,32 @@ def _z_ranges(z_sorted, z_nodes, cutoff):
             np.searchsorted(z_sorted, z_nodes + cutoff, "right").astype(np.int64))
 
 
+@njit(parallel=True, cache=True)
+def _to_local_rz(pts, tens, x0, y0, pos, local):
+    """pos = (rho, 0, z) of each point about the axis (x0, y0); local = R T R^T with R's rows
+    e_r = (c, s, 0), e_theta = (-s, c, 0), e_z (on the axis: e_r = x)."""
+    for k in prange(pts.shape[0]):
+        x = pts[k, 0] - x0
+        y = pts[k, 1] - y0
+        rho = math.sqrt(x * x + y * y)
+        c, s = (x / rho, y / rho) if rho > 0.0 else (1.0, 0.0)
+        pos[k, 0] = rho
+        pos[k, 1] = 0.0
+        pos[k, 2] = pts[k, 2]
+        xx, xy, xz, yx, yy, yz, zx, zy, zz = (tens[k, 0], tens[k, 1], tens[k, 2], tens[k, 3], tens[k, 4],
+                                              tens[k, 5], tens[k, 6], tens[k, 7], tens[k, 8])
+        cc, ss, cs = c * c, s * s, c * s
+        local[k, 0] = cc * xx + cs * (xy + yx) + ss * yy
+        local[k, 1] = cc * xy - ss * yx + cs * (yy - xx)
+        local[k, 2] = c * xz + s * yz
+        local[k, 3] = cc * yx - ss * xy + cs * (yy - xx)
+        local[k, 4] = ss * xx - cs * (xy + yx) + cc * yy
+        local[k, 5] = c * yz - s * xz
+        local[k, 6] = c * zx + s * zy
+        local[k, 7] = c * zy - s * zx
+        local[k, 8] = zz
+
+
 # ----------------------------------------------------------------------------- grids
 
 class CartesianGrid:
@@ -420,6 +446,8 @@ class AxisymmetricGrid:
             raise ValueError("RZ grid: r_max > 0, z_hi > z_lo, nr and nz >= 1")
         if method not in self.METHODS:
             raise ValueError(f"RZ grid: method must be one of {', '.join(self.METHODS)}")
+        if method == "lattice" and (refine < 2 or refine % 2):
+            raise ValueError("RZ grid: the lattice refinement must be an even number >= 2")
         self.r_max, self.z_lo, self.z_hi, self.nr, self.nz = float(r_max), float(z_lo), float(z_hi), int(nr), int(nz)
         self.x0, self.y0 = float(x0), float(y0)
         self.dr = self.r_max / self.nr
@@ -448,21 +476,12 @@ class AxisymmetricGrid:
         return np.column_stack([rho, np.zeros_like(rho), p[:, 2]]), v_cyl
 
     def contact_frame(self, pts, tens):
-        p = self._shift(pts)
-        rho, _, c, s = to_cylindrical(p, np.zeros_like(p))
-        t = tens.reshape(-1, 9)                  # R T R^T, R's rows e_r = (c, s, 0), e_theta = (-s, c, 0), e_z
-        xx, xy, xz, yx, yy, yz, zx, zy, zz = t.T
-        cc, ss, cs = c * c, s * s, c * s
-        local = np.column_stack([cc * xx + cs * (xy + yx) + ss * yy,
-                                 cc * xy - ss * yx + cs * (yy - xx),
-                                 c * xz + s * yz,
-                                 cc * yx - ss * xy + cs * (yy - xx),
-                                 ss * xx - cs * (xy + yx) + cc * yy,
-                                 c * yz - s * xz,
-                                 c * zx + s * zy,
-                                 c * zy - s * zx,
-                                 zz])
-        return np.column_stack([rho, np.zeros_like(rho), p[:, 2]]), local
+        """Contact points as (rho, 0, z) and their tensors in the local (r, theta, z) basis (k, 9)."""
+        pos = np.empty((len(pts), 3))
+        local = np.empty((len(pts), 9))
+        _to_local_rz(np.ascontiguousarray(pts, float), np.ascontiguousarray(tens, float).reshape(-1, 9),
+                     self.x0, self.y0, pos, local)
+        return pos, local
 
     def accumulate(self, kernel: Kernel, pos, weights, dest, nfields, codes):
         if self.method == "lattice":

@@ -257,6 +257,9 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
        nr: int = typer.Option(100, min=1, help="radial cells (or x and y cells of a Cartesian grid)"),
        nz: int = typer.Option(300, min=1, help="vertical cells"),
        grid: str = typer.Option("rz", help="rz (axisymmetric) or cartesian"),
+       method: str = typer.Option("exact", help="rz sums: exact, or lattice (sources on a finer lattice, tabulated "
+                                  "kernel moments: many times faster, small error; see the README)"),
+       refine: int = typer.Option(2, min=2, help="lattice nodes per grid cell and direction (even; --method lattice)"),
        species: Optional[str] = typer.Option("radius", help="partial fields by radius, type, or none"),
        per_frame: bool = typer.Option(False, help="keep per-frame fields (time evolution) as well"),
        every: int = typer.Option(1, min=1, help="use every n-th frame"),
@@ -279,6 +282,8 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
     try:
         if grid not in ("rz", "cartesian"):
             raise ReadError("--grid must be rz or cartesian")
+        if method not in ("exact", "lattice") or (method == "lattice" and grid != "rz"):
+            raise ReadError("--method must be exact or lattice, and lattice needs --grid rz")
         if path.is_dir() and (path / "derived.json").is_file():
             setup = setup_from_run(path)
             target = output or path / "results" / "cg"
@@ -301,13 +306,13 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
                             local_columns(wall_contact_keywords.split(","), wall=True) if wall_contacts else None)
             target = output or Path("cg_results")
         summary = run_cg(setup, target, kernel, width, unit, nr, nz, None if species == "none" else species,
-                         per_frame, grid, every)
+                         per_frame, grid, every, method, refine)
     except SiloflowError as exc:
         _fail(exc)
     except ValueError as exc:
         _fail(SiloflowError(str(exc)))
     out.print(f"coarse-grained {summary['frames']} frames (steps {summary['steps'][0]}-{summary['steps'][1]}) "
-              f"on a {grid} grid with a {summary['kernel']} kernel; contacts: {summary['contacts']}, "
+              f"on a {grid} grid ({summary['method']} sums) with a {summary['kernel']} kernel; contacts: {summary['contacts']}, "
               f"wall contacts: {summary['wall_contacts']}")
     if "v_z_centre_outlet" in summary:
         out.print(f"outlet centre: solid fraction {summary['solid_fraction_centre_outlet']:.3f}, "

@@ -171,6 +171,16 @@ def test_coarse_graining_of_the_real_run(small_run, tmp_path):
         assert float(axis.sel(z=0.3 * h, method="nearest")) > float(axis.sel(z=0.7 * h, method="nearest"))
     for name in ("cg_maps.png", "cg_outlet_profiles.png", "cg_axial_pressure.png", "outlet_profiles.csv"):
         assert (out / name).is_file(), name
+    # the fast lattice sums give the same fields on real frames, within their stated error
+    fast = tmp_path / "cg_lattice"
+    result = CliRunner().invoke(app, ["cg", str(folder), "--nr", "20", "--nz", "60", "--width", "1.5", "-o", str(fast),
+                                      "--method", "lattice"])
+    assert result.exit_code == 0, result.output
+    assert json.loads((fast / "cg_summary.json").read_text())["method"] == "lattice"
+    with xr.open_dataset(out / "fields.nc") as a, xr.open_dataset(fast / "fields.nc") as b:
+        for name, tol in (("rho", 5e-3), ("contact_pressure", 3e-2), ("kinetic_pressure", 3e-2)):
+            err = float(abs(a[name] - b[name]).max() / abs(a[name]).max())
+            assert err < tol, (name, err)
 
 
 def test_disk_estimate_bounds_what_the_run_wrote(small_run):

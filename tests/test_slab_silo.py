@@ -76,6 +76,22 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
     text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
     assert "fflag on off on tflag off on off" in text and "orientation template" in text
     assert d.insertion_region["yhi"] == pytest.approx(0.5 * 0.0022 - 0.001)
+    # dust in a slab: poured into the mid-plane and held there; inserted before the grains of
+    # the same step, whose overlap check (unlike the dust's) sees the other fix's particles
+    pair = {"friction": 0.3, "restitution": 0.5}
+    data["particles"]["dust"] = {"radius": 0.0002, "density": 2000.0, "number_ratio": 0.1, "youngs_modulus": 5e6,
+                                 "dust_dust": pair, "dust_particle": pair, "dust_wall": pair}
+    case = case_from_dict(data)
+    d = derive(case)
+    text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+    lines = text.splitlines()
+    first = {key: next(k for k, line in enumerate(lines) if line.startswith(key))
+             for key in ("fix             ins_dust", "fix             ins all", "region          insertion_dust")}
+    assert first["region          insertion_dust"] < first["fix             ins_dust"] < first["fix             ins all"]
+    assert "region insertion_dust" in lines[first["fix             ins_dust"]]
+    plane = next(line for line in lines if line.startswith("region          insertion_dust")).split()
+    assert abs(float(plane[5])) < 1e-6 and abs(float(plane[6])) < 1e-6       # y range: the mid-plane
+    assert "fix             dust_in_plane dust setforce NULL 0.0 NULL" in text
 
 
 @pytest.mark.parametrize("path,value,field", [
