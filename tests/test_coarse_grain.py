@@ -366,3 +366,12 @@ def test_lattice_error_falls_as_h4_for_a_smooth_kernel():
     assert err[1]["particles"] < err[0]["particles"] / 6 and err[1]["contact"] < err[0]["contact"] / 6   # 2^4 = 16
     with pytest.raises(ValueError, match="method"):
         AxisymmetricGrid(0.06, 0.0, 0.12, 40, 80, method="fft")
+
+
+@pytest.mark.parametrize("args", [["--method", "fast"], ["--method", "lattice", "--grid", "cartesian"]])
+def test_cg_refuses_an_unknown_or_unsupported_method(tmp_path, args):
+    from typer.testing import CliRunner
+
+    from siloflow.cli import app
+    result = CliRunner().invoke(app, ["cg", str(tmp_path), *args])
+    assert result.exit_code != 0 and "--method" in result.output
