@@ -747,4 +747,8 @@ class CoarseGraining:
         ds.attrs.update({"grid": self.grid.kind, "frames": len(self.steps), "first_step": self.steps[0],
                          "last_step": self.steps[-1], "contact_line_points": "adaptive: 2 + ceil(2 L / s)" if self.n_s is None else self.n_s,
                          **{f"kernel_{k}": v for k, v in self.kernel.describe().items()}})
+        if self.grid.kind == "rz":
+            ds.attrs["rz_method"] = self.grid.method
+            if self.grid.method == "lattice":
+                ds.attrs["lattice_refine"] = self.grid.refine
         return ds
