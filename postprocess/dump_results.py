@@ -38,6 +38,14 @@ def _dump_sources(folder):
     return atoms, contacts
 
 
+def species_densities(derived: dict) -> dict[int, float] | None:
+    """Particle density (kg/m3) per atom type from a run's derived.json (None for old folders)."""
+    species = derived.get("species")
+    if not species:
+        return None
+    return {int(s["type"]): float(s["density"]) for s in species}
+
+
 def bed_regions(case, surface: float, d: float) -> list[MeasureRegion]:
     """Measurement cylinders about the silo axis in the settled bed, three grain diameters
     from the bottom and the free surface: ``bulk_core`` (two diameters from the wall: the
@@ -101,7 +109,11 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     dt = run.dt
     open_step = run.stage_steps["open"]
     columns = run.derived.get("contact_columns") or None
-    contacts = list(read_frames(contact_files, columns=columns)) if contact_files and columns else None
+    has_contacts = bool(contact_files) and bool(columns)
+
+    def contact_frames(wanted=None):
+        """Contact frames streamed from disk (a long run's do not fit in memory together)."""
+        return read_frames(contact_files, columns=columns, steps=wanted)
 
     g = case.geometry
     R = g.half_width
@@ -128,13 +140,18 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
         regions = None
         summary["bulk_solid_fraction"] = {"error": str(exc)}
     if regions is not None:
-        por = Porosity(regions).run([settled])
+        por = Porosity(regions, densities=species_densities(run.derived)).run([settled])
         por.save(out, figure=False)
-        phi = dict(zip(por.table.region, por.table.solid_fraction.astype(float)))
-        phi_bulk, phi_section = phi["bulk_core"], phi["cross_section"]
+        at = por.table.set_index("region")
+        phi_bulk, phi_section = (float(at.loc[k, "solid_fraction"]) for k in ("bulk_core", "cross_section"))
+        if "bulk_density" in at:      # species of different densities (dust): measured mass per volume
+            rho_bulk, rho_section = (float(at.loc[k, "bulk_density"]) for k in ("bulk_core", "cross_section"))
+        else:
+            rho_bulk, rho_section = phi_bulk * rho_p, phi_section * rho_p
         summary["bulk_solid_fraction"] = phi_bulk
-        summary["bulk_density_kg_m3"] = phi_bulk * rho_p
+        summary["bulk_density_kg_m3"] = rho_bulk
         summary["cross_section_solid_fraction"] = phi_section
+        summary["cross_section_bulk_density_kg_m3"] = rho_section
     if case.analysis.porosity_regions:
         summary["porosity_regions"] = case_regions_porosity(case, atoms_files, settled, out)
 
@@ -146,20 +163,21 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
         return ((across < R - 2 * d) & (p[:, 2] > g.hopper_height + 2 * d)
                 & (p[:, 2] < top - 2 * d))
 
-    if contacts:
-        coord = Coordination(select=core).run(read_frames(atoms_files), contacts)
+    if has_contacts:
+        coord = Coordination(select=core).run(read_frames(atoms_files), contact_frames())
         coord.save(out)
         row = coord.table[(coord.table.step == settled.timestep) & (coord.table.species == "all")]
         if not row.empty:
             summary["coordination_settled"] = {k: float(row[k].iloc[0]) for k in ("z_mean", "z_mech")}
             summary["coordination_convention"] = str(row.convention.iloc[0])
-        by_step = {c.timestep: c for c in contacts}
-        after = [int(k) for k in steps if k > open_step and k in by_step]
+        with_contacts = set(int(k) for k in coord.table.step.unique())
+        after = [int(k) for k in steps if k > open_step and k in with_contacts]
         last = next(read_frames(atoms_files, steps=[max(after)])) if after else None
-        figs = [(settled, "force_chains_settled.png")] + ([(last, "force_chains_discharge.png")] if last else [])
+        figs = [(f, name) for f, name in [(settled, "force_chains_settled.png"), (last, "force_chains_discharge.png")]
+                if f is not None and f.timestep in with_contacts]
+        chains = {c.timestep: c for c in contact_frames([f.timestep for f, _ in figs])} if figs else {}
         for frame, name in figs:
-            if frame.timestep in by_step:
-                force_chain_figure(frame, by_step[frame.timestep], out / name, axis=1, center=0.0, thickness=d)
+            force_chain_figure(frame, chains[frame.timestep], out / name, axis=1, center=0.0, thickness=d)
 
     if regions is None:
         return summary
@@ -168,12 +186,12 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     area = surface.area
     st = surface.table
     in_window = (st.time >= flow_rate.t_start) & (st.time <= flow_rate.t_end) & (st.surface_height > g.hopper_height + 3 * d)
-    wr = surface_flow_rate(st.time[in_window], st.surface_height[in_window], area, rho_p, phi_section)
+    wr = surface_flow_rate(st.time[in_window], st.surface_height[in_window], area, rho_section)
     summary["flow_rate_surface"] = asdict(wr)
     summary["flow_rate_surface_over_outlet"] = wr.rate / flow_rate.rate if flow_rate.rate else float("nan")
     wf_t = rate_series(discharge.time, discharge.outlet_mass)
     flows = pd.DataFrame({"time": discharge.time, "Wf_kg_s": wf_t})
-    wr_t = -rate_series(st.time, st.surface_height) * area * rho_p * phi_section
+    wr_t = -rate_series(st.time, st.surface_height) * area * rho_section
     flows = pd.merge_asof(flows.sort_values("time"), pd.DataFrame({"time": st.time, "Wr_kg_s": wr_t}).sort_values("time"),
                           on="time", direction="nearest", tolerance=0.5 * dt * run.sample_steps)
     write_text(out / "flow_rates.csv", flows.to_csv(index=False))
@@ -181,7 +199,7 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     # Janssen fit of the settled profile
     static = bands_table[bands_table.z_mid < h_settled]
     try:
-        fit = fit_janssen(h_settled - static.z_mid, static.static_pressure, phi_section * rho_p,
+        fit = fit_janssen(h_settled - static.z_mid, static.static_pressure, rho_section,
                           janssen_diameter(g), float(run.derived["gravity"]))
         summary["janssen_static"] = asdict(fit)
     except ValueError as exc:

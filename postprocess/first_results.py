@@ -186,7 +186,8 @@ def report_text(summary: dict, run: RunOutputs) -> str:
     if "bulk_solid_fraction" in fa:
         if "cross_section_solid_fraction" in fa:
             lines += [f"- settled bed: bulk solid fraction {_fmt(fa['bulk_solid_fraction'], '.3f')} (core), "
-                      f"{_fmt(fa['cross_section_solid_fraction'], '.3f')} (whole cross-section); free surface at "
+                      f"{_fmt(fa['cross_section_solid_fraction'], '.3f')} (whole cross-section); bulk density "
+                      f"{_fmt(fa['bulk_density_kg_m3'], '.4g')} kg/m3 (core); free surface at "
                       f"{_fmt(fa['settled_surface_height_m'] * 1000)} mm"]
         else:
             lines += [f"- settled bed: free surface at {_fmt(fa['settled_surface_height_m'] * 1000)} mm; "

@@ -155,10 +155,11 @@ class FreeSurface(FrameAnalysis):
                            ylabel="free-surface height (m)")
 
 
-def surface_flow_rate(time, height, area: float, particle_density: float, bulk_solid_fraction: float) -> LinearRate:
-    """Wr (kg/s) from a straight-line fit of the free-surface height: -dh/dt A rho_p phi_bulk."""
+def surface_flow_rate(time, height, area: float, bulk_density: float) -> LinearRate:
+    """Wr (kg/s) from a straight-line fit of the free-surface height: -dh/dt A rho_bulk, with
+    ``area`` (m2) the cross-section and ``bulk_density`` (kg/m3) the bed's mass per volume."""
     fit = linear_rate(time, height)
-    scale = area * particle_density * bulk_solid_fraction
+    scale = area * bulk_density
     return LinearRate(-fit.rate * scale, fit.stderr * scale, fit.t_start, fit.t_end, fit.n_samples)
 
 

@@ -194,21 +194,44 @@ class Porosity(FrameAnalysis):
 
     ``conversion``: optional dict(relative_density=..., reading=...) applied to ``circle``
     regions, adding a ``porosity_3d`` column.
+
+    ``densities``: optional particle density (kg/m3) per atom type; adds a ``bulk_density``
+    column (kg/m3, sphere and cylinder regions) = sum of density x solid volume / volume. With
+    one density it is density x solid fraction; with species of different densities (dust
+    whose density is scaled) only this gives the bed's mass per volume.
     """
 
     name = "porosity"
 
-    def __init__(self, regions: list[MeasureRegion], conversion: dict | None = None):
+    def __init__(self, regions: list[MeasureRegion], conversion: dict | None = None,
+                 densities: dict[int, float] | None = None):
         super().__init__()
         if not regions:
             raise ValueError("porosity needs at least one measurement region")
         self.regions = list(regions)
         self.conversion = conversion
+        self.densities = dict(densities) if densities else None
+        if self.densities and not all(math.isfinite(v) and v > 0 for v in self.densities.values()):
+            raise ValueError("particle densities must be finite and > 0")
+
+    def _row_densities(self, frame) -> np.ndarray:
+        """Density (kg/m3) of every row, from its type."""
+        types = frame.column("type").astype(int)
+        known = np.array(sorted(self.densities))
+        missing = np.setdiff1d(np.unique(types), known)
+        if len(missing):
+            raise ValueError(f"step {frame.timestep}: no particle density for atom type(s) "
+                             f"{', '.join(map(str, missing))}")
+        return np.array([self.densities[k] for k in known])[np.searchsorted(known, types)]
 
     def _single_frame(self, frame, contacts):
         pos, rad = frame.positions(), frame.radii()
         tree = cKDTree(pos) if len(pos) else None
         volume_weights = grain_weights(frame)
+        mass_weights = None
+        if self.densities:
+            rho = self._row_densities(frame)
+            mass_weights = rho if volume_weights is None else rho * volume_weights
         sections = {}                        # circle regions often share a plane (paper A: nine)
         rows = []
         for region in self.regions:
@@ -222,6 +245,9 @@ class Porosity(FrameAnalysis):
             solid = region.solid(pos, rad, tree, weights) if tree is not None else 0.0
             phi = solid / region.measure
             row = {"region": region.name, "shape": region.shape, "solid_fraction": phi, "porosity": 1.0 - phi}
+            if mass_weights is not None:
+                row["bulk_density"] = (region.solid(pos, rad, tree, mass_weights) / region.measure
+                                       if region.shape != "circle" and tree is not None else float("nan"))
             if self.conversion and region.shape == "circle":
                 try:
                     row["porosity_3d"] = float(porosity_2d_to_3d(1.0 - phi, **self.conversion))
@@ -232,7 +258,8 @@ class Porosity(FrameAnalysis):
         return rows
 
     def _conclude(self):
-        self.summary = self.table.groupby("region")[["solid_fraction", "porosity"]].mean()
+        cols = [c for c in ("solid_fraction", "porosity", "bulk_density") if c in self.table]
+        self.summary = self.table.groupby("region")[cols].mean()
 
     def figure(self, path):
         from .figures import line_figure

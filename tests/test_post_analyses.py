@@ -83,6 +83,25 @@ def test_lattice_porosity_in_sphere_and_cylinder(kind, expected):
     assert table.loc["c", "porosity"] == pytest.approx(expected, abs=0.004)
 
 
+def test_bulk_density_weighs_each_species_by_its_own_density():
+    """Two species of different densities (dust scaled heavy): mass per volume, not rho_p phi."""
+    rng = np.random.default_rng(4)
+    pos, r = lattice("sc", 10)
+    types = np.where(rng.random(len(pos)) < 0.3, 2, 1)
+    r = np.where(types == 2, 0.1, r)                    # small, heavy "dust" on some sites
+    frame = frame_of(pos, r)
+    frame.data["type"] = types
+    region = MeasureRegion("c", "cylinder", (4.6, 4.4, 0.0), 3.1, axis=2, t0=1.3, t1=8.2)
+    dens = {1: 1000.0, 2: 4.0e5}
+    row = Porosity([region], densities=dens).run([frame]).table.iloc[0]
+    solid = {k: Porosity([region]).run([frame_of(pos[types == k], r[types == k])]).table.solid_fraction.iloc[0]
+             for k in (1, 2)}
+    assert row.bulk_density == pytest.approx(dens[1] * solid[1] + dens[2] * solid[2], rel=1e-12)
+    assert row.bulk_density > 1.5 * dens[1] * row.solid_fraction         # the dust's mass counts
+    with pytest.raises(ValueError, match="no particle density for atom type"):
+        Porosity([region], densities={1: 1000.0}).run([frame])
+
+
 def test_porosity_counts_the_part_of_a_cut_sphere_not_its_centre():
     # one sphere of radius 1 whose centre lies just outside the measurement sphere
     frame = frame_of(np.array([[2.2, 0.0, 0.0]]), np.array([1.0]))
@@ -239,7 +258,7 @@ def test_free_surface_of_a_bed_with_a_crater_tracks_its_volume():
 
 def test_surface_flow_rate_sign_and_scale():
     t = np.linspace(0, 1, 11)
-    fit = surface_flow_rate(t, 0.3 - 0.01 * t, area=0.02, particle_density=2500, bulk_solid_fraction=0.6)
+    fit = surface_flow_rate(t, 0.3 - 0.01 * t, area=0.02, bulk_density=2500 * 0.6)
     assert fit.rate == pytest.approx(0.01 * 0.02 * 2500 * 0.6)
 
 
