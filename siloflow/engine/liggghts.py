@@ -229,16 +229,21 @@ _RESTART_MARK = "SILOFLOW_RESTART "
 FILL_LOSS_LIMIT = 0.01
 
 
+def _restart_mark(lines: list[str]) -> Optional[tuple[int, int]]:
+    """(line index, step) of the log's restart marker (the settled bed written), or None."""
+    for k, line in enumerate(lines):
+        if line.startswith(_RESTART_MARK):
+            return k, int(float(line.split()[1]))
+    return None
+
+
 def _restart_step(folder: Path) -> Optional[int]:
     """The step of the settled bed's restart file, from the first part's log (None if not written)."""
     try:
-        text = decode((folder / LOG_NAME).read_bytes())
+        mark = _restart_mark(decode((folder / LOG_NAME).read_bytes()).splitlines())
     except OSError:
         return None
-    for line in text.splitlines():
-        if line.startswith(_RESTART_MARK):
-            return int(float(line.split()[1]))
-    return None
+    return None if mark is None else mark[1]
 
 
 def _log_text(folder: Path) -> str:
@@ -249,7 +254,8 @@ def _log_text(folder: Path) -> str:
     if not resumed.is_file():
         return text
     lines = text.splitlines()
-    cut = next((k for k, line in enumerate(lines) if line.startswith(_RESTART_MARK)), len(lines))
+    mark = _restart_mark(lines)
+    cut = len(lines) if mark is None else mark[0]
     return "\n".join(lines[:cut + 1]) + "\n" + decode(resumed.read_bytes())
 
 
