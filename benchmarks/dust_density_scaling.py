@@ -1,24 +1,29 @@
 """The dust time-step remedy, measured: the same clumps + dust silo run with the dust at its own
-density and with the dust density scaled (``particles.dust.density_scale``), plus a second seed
-at the true density to show the run-to-run noise any change must exceed.
+density and with the dust density scaled (``particles.dust.density_scale``), each with several
+seeds to show the run-to-run noise any change must exceed.
 
 Prints, per run: time step, engine wall time, dust mass share, static wall pressure of the
-lowest band, steady flow rate Wf and settled bulk solid fraction, and their ratios to the
-unscaled run. One run each (a noisy machine: read the ratios).
+lowest band, steady flow rate Wf and settled bulk solid fraction; then per scale the change of
+each against the true density with its standard error.
 
-    python benchmarks/dust_density_scaling.py [case.yaml] [scale ...]
+    python benchmarks/dust_density_scaling.py [case.yaml] [--scales 25 200] [--seeds 3]
 
-Default case: tests/data/clump_silo.yaml (600 wheat clumps, 60 dust balls, Hertz), scales 25,
-200 and 1000. About 10 minutes on this machine (multisphere runs on one core). A variant that
-fails (e.g. a bed that no longer settles in the allowed time) is reported as such.
+Default case: tests/data/clump_silo.yaml (600 wheat clumps, 60 dust balls, Hertz), scales 25
+and 200 (1000 did not settle in the allowed time), three seeds each, the true density
+included: the seeds give each mean a standard error, and a change is called measured only
+beyond twice the combined error. About 10-15 minutes on this machine (multisphere runs on one
+core). A variant that fails (e.g. a bed that no longer settles) is reported as such.
 """
 from __future__ import annotations
 
+import argparse
 import copy
 import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,11 +51,11 @@ def measure(data: dict, folder: Path) -> dict:
             "bulk_phi": fa.get("bulk_solid_fraction") if isinstance(fa.get("bulk_solid_fraction"), float) else float("nan")}
 
 
-def main(case_file: Path, scales: list[float]) -> None:
+def main(case_file: Path, scales: list[float], seeds: int) -> None:
     base = yaml.safe_load(case_file.read_text())
     runs = []
     with tempfile.TemporaryDirectory() as tmp:
-        variants = [(1.0, base["seed"]), (1.0, base["seed"] + 1)] + [(s, base["seed"]) for s in scales]
+        variants = [(scale, base["seed"] + k) for scale in [1.0] + scales for k in range(seeds)]
         for k, (scale, seed) in enumerate(variants):
             data = copy.deepcopy(base)
             data["particles"]["dust"]["density_scale"] = scale
@@ -63,18 +68,46 @@ def main(case_file: Path, scales: list[float]) -> None:
             r = runs[-1]
             print(f"density_scale {scale:g} seed {seed}: dt {r['dt']:.3g} s (without dust {r['dt_without_dust']:.3g} s), "
                   f"engine {r['wall_s']:.1f} s, dust {100 * r['dust_mass_share']:.2f} % of the mass", flush=True)
-    ref = runs[0]
-    print(f"\n{'scale':>7} {'seed':>6} {'dt/dt1':>7} {'time/t1':>8} {'dust %':>7} {'p0 (Pa)':>9} {'p0/p0_1':>8} "
-          f"{'Wf (g/s)':>9} {'Wf/Wf_1':>8} {'phi':>6}")
-    for r in runs:
-        print(f"{r['scale']:>7g} {r['seed']:>6} {r['dt'] / ref['dt']:>7.2f} {r['wall_s'] / ref['wall_s']:>8.2f} "
-              f"{100 * r['dust_mass_share']:>7.2f} {r['p_static_band0']:>9.1f} {r['p_static_band0'] / ref['p_static_band0']:>8.3f} "
-              f"{1000 * r['flow_rate']:>9.2f} {r['flow_rate'] / ref['flow_rate']:>8.3f} {r['bulk_phi']:>6.3f}")
-    print("\nthe second seed at density_scale 1 is the noise: a change smaller than its ratio is not measured")
+    table = pd.DataFrame(runs)
+    if table.empty or not (table.scale == 1.0).any():
+        print("no run at the true dust density finished: nothing to compare against")
+        return
+    ref = table[table.scale == 1.0].iloc[0]
+    print(f"\n{'scale':>7} {'seed':>6} {'dt/dt1':>7} {'time/t1':>8} {'dust %':>7} {'p0 (Pa)':>9} "
+          f"{'Wf (g/s)':>9} {'phi':>6}")
+    for _, r in table.iterrows():
+        print(f"{r.scale:>7g} {r.seed:>6} {r.dt / ref.dt:>7.2f} {r.wall_s / ref.wall_s:>8.2f} "
+              f"{100 * r.dust_mass_share:>7.2f} {r.p_static_band0:>9.1f} {1000 * r.flow_rate:>9.2f} {r.bulk_phi:>6.3f}")
+    print(f"\nper scale, over seeds: mean and its standard error; change against the true density with the "
+          f"combined standard error (a change within 2 of them is not measured)")
+    print(f"{'scale':>7} {'runs':>5} {'time/t1':>8} {'p0 change %':>16} {'Wf change %':>16} {'phi change':>18}")
+    one = table[table.scale == 1.0]
+    for scale, grp in table.groupby("scale"):
+        cells = []
+        for col, pct in (("p_static_band0", True), ("flow_rate", True), ("bulk_phi", False)):
+            diff, se = mean_change(grp[col].to_numpy(float), one[col].to_numpy(float))
+            f = 100.0 / one[col].mean() if pct else 1.0
+            flag = "*" if abs(diff) > 2 * se else " "
+            cells.append(f"{diff * f:+7.2f} +/- {se * f:5.2f}{flag}" if pct else f"{diff:+8.4f} +/- {se:6.4f}{flag}")
+        print(f"{scale:>7g} {len(grp):>5} {grp.wall_s.mean() / one.wall_s.mean():>8.2f} {cells[0]:>16} {cells[1]:>16} {cells[2]:>18}")
+    print("* : beyond twice the combined standard error")
+
+
+def mean_change(values: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
+    """Difference of the means and its standard error (each side's sample std / sqrt n; NaN with
+    one run on either side)."""
+    def se2(v):
+        return v.var(ddof=1) / len(v) if len(v) > 1 else float("nan")
+    return float(values.mean() - reference.mean()), float(np.sqrt(se2(values) + se2(reference)))
 
 
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    case = Path(args[0]) if args and args[0].endswith(".yaml") else ROOT / "tests" / "data" / "clump_silo.yaml"
-    scales = [float(a) for a in args if not a.endswith(".yaml")] or [25.0, 200.0, 1000.0]
-    main(case, scales)
+    parser = argparse.ArgumentParser(description="dust density scaling: time step and run time against "
+                                     "static pressure, flow rate and solid fraction")
+    parser.add_argument("case", nargs="?", type=Path, default=ROOT / "tests" / "data" / "clump_silo.yaml")
+    parser.add_argument("--scales", type=float, nargs="+", default=[25.0, 200.0])
+    parser.add_argument("--seeds", type=int, default=3, help="runs (seeds) per scale, the true density included")
+    args = parser.parse_args()
+    if args.seeds < 1 or any(not (1.0 <= s <= 1.0e6) for s in args.scales):
+        parser.error("--seeds must be >= 1 and --scales within [1, 1e6]")
+    main(args.case, args.scales, args.seeds)
