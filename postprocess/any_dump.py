@@ -65,12 +65,16 @@ def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     files = dump_files(source)
-    contact_frames = list(read_frames(contacts, columns=contact_columns, every=1)) if contacts else None
+
+    def contact_frames(steps=None):
+        """Contact frames streamed from disk (None without contact dumps)."""
+        return read_frames(contacts, columns=contact_columns, steps=steps) if contacts else None
+
     last = last_frame(files)
     summary: dict = {"source": [str(f) for f in files][:3] + (["..."] if len(files) > 3 else []),
                      "files": len(files)}
 
-    frames = FrameSummary().run(read_frames(files, every=every), contact_frames or None)
+    frames = FrameSummary().run(read_frames(files, every=every), contact_frames())
     frames.save(out)
     summary["frames"] = frames.n_frames
     summary["last_step"] = int(last.timestep)
@@ -88,9 +92,11 @@ def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, 
             por.save(out)
             final = por.table[por.table.step == por.table.step.max()]
             summary["porosity_last"] = dict(zip(final.region, final.porosity.astype(float)))
+            if "bulk_density" in final:      # the dump has a mass column
+                summary["bulk_density_last_kg_m3"] = dict(zip(final.region, final.bulk_density.astype(float)))
             summary["regions"] = [{"name": r.name, "shape": r.shape, "center": list(r.center), "radius": r.radius}
                                   for r in regions]
-        coord = Coordination().run(read_frames(files, every=every), contact_frames)
+        coord = Coordination().run(read_frames(files, every=every), contact_frames())
         coord.save(out)
         table = coord.table[coord.table.species == "all"]
         row = table[table.step == table.step.max()].iloc[0]
@@ -98,8 +104,8 @@ def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, 
                                         "z_mech": float(row.z_mech), "source": row.source,
                                         "convention": row.convention,
                                         "note": "all grains; grains at walls lack their wall contacts"}
-    if contact_frames:
-        match = [c for c in contact_frames if c.timestep == last.timestep]
+    if contacts:
+        match = list(contact_frames([last.timestep]))
         if match and any(c in match[0].data for c in ("fnx", "fx")):
             force_chain_figure(last, match[0], out / "force_chains_last.png")
     write_json(out / "summary.json", summary)

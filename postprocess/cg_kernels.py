@@ -6,6 +6,10 @@
   1 / A_w = 4 pi (2w)^3 (sqrt(pi)/4 erf(2) - exp(-4)).
 * Lucy (compact polynomial): phi(R) = 105 / (16 pi c^3) (1 + 3q)(1 - q)^3, q = |R|/c < 1.
 
+A slab silo's fields are averages through its thickness T: the 3D kernel integrated over all y,
+divided by T (:func:`slab_kernel_value`, closed forms for both kernels), so a slab thinner than
+the kernel keeps its whole mass and gives its own density, not the 3D kernel's value at y = 0.
+
 Kernels are plain (kind, A, cutoff, width) tuples so that the numba loops can evaluate them.
 """
 from __future__ import annotations
@@ -87,3 +91,25 @@ def kernel_value(kind, norm, cutoff, width, R2):
         return norm * math.exp(-R2 / (4.0 * width * width))
     q = math.sqrt(R2) / cutoff
     return norm * (1.0 + 3.0 * q) * (1.0 - q) ** 3
+
+
+@njit(cache=True, fastmath=False)
+def slab_kernel_value(kind, norm, cutoff, width, S2):
+    """The kernel integrated over y, int phi(sqrt(S2 + y^2)) dy (m^-2), at squared in-plane
+    distance ``S2``; integrates to 1 over the plane."""
+    c2 = cutoff * cutoff
+    if S2 >= c2:
+        return 0.0
+    L = math.sqrt(c2 - S2)                      # half the chord through the support
+    if kind == GAUSSIAN:
+        return norm * math.exp(-S2 / (4.0 * width * width)) * 2.0 * width * math.sqrt(math.pi) \
+            * math.erf(L / (2.0 * width))
+    # Lucy: (1 + 3q)(1 - q)^3 = 1 - 6 q^2 + 8 q^3 - 3 q^4, q^2 = (S2 + y^2) / c^2
+    c = cutoff
+    a2 = S2
+    poly = L - 6.0 * (a2 * L + L ** 3 / 3.0) / c2 - 3.0 * (a2 * a2 * L + 2.0 * a2 * L ** 3 / 3.0 + L ** 5 / 5.0) / (c2 * c2)
+    # int_0^L (a^2 + y^2)^(3/2) dy = L/8 (2 L^2 + 5 a^2) c + 3 a^4 / 8 ln((L + c) / a)
+    cube = L / 8.0 * (2.0 * L * L + 5.0 * a2) * c
+    if a2 > 0.0:
+        cube += 3.0 * a2 * a2 / 8.0 * math.log((L + c) / math.sqrt(a2))
+    return 2.0 * norm * (poly + 8.0 * cube / (c2 * c))

@@ -94,7 +94,7 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
         if grid_kind == "rz":
             raise ReadError("a slab silo has no axis: use --grid cartesian (a planar x-z grid)")
         t = 0.5 * setup.slab_thickness
-        grid = CartesianGrid([-setup.r_max, -t, setup.z_lo], [setup.r_max, t, setup.z_hi], (nr, 1, nz))
+        grid = CartesianGrid([-setup.r_max, -t, setup.z_lo], [setup.r_max, t, setup.z_hi], (nr, 1, nz), slab=True)
     elif grid_kind == "rz":
         grid = AxisymmetricGrid(setup.r_max, setup.z_lo, setup.z_hi, nr, nz, method=method, refine=refine)
     else:

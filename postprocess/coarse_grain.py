@@ -22,7 +22,9 @@ Grids:
   at radius rho and a node at r, the kernel moments <phi>, <phi cos a>, <phi cos^2 a>,
   <phi cos 2a> over the relative azimuth a are integrated exactly over the kernel's support
   |a| < a_c by Gauss-Legendre (smooth integrand: < 1e-12 relative).
-* planar (x, z): a Cartesian grid with one cell across the slab (use ``cartesian`` with ny = 1).
+* planar (x, z) for a slab silo: a Cartesian grid with one cell across the slab and
+  ``slab=True``: averages through the thickness T, sum_i ... phi2(x - r_i) / T with phi2 the
+  kernel integrated over y (``cg_kernels.slab_kernel_value``), whatever T is against w.
 
 Everything is streamed by frame: :class:`CoarseGraining` accumulates sums per frame and
 time-averages them (or keeps per-frame fields), so memory is one frame plus the grid.
@@ -35,7 +37,7 @@ import numpy as np
 from numba import njit, prange
 
 from .analysis_base import StepCursor, paired
-from .cg_kernels import GAUSSIAN, LUCY, Kernel, kernel_value
+from .cg_kernels import GAUSSIAN, LUCY, Kernel, kernel_value, slab_kernel_value
 
 # particle block: m, p (3), m v v (6: xx yy zz xy xz yz, or rr tt zz rt rz tz)
 PARTICLE_COLUMNS = ["m", "p0", "p1", "p2", "t00", "t11", "t22", "t01", "t02", "t12"]
@@ -54,9 +56,10 @@ _GL_U = {GAUSSIAN: np.polynomial.legendre.leggauss(10), LUCY: np.polynomial.lege
 # ----------------------------------------------------------------------------- numba cores
 
 @njit(parallel=True, cache=True)
-def _accumulate_cartesian(origin, spacing, shape, pos, weights, dest, lo, hi, kind, norm, cutoff, width, out):
+def _accumulate_cartesian(origin, spacing, shape, pos, weights, dest, lo, hi, kind, norm, cutoff, width, slab, out):
     """out[iz, iy, ix, dest[i, d] + c] += weights[i, c] * phi(node - pos[i]) for every source i
-    (sorted by z; lo/hi: source index range within reach of node plane iz)."""
+    (sorted by z; lo/hi: source index range within reach of node plane iz). ``slab`` (ny = 1):
+    phi is the kernel integrated over y divided by the cell's y extent (a slab average)."""
     nx, ny, nz = shape[0], shape[1], shape[2]
     ncomp = weights.shape[1]
     ndest = dest.shape[1]
@@ -71,13 +74,19 @@ def _accumulate_cartesian(origin, spacing, shape, pos, weights, dest, lo, hi, ki
             reach = math.sqrt(rem)
             ix0 = max(0, int(math.floor((pos[i, 0] - reach - origin[0]) / spacing[0] - 0.5)))
             ix1 = min(nx - 1, int(math.ceil((pos[i, 0] + reach - origin[0]) / spacing[0] - 0.5)))
-            iy0 = max(0, int(math.floor((pos[i, 1] - reach - origin[1]) / spacing[1] - 0.5)))
-            iy1 = min(ny - 1, int(math.ceil((pos[i, 1] + reach - origin[1]) / spacing[1] - 0.5)))
+            if slab:
+                iy0, iy1 = 0, 0
+            else:
+                iy0 = max(0, int(math.floor((pos[i, 1] - reach - origin[1]) / spacing[1] - 0.5)))
+                iy1 = min(ny - 1, int(math.ceil((pos[i, 1] + reach - origin[1]) / spacing[1] - 0.5)))
             for iy in range(iy0, iy1 + 1):
                 dy = origin[1] + (iy + 0.5) * spacing[1] - pos[i, 1]
                 for ix in range(ix0, ix1 + 1):
                     dx = origin[0] + (ix + 0.5) * spacing[0] - pos[i, 0]
-                    phi = kernel_value(kind, norm, cutoff, width, dx * dx + dy * dy + dz * dz)
+                    if slab:
+                        phi = slab_kernel_value(kind, norm, cutoff, width, dx * dx + dz * dz) / spacing[1]
+                    else:
+                        phi = kernel_value(kind, norm, cutoff, width, dx * dx + dy * dy + dz * dz)
                     if phi == 0.0:
                         continue
                     for d in range(ndest):
@@ -384,11 +393,15 @@ def _to_local_rz(pts, tens, x0, y0, pos, local):
 # ----------------------------------------------------------------------------- grids
 
 class CartesianGrid:
-    """Regular grid of ``shape`` (nx, ny, nz) cells over [lo, hi] (m); fields at cell centres."""
+    """Regular grid of ``shape`` (nx, ny, nz) cells over [lo, hi] (m); fields at cell centres.
+
+    ``slab=True`` (a quasi-2D slab silo, ny = 1, y from lo to hi its thickness): fields are
+    averages through the slab, the kernel integrated over y divided by the thickness, so the
+    whole mass is kept however thin the slab is against the kernel."""
 
     kind = "cartesian"
 
-    def __init__(self, lo, hi, shape):
+    def __init__(self, lo, hi, shape, slab: bool = False):
         self.lo = np.asarray(lo, float)
         self.hi = np.asarray(hi, float)
         self.shape = np.asarray(shape, np.int64)
@@ -396,6 +409,9 @@ class CartesianGrid:
             raise ValueError("a Cartesian grid needs lo, hi and shape of length 3")
         if np.any(self.hi <= self.lo) or np.any(self.shape < 1):
             raise ValueError("grid: hi must exceed lo and every count be >= 1")
+        if slab and self.shape[1] != 1:
+            raise ValueError("a slab grid has one cell through the slab (ny = 1)")
+        self.slab = bool(slab)
         self.spacing = (self.hi - self.lo) / self.shape
 
     def axes(self) -> dict:
@@ -415,7 +431,7 @@ class CartesianGrid:
         out = np.zeros((*self.shape[::-1], nfields))
         _accumulate_cartesian(self.lo, self.spacing, self.shape, np.ascontiguousarray(pos[order]),
                               np.ascontiguousarray(weights[order]), np.ascontiguousarray(dest[order]), lo, hi,
-                              kernel.kind, kernel.norm, kernel.cutoff, kernel.width, out)
+                              kernel.kind, kernel.norm, kernel.cutoff, kernel.width, self.slab, out)
         return out[..., None]
 
     def particle_frame(self, pos, vel):
@@ -747,6 +763,9 @@ class CoarseGraining:
         ds.attrs.update({"grid": self.grid.kind, "frames": len(self.steps), "first_step": self.steps[0],
                          "last_step": self.steps[-1], "contact_line_points": "adaptive: 2 + ceil(2 L / s)" if self.n_s is None else self.n_s,
                          **{f"kernel_{k}": v for k, v in self.kernel.describe().items()}})
+        if getattr(self.grid, "slab", False):
+            ds.attrs["slab_thickness_m"] = float(self.grid.spacing[1])
+            ds.attrs["slab_average"] = "kernel integrated over y, divided by the slab thickness"
         if self.grid.kind == "rz":
             ds.attrs["rz_method"] = self.grid.method
             if self.grid.method == "lattice":

@@ -195,10 +195,12 @@ class Porosity(FrameAnalysis):
     ``conversion``: optional dict(relative_density=..., reading=...) applied to ``circle``
     regions, adding a ``porosity_3d`` column.
 
-    ``densities``: optional particle density (kg/m3) per atom type; adds a ``bulk_density``
-    column (kg/m3, sphere and cylinder regions) = sum of density x solid volume / volume. With
-    one density it is density x solid fraction; with species of different densities (dust
-    whose density is scaled) only this gives the bed's mass per volume.
+    ``bulk_density`` column (kg/m3, sphere and cylinder regions) = sum of density x solid
+    volume / volume, with each row's density from ``densities`` (kg/m3 per atom type) or, for
+    plain spheres, from a ``mass`` column (mass / sphere volume; LIGGGHTS gives each sphere of a
+    clump the whole clump's mass, so clumps need ``densities``). With one density it is density
+    x solid fraction; with species of different densities (dust whose density is scaled) only
+    this gives the bed's mass per volume.
     """
 
     name = "porosity"
@@ -214,8 +216,12 @@ class Porosity(FrameAnalysis):
         if self.densities and not all(math.isfinite(v) and v > 0 for v in self.densities.values()):
             raise ValueError("particle densities must be finite and > 0")
 
-    def _row_densities(self, frame) -> np.ndarray:
-        """Density (kg/m3) of every row, from its type."""
+    def _row_densities(self, frame, clumps: bool) -> np.ndarray | None:
+        """Density (kg/m3) of every row, from its type (or its mass; None if neither is known)."""
+        if not self.densities:
+            if clumps or "mass" not in frame.data:
+                return None
+            return frame.column("mass").astype(float) / (4.0 / 3.0 * np.pi * frame.radii() ** 3)
         types = frame.column("type").astype(int)
         known = np.array(sorted(self.densities))
         missing = np.setdiff1d(np.unique(types), known)
@@ -228,10 +234,8 @@ class Porosity(FrameAnalysis):
         pos, rad = frame.positions(), frame.radii()
         tree = cKDTree(pos) if len(pos) else None
         volume_weights = grain_weights(frame)
-        mass_weights = None
-        if self.densities:
-            rho = self._row_densities(frame)
-            mass_weights = rho if volume_weights is None else rho * volume_weights
+        rho = self._row_densities(frame, clumps=volume_weights is not None)
+        mass_weights = rho if rho is None or volume_weights is None else rho * volume_weights
         sections = {}                        # circle regions often share a plane (paper A: nine)
         rows = []
         for region in self.regions:

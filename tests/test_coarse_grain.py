@@ -142,6 +142,56 @@ def test_cartesian_agrees_with_brute_force(kernel):
     np.testing.assert_allclose(sums["contact"].reshape(-1, 9), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
 
 
+@pytest.mark.parametrize("kernel", [gaussian(0.004), lucy(0.012)], ids=["gaussian", "lucy"])
+def test_slab_grid_averages_through_the_thickness(kernel):
+    """A slab silo (T thinner than the kernel): the field is the 3D kernel integrated over y
+    (independently: scipy quad) over T; the mass is kept; the grains' y does not matter."""
+    T = 0.0044
+    rng = np.random.default_rng(8)
+    pos, vel, mass = cloud(40, [-0.01, -0.5 * T, 0.0], [0.01, 0.5 * T, 0.02], seed=6)
+    grid = CartesianGrid([-0.02, -0.5 * T, -0.01], [0.02, 0.5 * T, 0.03], (6, 1, 6), slab=True)
+    rho = coarse_grain_frame(grid, kernel, pos, vel, mass)["particles"][:, 0, :, 0]
+    ax = grid.axes()
+    for iz, ix in [(2, 2), (3, 3), (1, 4), (4, 1)]:
+        x, z = ax["x"][ix], ax["z"][iz]
+        ref = 0.0
+        for p, m in zip(pos, mass):
+            s2 = (x - p[0]) ** 2 + (z - p[2]) ** 2
+            if s2 < kernel.cutoff ** 2:
+                chord = math.sqrt(kernel.cutoff ** 2 - s2)      # inside the support: smooth
+                ref += m * quad(lambda y: kernel_value(kernel.kind, kernel.norm, kernel.cutoff, kernel.width, s2 + y * y),
+                                -chord, chord, epsabs=0, epsrel=1e-13, points=[0.0])[0] / T
+        assert rho[iz, ix] == pytest.approx(ref, rel=1e-10)
+    moved = pos.copy()
+    moved[:, 1] = rng.uniform(-0.5 * T, 0.5 * T, len(pos))
+    np.testing.assert_array_equal(coarse_grain_frame(grid, kernel, moved, vel, mass)["particles"][:, 0, :, 0], rho)
+    # conservation on a grid covering the kernels' reach: sum rho dV = total mass
+    big = CartesianGrid([-0.03, -0.5 * T, -0.02], [0.03, 0.5 * T, 0.04], (120, 1, 120), slab=True)
+    s = coarse_grain_frame(big, kernel, pos, vel, mass)["particles"]
+    assert s[..., 0].sum() * big.cell_volume == pytest.approx(mass.sum(), rel=0.005)
+
+
+def test_slab_density_is_the_slabs_own_not_the_kernel_at_mid_plane():
+    """One layer of grains in a slab as thick as a grain, coarse-grained wider than the slab:
+    the slab average is the layer's mass / (area T); the 3D kernel at y = 0 is not (the old way)."""
+    T, a = 0.004, 0.004
+    xs = np.arange(-0.1, 0.1, a) + 0.5 * a
+    pos = np.array([(x, 0.0, z) for x in xs for z in xs + 0.1])
+    mass = np.full(len(pos), 1.0e-4)
+    expect = mass[0] / (a * a * T)
+    k = gaussian(0.004)                                     # cutoff 16 mm: 4 x the slab
+    grid = CartesianGrid([-0.04, -0.5 * T, 0.06], [0.04, 0.5 * T, 0.14], (8, 1, 8), slab=True)
+    rho = coarse_grain_frame(grid, k, pos, np.zeros_like(pos), mass)["particles"][..., 0]
+    np.testing.assert_allclose(rho, expect, rtol=1e-3)
+    mid = coarse_grain_frame(CartesianGrid(grid.lo, grid.hi, (8, 1, 8)), k, pos, np.zeros_like(pos), mass)
+    assert mid["particles"][..., 0].mean() < 0.4 * expect
+
+
+def test_slab_grid_needs_one_cell_through_the_slab():
+    with pytest.raises(ValueError, match="ny = 1"):
+        CartesianGrid([-0.02, -0.002, 0.0], [0.02, 0.002, 0.03], (6, 2, 6), slab=True)
+
+
 def ring_average(kernel, r, z, pos, weight):
     """Independent azimuthal average of sum_i weight_i phi(|x(theta) - p_i|) at radius r, height z:
     scipy quad over each particle's own interval of theta inside the kernel's support."""

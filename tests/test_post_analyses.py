@@ -100,6 +100,9 @@ def test_bulk_density_weighs_each_species_by_its_own_density():
     assert row.bulk_density > 1.5 * dens[1] * row.solid_fraction         # the dust's mass counts
     with pytest.raises(ValueError, match="no particle density for atom type"):
         Porosity([region], densities={1: 1000.0}).run([frame])
+    # a dump of any LIGGGHTS/LAMMPS run: the densities from its mass column
+    frame.data["mass"] = np.where(types == 2, dens[2], dens[1]) * 4.0 / 3.0 * np.pi * r ** 3
+    assert Porosity([region]).run([frame]).table.bulk_density.iloc[0] == pytest.approx(row.bulk_density, rel=1e-12)
 
 
 def test_porosity_counts_the_part_of_a_cut_sphere_not_its_centre():
