@@ -36,6 +36,10 @@ from siloflow.engine import LiggghtsEngine  # noqa: E402
 from siloflow.errors import EngineRunError  # noqa: E402
 
 
+#: every run's measurements, written before the report is printed
+RAW_TABLE = Path(tempfile.gettempdir()) / "siloflow_dust_density_scaling.csv"
+
+
 def measure(data: dict, folder: Path) -> dict:
     case = case_from_dict(data)
     d = derive(case)
@@ -69,6 +73,14 @@ def main(case_file: Path, scales: list[float], seeds: int) -> None:
             print(f"density_scale {scale:g} seed {seed}: dt {r['dt']:.3g} s (without dust {r['dt_without_dust']:.3g} s), "
                   f"engine {r['wall_s']:.1f} s, dust {100 * r['dust_mass_share']:.2f} % of the mass", flush=True)
     table = pd.DataFrame(runs)
+    if not table.empty:          # the raw runs first: a report that fails below loses nothing
+        table.to_csv(RAW_TABLE, index=False)
+        print(f"runs written to {RAW_TABLE}")
+    report(table)
+
+
+def report(table: pd.DataFrame) -> None:
+    """Print the runs and, per scale, the changes against the true density."""
     if table.empty or not (table.scale == 1.0).any():
         print("no run at the true dust density finished: nothing to compare against")
         return
@@ -76,13 +88,14 @@ def main(case_file: Path, scales: list[float], seeds: int) -> None:
     print(f"\n{'scale':>7} {'seed':>6} {'dt/dt1':>7} {'time/t1':>8} {'dust %':>7} {'p0 (Pa)':>9} "
           f"{'Wf (g/s)':>9} {'phi':>6}")
     for _, r in table.iterrows():
-        print(f"{r.scale:>7g} {r.seed:>6} {r.dt / ref.dt:>7.2f} {r.wall_s / ref.wall_s:>8.2f} "
-              f"{100 * r.dust_mass_share:>7.2f} {r.p_static_band0:>9.1f} {1000 * r.flow_rate:>9.2f} {r.bulk_phi:>6.3f}")
+        print(f"{r['scale']:>7g} {int(r['seed']):>6} {r['dt'] / ref['dt']:>7.2f} {r['wall_s'] / ref['wall_s']:>8.2f} "
+              f"{100 * r['dust_mass_share']:>7.2f} {r['p_static_band0']:>9.1f} {1000 * r['flow_rate']:>9.2f} "
+              f"{r['bulk_phi']:>6.3f}")
     print(f"\nper scale, over seeds: mean and its standard error; change against the true density with the "
           f"combined standard error (a change within 2 of them is not measured)")
     print(f"{'scale':>7} {'runs':>5} {'time/t1':>8} {'p0 change %':>16} {'Wf change %':>16} {'phi change':>18}")
     one = table[table.scale == 1.0]
-    for scale, grp in table.groupby("scale"):
+    for scale, grp in table[table.scale != 1.0].groupby("scale"):
         cells = []
         for col, pct in (("p_static_band0", True), ("flow_rate", True), ("bulk_phi", False)):
             diff, se = mean_change(grp[col].to_numpy(float), one[col].to_numpy(float))
@@ -107,7 +120,11 @@ if __name__ == "__main__":
     parser.add_argument("case", nargs="?", type=Path, default=ROOT / "tests" / "data" / "clump_silo.yaml")
     parser.add_argument("--scales", type=float, nargs="+", default=[25.0, 200.0])
     parser.add_argument("--seeds", type=int, default=3, help="runs (seeds) per scale, the true density included")
+    parser.add_argument("--report", type=Path, help="only print the report of a runs table written before")
     args = parser.parse_args()
+    if args.report:
+        report(pd.read_csv(args.report))
+        sys.exit(0)
     if args.seeds < 1 or any(not (1.0 <= s <= 1.0e6) for s in args.scales):
         parser.error("--seeds must be >= 1 and --scales within [1, 1e6]")
     main(args.case, args.scales, args.seeds)

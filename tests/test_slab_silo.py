@@ -162,6 +162,31 @@ def test_slab_run_keeps_grains_in_the_slab_and_senses_both_walls(slab_run):
     assert summary["frame_analyses"]["flow_rate_surface_over_outlet"] == pytest.approx(1.0, abs=0.15)
 
 
+@pytest.mark.engine
+@pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS not installed (make install-engine); "
+                    "CI installs it, so CI never skips this")
+def test_slab_coarse_graining_gives_the_beds_own_solid_fraction(slab_run, tmp_path):
+    """siloflow cg on a slab run: fields averaged through the thickness. In the flowing bed's
+    middle the solid fraction is the bed's (the 3D kernel sampled at y = 0 gave about 0.3 of it)."""
+    from typer.testing import CliRunner
+    import xarray as xr
+    from siloflow.cli import app
+    case, folder, record, summary = slab_run
+    out = tmp_path / "cg"
+    result = CliRunner().invoke(app, ["cg", str(folder), "--grid", "cartesian", "--nr", "24", "--nz", "40",
+                                      "--width", "2", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    fa = summary["frame_analyses"]
+    with xr.open_dataset(out / "fields.nc") as ds:
+        assert ds.attrs["slab_thickness_m"] == pytest.approx(case.geometry.thickness)
+        assert ds.sizes["y"] == 1
+        g = case.geometry
+        mid = ds.solid_fraction.isel(y=0).sel(x=slice(-0.25 * g.half_width, 0.25 * g.half_width),
+                                              z=slice(g.hopper_height + 0.01, g.hopper_height + 0.02)).mean()
+        # settled 0.5-0.6; flowing somewhat looser
+        assert 0.75 * fa["bulk_solid_fraction"] < float(mid) < 1.05 * fa["bulk_solid_fraction"]
+
+
 @pytest.mark.parametrize("deck", ["slab", "cylinder"])
 def test_central_fill_pours_from_a_narrow_region(deck, quick_dict):
     data = slab_dict() if deck == "slab" else quick_dict
