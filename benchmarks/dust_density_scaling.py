@@ -55,22 +55,37 @@ def measure(data: dict, folder: Path) -> dict:
             "bulk_phi": fa.get("bulk_solid_fraction") if isinstance(fa.get("bulk_solid_fraction"), float) else float("nan")}
 
 
-def main(case_file: Path, scales: list[float], seeds: int) -> None:
+def variant_data(base: dict, scale: float, seed: int, keep_dt: bool) -> dict:
+    """The case of one run: dust density x ``scale``; with ``keep_dt`` the time step of the true
+    density (timestep_fraction lowered), so that the dust's mass is all that changes."""
+    data = copy.deepcopy(base)
+    data["particles"]["dust"]["density_scale"] = scale
+    data["seed"] = seed
+    if keep_dt:
+        true = copy.deepcopy(base)
+        true["particles"]["dust"]["density_scale"] = 1.0
+        engine = data.setdefault("engine", {})
+        fraction = engine.get("timestep_fraction", case_from_dict(data).engine.timestep_fraction)
+        engine["timestep_fraction"] = fraction * derive(case_from_dict(true)).timestep / derive(case_from_dict(data)).timestep
+    return data
+
+
+def main(case_file: Path, scales: list[float], seeds: int, keep_dt: bool = True) -> None:
     base = yaml.safe_load(case_file.read_text())
     runs = []
     with tempfile.TemporaryDirectory() as tmp:
-        variants = [(scale, base["seed"] + k) for scale in [1.0] + scales for k in range(seeds)]
-        for k, (scale, seed) in enumerate(variants):
-            data = copy.deepcopy(base)
-            data["particles"]["dust"]["density_scale"] = scale
-            data["seed"] = seed
+        variants = [(scale, base["seed"] + k, False) for scale in [1.0] + scales for k in range(seeds)]
+        if keep_dt:
+            variants += [(scale, base["seed"] + k, True) for scale in scales for k in range(seeds)]
+        for k, (scale, seed, same_dt) in enumerate(variants):
+            label = f"{scale:g}" + (" @dt1" if same_dt else "")
             try:
-                runs.append(measure(data, Path(tmp) / f"run{k}"))
+                runs.append({"variant": label, **measure(variant_data(base, scale, seed, same_dt), Path(tmp) / f"run{k}")})
             except EngineRunError as exc:          # a failed variant is a result too: say what failed
-                print(f"density_scale {scale:g} seed {seed}: FAILED: {str(exc).splitlines()[0]}", flush=True)
+                print(f"density_scale {label} seed {seed}: FAILED: {str(exc).splitlines()[0]}", flush=True)
                 continue
             r = runs[-1]
-            print(f"density_scale {scale:g} seed {seed}: dt {r['dt']:.3g} s (without dust {r['dt_without_dust']:.3g} s), "
+            print(f"density_scale {label} seed {seed}: dt {r['dt']:.3g} s (without dust {r['dt_without_dust']:.3g} s), "
                   f"engine {r['wall_s']:.1f} s, dust {100 * r['dust_mass_share']:.2f} % of the mass", flush=True)
     table = pd.DataFrame(runs)
     if not table.empty:          # the raw runs first: a report that fails below loses nothing
@@ -84,26 +99,30 @@ def report(table: pd.DataFrame) -> None:
     if table.empty or not (table.scale == 1.0).any():
         print("no run at the true dust density finished: nothing to compare against")
         return
-    ref = table[table.scale == 1.0].iloc[0]
-    print(f"\n{'scale':>7} {'seed':>6} {'dt/dt1':>7} {'time/t1':>8} {'dust %':>7} {'p0 (Pa)':>9} "
+    if "variant" not in table:                         # a table written before variants had labels
+        table = table.assign(variant=[f"{v:g}" for v in table.scale])
+    table = table.assign(variant=table.variant.astype(str))
+    ref = table[table.variant == "1"].iloc[0]
+    print(f"\n{'scale':>10} {'seed':>6} {'dt/dt1':>7} {'time/t1':>8} {'dust %':>7} {'p0 (Pa)':>9} "
           f"{'Wf (g/s)':>9} {'phi':>6}")
     for _, r in table.iterrows():
-        print(f"{r['scale']:>7g} {int(r['seed']):>6} {r['dt'] / ref['dt']:>7.2f} {r['wall_s'] / ref['wall_s']:>8.2f} "
+        print(f"{r['variant']:>10} {int(r['seed']):>6} {r['dt'] / ref['dt']:>7.2f} {r['wall_s'] / ref['wall_s']:>8.2f} "
               f"{100 * r['dust_mass_share']:>7.2f} {r['p_static_band0']:>9.1f} {1000 * r['flow_rate']:>9.2f} "
               f"{r['bulk_phi']:>6.3f}")
     print(f"\nper scale, over seeds: mean and its standard error; change against the true density with the "
           f"combined standard error (a change within 2 of them is not measured)")
-    print(f"{'scale':>7} {'runs':>5} {'time/t1':>8} {'p0 change %':>16} {'Wf change %':>16} {'phi change':>18}")
-    one = table[table.scale == 1.0]
-    for scale, grp in table[table.scale != 1.0].groupby("scale"):
+    print(f"{'scale':>10} {'runs':>5} {'time/t1':>8} {'p0 change %':>16} {'Wf change %':>16} {'phi change':>18}")
+    one = table[table.variant == "1"]
+    for scale, grp in table[table.variant != "1"].groupby("variant", sort=False):
         cells = []
         for col, pct in (("p_static_band0", True), ("flow_rate", True), ("bulk_phi", False)):
             diff, se = mean_change(grp[col].to_numpy(float), one[col].to_numpy(float))
             f = 100.0 / one[col].mean() if pct else 1.0
             flag = "*" if abs(diff) > 2 * se else " "
             cells.append(f"{diff * f:+7.2f} +/- {se * f:5.2f}{flag}" if pct else f"{diff:+8.4f} +/- {se:6.4f}{flag}")
-        print(f"{scale:>7g} {len(grp):>5} {grp.wall_s.mean() / one.wall_s.mean():>8.2f} {cells[0]:>16} {cells[1]:>16} {cells[2]:>18}")
-    print("* : beyond twice the combined standard error")
+        print(f"{scale:>10} {len(grp):>5} {grp.wall_s.mean() / one.wall_s.mean():>8.2f} {cells[0]:>16} {cells[1]:>16} {cells[2]:>18}")
+    print("* : beyond twice the combined standard error; @dt1: the true density's time step kept, so "
+          "only the dust's mass changed")
 
 
 def mean_change(values: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
@@ -121,10 +140,12 @@ if __name__ == "__main__":
     parser.add_argument("--scales", type=float, nargs="+", default=[25.0, 200.0])
     parser.add_argument("--seeds", type=int, default=3, help="runs (seeds) per scale, the true density included")
     parser.add_argument("--report", type=Path, help="only print the report of a runs table written before")
+    parser.add_argument("--no-keep-dt", action="store_true", help="skip the runs that keep the true density's "
+                        "time step (they separate the dust's mass from the time step's effect)")
     args = parser.parse_args()
     if args.report:
         report(pd.read_csv(args.report))
         sys.exit(0)
     if args.seeds < 1 or any(not (1.0 <= s <= 1.0e6) for s in args.scales):
         parser.error("--seeds must be >= 1 and --scales within [1, 1e6]")
-    main(args.case, args.scales, args.seeds)
+    main(args.case, args.scales, args.seeds, keep_dt=not args.no_keep_dt)
