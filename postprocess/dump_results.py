@@ -140,7 +140,11 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
         regions = None
         summary["bulk_solid_fraction"] = {"error": str(exc)}
     if regions is not None:
-        por = Porosity(regions, densities=species_densities(run.derived)).run([settled])
+        try:
+            por = Porosity(regions, densities=species_densities(run.derived)).run([settled])
+        except ValueError as exc:      # a type the run's species do not list: the grain density only
+            summary["bulk_density_note"] = f"{exc}; bulk density = particle density x solid fraction"
+            por = Porosity(regions).run([settled])
         por.save(out, figure=False)
         at = por.table.set_index("region")
         phi_bulk, phi_section = (float(at.loc[k, "solid_fraction"]) for k in ("bulk_core", "cross_section"))
