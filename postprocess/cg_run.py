@@ -36,6 +36,7 @@ class CgSetup:
     wall_contacts: list | None = None
     wall_contact_columns: list | None = None
     slab_thickness: float | None = None     # a slab silo: the grid is planar (x, z), r_max its half width
+    note: str | None = None                  # said in cg_summary.json
 
 
 def setup_from_run(folder: Path) -> CgSetup:
@@ -63,13 +64,15 @@ def setup_from_run(folder: Path) -> CgSetup:
         walls = None
     g = case.geometry
     top = summary.get("frame_analyses", {}).get("settled_surface_height_m") or (g.hopper_height + g.height)
-    if derived.get("mass_weights") and any(w != 1.0 for w in derived["mass_weights"]):
-        raise ReadError(f"{folder}: coarse-graining of clumps (multisphere: each sphere carries its "
-                        "clump's mass) is not implemented")
+    densities = {float(sp["density"]) for sp in derived.get("species", [])}
+    note = None
+    if len(densities) > 1:
+        note = (f"species of different densities ({', '.join(f'{v:g}' for v in sorted(densities))} kg/m3): "
+                f"solid_fraction = rho / {case.materials.particle.density:g} counts the others by their mass")
     return CgSetup(atoms, contacts, derived.get("contact_columns") or None, g.half_width, float(derived["outlet_z"]),
                    float(top), 0.0, g.outlet_radius, case.materials.particle.density,
                    int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, derived.get("wall_contact_columns"),
-                   slab_thickness=g.thickness if g.kind == "planar" else None)
+                   slab_thickness=g.thickness if g.kind == "planar" else None, note=note)
 
 
 def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: float = 2.0, unit: str = "radius",
@@ -113,7 +116,7 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
                "outlet_radius_m": setup.outlet_radius,
                "method": method if grid_kind == "rz" else "exact", **({"lattice_refine": refine} if
                                                                        grid_kind == "rz" and method == "lattice" else {}),
-               "z_outlet_m": setup.z_outlet, **kernel.describe()}
+               "z_outlet_m": setup.z_outlet, **kernel.describe(), **({"note": setup.note} if setup.note else {})}
     if grid_kind == "rz":
         prof = outlet_profiles(ds, setup.z_outlet, setup.outlet_radius)
         write_text(out / "outlet_profiles.csv", prof.to_csv(index=False))

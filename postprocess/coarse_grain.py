@@ -38,6 +38,7 @@ from numba import njit, prange
 
 from .analysis_base import StepCursor, paired
 from .cg_kernels import GAUSSIAN, LUCY, Kernel, kernel_value, slab_kernel_value
+from .clump_bodies import body_centres, body_contacts, body_frame
 
 # particle block: m, p (3), m v v (6: xx yy zz xy xz yz, or rr tt zz rt rz tz)
 PARTICLE_COLUMNS = ["m", "p0", "p1", "p2", "t00", "t11", "t22", "t01", "t02", "t12"]
@@ -658,9 +659,14 @@ def liggghts_contacts(contacts_frame):
     return (d.loc[keep, ["x1", "y1", "z1"]].to_numpy(), d.loc[keep, ["x2", "y2", "z2"]].to_numpy(), force[keep])
 
 
-def _joined_contacts(*frames):
-    """Concatenate the (pos_i, pos_j, force) of several contact frames (pairs, walls); None if none."""
-    parts = [liggghts_contacts(f) for f in frames if f is not None]
+def _joined_contacts(*frames, atoms=None, centres=None):
+    """Concatenate the (pos_i, pos_j, force) of several contact frames (pairs, walls); None if
+    none. With ``atoms`` and its clumps' ``centres`` (:func:`clump_bodies.body_centres`), the
+    branches run through the clumps' centroids."""
+    if centres is not None and centres[1] is not None:
+        parts = [body_contacts(atoms, f, centres) for f in frames if f is not None]
+    else:
+        parts = [liggghts_contacts(f) for f in frames if f is not None]
     if not parts:
         return None
     return tuple(np.concatenate([p[k] for p in parts]) for k in range(3))
@@ -693,11 +699,17 @@ class CoarseGraining:
         return self.rho_p * 4.0 / 3.0 * np.pi * frame.radii() ** 3
 
     def add_frame(self, frame, contacts=None, wall_contacts=None):
+        """Add one frame's sums; clumps (a ``mol`` column) are coarse-grained as rigid bodies
+        (:mod:`postprocess.clump_bodies`)."""
+        centres = body_centres(frame) if "mol" in frame.data else None
+        joined = _joined_contacts(contacts, wall_contacts, atoms=frame, centres=centres)
+        if centres is not None and centres[1] is not None:
+            frame = body_frame(frame, self.rho_p, centres)
         sp, labels = species_of(frame, self.species, self.classes)
         if self.species is not None and self.classes is None:
             self.classes = labels              # the first frame fixes the classes
         sums = coarse_grain_frame(self.grid, self.kernel, frame.positions(), frame.velocities(), self._mass(frame),
-                                  sp, len(self.classes or []), _joined_contacts(contacts, wall_contacts), self.n_s)
+                                  sp, len(self.classes or []), joined, self.n_s)
         if self.per_frame:
             self.frames.append(sums)
         if self.sum is None:

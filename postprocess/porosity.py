@@ -132,7 +132,7 @@ def clump_bodies(frame):
     return body, int(multi.sum())
 
 
-def _rows_by_body(body: np.ndarray, rows: np.ndarray):
+def rows_by_body(body: np.ndarray, rows: np.ndarray):
     """The given rows grouped by their body index (>= 0), one array per body, by one sort."""
     rows = rows[body[rows] >= 0]
     rows = rows[np.argsort(body[rows], kind="stable")]
@@ -143,13 +143,15 @@ def _rows_by_body(body: np.ndarray, rows: np.ndarray):
 _UNION_CACHE: dict = {}
 
 
-def _clump_key(pos, rad) -> tuple:
+def clump_key(pos, rad, ordered: bool = False) -> tuple:
     """Shape of a clump up to rigid motion, rounded to 1e-4 of its largest radius (dumps carry about
-    six digits; shapes that close share one union volume, good to about 1e-4)."""
+    six digits; shapes that close share one union volume, good to about 1e-4). ``ordered``: the
+    rows' order is part of the key (for per-row results such as centroid weights)."""
     scale = 1e-4 * rad.max()
-    d = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(-1))
-    return (tuple(np.round(np.sort(rad) / scale).astype(int)),
-            tuple(np.round(np.sort(d[np.triu_indices(len(rad), 1)]) / scale).astype(int)))
+    d = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(-1))[np.triu_indices(len(rad), 1)]
+    if not ordered:
+        rad, d = np.sort(rad), np.sort(d)
+    return tuple(np.round(rad / scale).astype(int)), tuple(np.round(d / scale).astype(int))
 
 
 def grain_weights(frame) -> np.ndarray | None:
@@ -161,8 +163,8 @@ def grain_weights(frame) -> np.ndarray | None:
     body, _ = found
     pos, rad = frame.positions(), frame.radii()
     weights = np.ones(frame.n)
-    for rows in _rows_by_body(body, np.arange(frame.n)):
-        key = _clump_key(pos[rows], rad[rows])
+    for rows in rows_by_body(body, np.arange(frame.n)):
+        key = clump_key(pos[rows], rad[rows])
         if key not in _UNION_CACHE:
             _UNION_CACHE[key] = union_volume(pos[rows], rad[rows]) / float((4.0 / 3.0 * np.pi * rad[rows] ** 3).sum())
         weights[rows] = _UNION_CACHE[key]
@@ -181,7 +183,7 @@ def section_weights(frame, axis: int, plane: float) -> np.ndarray | None:
     cut = (h < rad) & (body >= 0)
     weights = np.ones(frame.n)
     keep = [k for k in range(3) if k != axis]
-    for rows in _rows_by_body(body, np.flatnonzero(cut)):
+    for rows in rows_by_body(body, np.flatnonzero(cut)):
         if len(rows) < 2:
             continue
         circle = np.sqrt(rad[rows] ** 2 - h[rows] ** 2)

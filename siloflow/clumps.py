@@ -125,20 +125,9 @@ def _covered(theta: float, ci, ri: float, others) -> list | None:
 
 def _exposed_integral(theta: float, ci, ri: float, others) -> float:
     """Integral over the exposed azimuths at ``theta`` of (x . n) sin(theta) (without R^2)."""
-    covered = _covered(theta, ci, ri, others)
-    if covered is None:
-        return 0.0
     s, c = math.sin(theta), math.cos(theta)
-    # exposed intervals = complement of the covered ones in [0, 2 pi]
-    edges, start = [], 0.0
-    for a, b in covered:
-        if a > start:
-            edges.append((start, a))
-        start = max(start, b)
-    if start < TWO_PI:
-        edges.append((start, TWO_PI))
     total = 0.0
-    for p1, p2 in edges:
+    for p1, p2 in _exposed_arcs(theta, ci, ri, others):
         total += (s * (ci[0] * (math.sin(p2) - math.sin(p1)) - ci[1] * (math.cos(p2) - math.cos(p1)))
                   + (ci[2] * c + ri) * (p2 - p1))
     return total * s
@@ -163,12 +152,11 @@ def _triple_points(ci, ri, cj, rj, ck, rk) -> list[np.ndarray]:
     return [p0 + (-b - root) / (2 * a) * u, p0 + (-b + root) / (2 * a) * u]
 
 
-def union_volume(centers, radii, rtol: float = 1e-10) -> float:
-    """Volume (m3) of the union of spheres (``centers`` (n, 3), ``radii`` (n,), m)."""
-    c = np.asarray(centers, float)
-    r = np.asarray(radii, float)
-    c = c - c.mean(axis=0)          # x . n is measured from here: keep it small
-    total = 0.0
+def _exposed_pieces(c, r):
+    """Per sphere i not buried in another: (i, others, polar breakpoints) for the integrals over
+    its exposed surface; ``others`` describes the spheres that cut it (see :func:`_covered`),
+    empty when the whole sphere is exposed."""
+    pieces = []
     for i in range(len(r)):
         others, breaks, buried = [], [], False
         for j in range(len(r)):
@@ -190,15 +178,41 @@ def union_volume(centers, radii, rtol: float = 1e-10) -> float:
             breaks += [theta_d - beta, theta_d + beta]
         if buried:
             continue
-        if not others:
-            total += 4.0 / 3.0 * math.pi * r[i] ** 3
-            continue
         near = [j for j in range(len(r)) if j != i and np.linalg.norm(c[j] - c[i]) < r[i] + r[j]]
         for a_, j in enumerate(near):
             for k in near[a_ + 1:]:
                 for point in _triple_points(c[i], r[i], c[j], r[j], c[k], r[k]):
                     breaks.append(math.acos(max(-1.0, min(1.0, point[2] / r[i]))))
         points = sorted({0.0, math.pi, *[b for b in breaks if 0.0 < b < math.pi]})
+        pieces.append((i, others, points))
+    return pieces
+
+
+def _exposed_arcs(theta: float, ci, ri: float, others) -> list:
+    """Exposed azimuth intervals of sphere i at polar angle ``theta``."""
+    covered = _covered(theta, ci, ri, others)
+    if covered is None:
+        return []
+    edges, start = [], 0.0
+    for a, b in covered:
+        if a > start:
+            edges.append((start, a))
+        start = max(start, b)
+    if start < TWO_PI:
+        edges.append((start, TWO_PI))
+    return edges
+
+
+def union_volume(centers, radii, rtol: float = 1e-10) -> float:
+    """Volume (m3) of the union of spheres (``centers`` (n, 3), ``radii`` (n,), m)."""
+    c = np.asarray(centers, float)
+    r = np.asarray(radii, float)
+    c = c - c.mean(axis=0)          # x . n is measured from here: keep it small
+    total = 0.0
+    for i, others, points in _exposed_pieces(c, r):
+        if not others:
+            total += 4.0 / 3.0 * math.pi * r[i] ** 3
+            continue
         part = 0.0
         for a, b in zip(points, points[1:]):
             if b - a > 1e-14:
@@ -208,6 +222,46 @@ def union_volume(centers, radii, rtol: float = 1e-10) -> float:
                 part += value
         total += r[i] ** 2 * part / 3.0
     return float(total)
+
+
+def _exposed_moment(theta: float, ci, ri: float, others) -> np.ndarray:
+    """Integrand over theta of the first moment: the exposed azimuths' integral of
+    (x_k^2 / 2) n_k sin(theta), x = ci + ri n, for k = x, y, z (without ri^2)."""
+    s, c = math.sin(theta), math.cos(theta)
+    out = np.zeros(3)
+    for p1, p2 in _exposed_arcs(theta, ci, ri, others):
+        # int cos, cos^2, cos^3 and sin, sin^2, sin^3 over [p1, p2]
+        c1 = math.sin(p2) - math.sin(p1)
+        c2 = 0.5 * (p2 - p1) + 0.25 * (math.sin(2 * p2) - math.sin(2 * p1))
+        c3 = c1 - (math.sin(p2) ** 3 - math.sin(p1) ** 3) / 3.0
+        s1 = -(math.cos(p2) - math.cos(p1))
+        s2 = 0.5 * (p2 - p1) - 0.25 * (math.sin(2 * p2) - math.sin(2 * p1))
+        s3 = s1 + (math.cos(p2) ** 3 - math.cos(p1) ** 3) / 3.0
+        out[0] += ci[0] ** 2 * s * c1 + 2 * ci[0] * ri * s * s * c2 + ri * ri * s ** 3 * c3
+        out[1] += ci[1] ** 2 * s * s1 + 2 * ci[1] * ri * s * s * s2 + ri * ri * s ** 3 * s3
+        out[2] += (ci[2] + ri * c) ** 2 * c * (p2 - p1)
+    return 0.5 * out * s
+
+
+def union_centroid(centers, radii, rtol: float = 1e-10) -> np.ndarray:
+    """Centroid (m) of the union of spheres, exact to ``rtol``: the first moment by the
+    divergence theorem, int_V x_k dV = int_S (x_k^2 / 2) n_k dS over the exposed surface."""
+    c0 = np.asarray(centers, float)
+    r = np.asarray(radii, float)
+    mid = c0.mean(axis=0)
+    c = c0 - mid
+    moment = np.zeros(3)
+    size = float(np.abs(c).max() + r.max())
+    for i, others, points in _exposed_pieces(c, r):
+        if not others:
+            moment += 4.0 / 3.0 * math.pi * r[i] ** 3 * c[i]
+            continue
+        for a, b in zip(points, points[1:]):
+            if b - a > 1e-14:
+                value, _ = integrate.quad_vec(_exposed_moment, a, b, args=(c[i], r[i], others),
+                                              epsabs=rtol * size ** 2, epsrel=rtol, limit=400)
+                moment += r[i] ** 2 * value
+    return mid + moment / union_volume(c0, r, rtol)
 
 
 def union_area(centers, radii) -> float:

@@ -227,6 +227,31 @@ def test_clump_run_conserves_mass_and_balances_the_weight(clump_run):
     assert fa["coordination_convention"] == "per_body"
 
 
+def test_clump_run_coarse_grains_bodies_not_spheres(clump_run, tmp_path):
+    """siloflow cg on a clump run: each grain is one rigid body at its centroid with its mass
+    (not three spheres each carrying it), contacts reach the bodies' centroids."""
+    from typer.testing import CliRunner
+    import xarray as xr
+    from siloflow.cli import app
+    case, folder, record = clump_run
+    out = tmp_path / "cg"
+    result = CliRunner().invoke(app, ["cg", str(folder), "--nr", "12", "--nz", "40", "--width", "1.5", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    fa = json.loads((folder / "results" / "summary.json").read_text())["frame_analyses"]
+    s = json.loads((out / "cg_summary.json").read_text())
+    assert s["frames"] >= 3 and s["contacts"]
+    with xr.open_dataset(out / "fields.nc") as ds:
+        assert ds.sizes["species"] == 2                                   # grains and dust
+        h = fa["settled_surface_height_m"]
+        mid = ds.sel(z=0.5 * h, method="nearest").isel(r=slice(0, 4)).mean("r")
+        # the flowing bed's solid fraction, from the bodies' mass: near the settled bed's
+        # union-volume value (three spheres each with the grain's mass would give about 3x)
+        assert 0.75 * fa["bulk_solid_fraction"] < float(mid.solid_fraction) < 1.1 * fa["bulk_solid_fraction"]
+        assert float(mid.contact_pressure) > 20 * float(mid.kinetic_pressure) > 0
+        axis = ds.contact_pressure.isel(r=0)
+        assert float(axis.sel(z=0.3 * h, method="nearest")) > float(axis.sel(z=0.7 * h, method="nearest"))
+
+
 # --------------------------------------------------------------------------- dust in a slab
 SLAB_DUST = ROOT / "tests" / "data" / "slab_dust.yaml"
 
