@@ -128,6 +128,8 @@ def body_contacts(frame, contacts_frame, centres=None):
         return centre[i], d[["xw", "yw", "zw"]].to_numpy(float), force
     keep = (d["periodic"].to_numpy() == 0) if "periodic" in d else np.ones(len(d), bool)
     j = rows_of("id2")
+    mol = frame.column("mol").astype(np.int64)
+    keep &= ~((mol[i] == mol[j]) & (mol[i] > 0))     # inside one rigid body (LIGGGHTS reports none)
     i, j, force = i[keep], j[keep], force[keep]
     xi, xj = d.loc[keep, ["x1", "y1", "z1"]].to_numpy(float), d.loc[keep, ["x2", "y2", "z2"]].to_numpy(float)
     rad = frame.radii()
