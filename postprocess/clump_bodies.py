@@ -23,7 +23,7 @@ import pandas as pd
 
 from siloflow.clumps import union_centroid, union_volume
 
-from .porosity import rows_by_body, clump_bodies, clump_key
+from .porosity import clump_bodies
 
 #: shape key (order-aware) -> affine weights of the sphere centres giving the union's centroid
 _WEIGHTS: dict[tuple, np.ndarray] = {}
@@ -39,27 +39,56 @@ def centroid_weights(centers, radii) -> np.ndarray:
     return np.linalg.lstsq(A, b, rcond=None)[0]
 
 
+def _body_blocks(body: np.ndarray):
+    """Clump rows as blocks of bodies with the same sphere count: a list of (m, n) row-index
+    arrays, each row one body's spheres in dump order."""
+    rows = np.flatnonzero(body >= 0)
+    rows = rows[np.argsort(body[rows], kind="stable")]
+    starts = np.flatnonzero(np.r_[True, np.diff(body[rows]) != 0])
+    counts = np.diff(np.r_[starts, len(rows)])
+    blocks = []
+    for n in np.unique(counts):
+        first = starts[counts == n]
+        blocks.append(rows[first[:, None] + np.arange(n)[None, :]])
+    return blocks
+
+
+def _block_weights(pos, rad, rows) -> np.ndarray:
+    """Centroid weights (m, n) of a block of bodies, computed once per shape: the key is the
+    radii and pair distances in row order (the weights follow the rows), rounded to 1e-4 of the
+    largest radius (dumps carry about six digits)."""
+    P, R = pos[rows], rad[rows]
+    n = rows.shape[1]
+    iu = np.triu_indices(n, 1)
+    D = np.sqrt(((P[:, :, None, :] - P[:, None, :, :]) ** 2).sum(-1))[:, iu[0], iu[1]]
+    scale = 1e-4 * R.max(axis=1, keepdims=True)
+    keys = np.concatenate([np.round(R / scale), np.round(D / scale)], axis=1).astype(np.int64)
+    unique, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    table = np.empty((len(unique), n))
+    for u, (key, b) in enumerate(zip(unique, first)):
+        k = (tuple(key[:n]), tuple(key[n:]))
+        if k not in _WEIGHTS:
+            _WEIGHTS[k] = centroid_weights(P[b], R[b])
+        table[u] = _WEIGHTS[k]
+    return table[inverse.ravel()]
+
+
 def body_centres(frame):
-    """(centre per row (n, 3), bodies) where a clump sphere's centre is its body's centroid and
-    any other row's is its own position; ``bodies`` is (rows per body, weights per body) or
-    None when the frame has no clumps."""
+    """(centre per row (n, 3), blocks) where a clump sphere's centre is its body's centroid and
+    any other row's is its own position; ``blocks`` is a list of (rows (m, k), weights (m, k))
+    for the bodies of k spheres, or None when the frame has no clumps."""
     pos = frame.positions()
     found = clump_bodies(frame)
     if found is None:
         return pos, None
     rad = frame.radii()
-    body, _ = found
-    groups = rows_by_body(body, np.arange(frame.n))
-    weights = []
     centre = pos.copy()
-    for rows in groups:
-        key = clump_key(pos[rows], rad[rows], ordered=True)
-        if key not in _WEIGHTS:
-            _WEIGHTS[key] = centroid_weights(pos[rows], rad[rows])
-        w = _WEIGHTS[key]
-        centre[rows] = w @ pos[rows]
-        weights.append(w)
-    return centre, (groups, weights)
+    blocks = []
+    for rows in _body_blocks(found[0]):
+        w = _block_weights(pos, rad, rows)
+        centre[rows] = np.einsum("mk,mkd->md", w, pos[rows])[:, None, :]
+        blocks.append((rows, w))
+    return centre, blocks
 
 
 def body_frame(frame, particle_density: float | None = None, centres=None):
@@ -67,30 +96,27 @@ def body_frame(frame, particle_density: float | None = None, centres=None):
     sphere, velocity sum w_i v_i, the body's mass, and ``radius`` its largest sphere's (species
     by radius then tell clumps from dust). Frames without clumps come back unchanged.
     ``centres``: :func:`body_centres` of the frame, if already computed."""
-    centre, bodies = centres or body_centres(frame)
-    if bodies is None:
+    centre, blocks = centres or body_centres(frame)
+    if blocks is None:
         return frame
-    groups, weights = bodies
     d = frame.data
-    vel, rad = frame.velocities(), frame.radii()
+    vel, rad, pos = frame.velocities(), frame.radii(), frame.positions()
     loose = np.ones(frame.n, bool)
-    first = np.array([rows[0] for rows in groups])
-    for rows in groups:
-        loose[rows] = False
-    if "mass" in d:
-        mass = frame.column("mass").astype(float)[first]
-    elif particle_density:
-        mass = np.array([particle_density * union_volume(frame.positions()[rows], rad[rows]) for rows in groups])
-    else:
-        raise ValueError(f"{frame.source}: clumps need a mass column or a particle density")
-    bodies_table = pd.DataFrame({
-        "id": frame.column("id")[first], "type": frame.column("type")[first],
-        "mol": frame.column("mol")[first],
-        "x": centre[first, 0], "y": centre[first, 1], "z": centre[first, 2],
-        "vx": [w @ vel[rows, 0] for rows, w in zip(groups, weights)],
-        "vy": [w @ vel[rows, 1] for rows, w in zip(groups, weights)],
-        "vz": [w @ vel[rows, 2] for rows, w in zip(groups, weights)],
-        "radius": [rad[rows].max() for rows in groups], "mass": mass})
+    tables = []
+    for rows, w in blocks:
+        loose[rows.ravel()] = False
+        first = rows[:, 0]
+        if "mass" in d:
+            mass = frame.column("mass").astype(float)[first]
+        elif particle_density:
+            mass = np.array([particle_density * union_volume(pos[r], rad[r]) for r in rows])
+        else:
+            raise ValueError(f"{frame.source}: clumps need a mass column or a particle density")
+        v = np.einsum("mk,mkd->md", w, vel[rows])
+        tables.append(pd.DataFrame({
+            "id": frame.column("id")[first], "type": frame.column("type")[first], "mol": frame.column("mol")[first],
+            "x": centre[first, 0], "y": centre[first, 1], "z": centre[first, 2],
+            "vx": v[:, 0], "vy": v[:, 1], "vz": v[:, 2], "radius": rad[rows].max(axis=1), "mass": mass}))
     keep = ["id", "type", "mol", "x", "y", "z", "vx", "vy", "vz", "radius"]
     rest = d.loc[loose, [c for c in keep if c in d]].copy()
     rest["radius"] = rad[loose]
@@ -98,7 +124,7 @@ def body_frame(frame, particle_density: float | None = None, centres=None):
         rest["mass"] = d.loc[loose, "mass"].to_numpy(float)
     elif particle_density:
         rest["mass"] = particle_density * 4.0 / 3.0 * np.pi * rad[loose] ** 3
-    data = pd.concat([bodies_table, rest], ignore_index=True)
+    data = pd.concat(tables + [rest], ignore_index=True)
     return replace(frame, data=data)
 
 

@@ -143,15 +143,13 @@ def rows_by_body(body: np.ndarray, rows: np.ndarray):
 _UNION_CACHE: dict = {}
 
 
-def clump_key(pos, rad, ordered: bool = False) -> tuple:
+def clump_key(pos, rad) -> tuple:
     """Shape of a clump up to rigid motion, rounded to 1e-4 of its largest radius (dumps carry about
-    six digits; shapes that close share one union volume, good to about 1e-4). ``ordered``: the
-    rows' order is part of the key (for per-row results such as centroid weights)."""
+    six digits; shapes that close share one union volume, good to about 1e-4)."""
     scale = 1e-4 * rad.max()
-    d = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(-1))[np.triu_indices(len(rad), 1)]
-    if not ordered:
-        rad, d = np.sort(rad), np.sort(d)
-    return tuple(np.round(rad / scale).astype(int)), tuple(np.round(d / scale).astype(int))
+    d = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(-1))
+    return (tuple(np.round(np.sort(rad) / scale).astype(int)),
+            tuple(np.round(np.sort(d[np.triu_indices(len(rad), 1)]) / scale).astype(int)))
 
 
 def grain_weights(frame) -> np.ndarray | None:
