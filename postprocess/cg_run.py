@@ -68,7 +68,8 @@ def setup_from_run(folder: Path) -> CgSetup:
     note = None
     if len(densities) > 1:
         note = (f"species of different densities ({', '.join(f'{v:g}' for v in sorted(densities))} kg/m3): "
-                f"solid_fraction = rho / {case.materials.particle.density:g} counts the others by their mass")
+                f"without partial fields (--species none), solid_fraction = rho / {case.materials.particle.density:g} "
+                "counts the others by their mass")
     return CgSetup(atoms, contacts, derived.get("contact_columns") or None, g.half_width, float(derived["outlet_z"]),
                    float(top), 0.0, g.outlet_radius, case.materials.particle.density,
                    int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, derived.get("wall_contact_columns"),
@@ -116,7 +117,8 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
                "outlet_radius_m": setup.outlet_radius,
                "method": method if grid_kind == "rz" else "exact", **({"lattice_refine": refine} if
                                                                        grid_kind == "rz" and method == "lattice" else {}),
-               "z_outlet_m": setup.z_outlet, **kernel.describe(), **({"note": setup.note} if setup.note else {})}
+               "z_outlet_m": setup.z_outlet, **kernel.describe(),
+               **({"note": setup.note} if setup.note and not species else {})}
     if grid_kind == "rz":
         prof = outlet_profiles(ds, setup.z_outlet, setup.outlet_radius)
         write_text(out / "outlet_profiles.csv", prof.to_csv(index=False))

@@ -25,8 +25,9 @@ from siloflow.clumps import union_centroid, union_volume
 
 from .porosity import clump_bodies
 
-#: shape key (order-aware) -> affine weights of the sphere centres giving the union's centroid
-_WEIGHTS: dict[tuple, np.ndarray] = {}
+#: shape key (order-aware) -> (affine weights of the sphere centres giving the union's
+#: centroid, union volume m3)
+_WEIGHTS: dict[tuple, tuple] = {}
 
 
 def centroid_weights(centers, radii) -> np.ndarray:
@@ -53,8 +54,9 @@ def _body_blocks(body: np.ndarray):
     return blocks
 
 
-def _block_weights(pos, rad, rows) -> np.ndarray:
-    """Centroid weights (m, n) of a block of bodies, computed once per shape: the key is the
+def _block_weights(pos, rad, rows) -> tuple[np.ndarray, np.ndarray]:
+    """Centroid weights (m, n) and union volumes (m,) (m3) of a block of bodies, computed once
+    per shape: the key is the
     radii and pair distances in row order (the weights follow the rows), rounded to 1e-4 of the
     largest radius (dumps carry about six digits)."""
     P, R = pos[rows], rad[rows]
@@ -65,18 +67,19 @@ def _block_weights(pos, rad, rows) -> np.ndarray:
     keys = np.concatenate([np.round(R / scale), np.round(D / scale)], axis=1).astype(np.int64)
     unique, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     table = np.empty((len(unique), n))
+    volume = np.empty(len(unique))
     for u, (key, b) in enumerate(zip(unique, first)):
         k = (tuple(key[:n]), tuple(key[n:]))
         if k not in _WEIGHTS:
-            _WEIGHTS[k] = centroid_weights(P[b], R[b])
-        table[u] = _WEIGHTS[k]
-    return table[inverse.ravel()]
+            _WEIGHTS[k] = centroid_weights(P[b], R[b]), union_volume(P[b], R[b])
+        table[u], volume[u] = _WEIGHTS[k]
+    return table[inverse.ravel()], volume[inverse.ravel()]
 
 
 def body_centres(frame):
     """(centre per row (n, 3), blocks) where a clump sphere's centre is its body's centroid and
-    any other row's is its own position; ``blocks`` is a list of (rows (m, k), weights (m, k))
-    for the bodies of k spheres, or None when the frame has no clumps."""
+    any other row's is its own position; ``blocks`` is a list of (rows (m, k), weights (m, k),
+    union volumes (m,)) for the bodies of k spheres, or None when the frame has no clumps."""
     pos = frame.positions()
     found = clump_bodies(frame)
     if found is None:
@@ -85,16 +88,16 @@ def body_centres(frame):
     centre = pos.copy()
     blocks = []
     for rows in _body_blocks(found[0]):
-        w = _block_weights(pos, rad, rows)
+        w, volume = _block_weights(pos, rad, rows)
         centre[rows] = np.einsum("mk,mkd->md", w, pos[rows])[:, None, :]
-        blocks.append((rows, w))
+        blocks.append((rows, w, volume))
     return centre, blocks
 
 
 def body_frame(frame, particle_density: float | None = None, centres=None):
     """The frame with each clump replaced by one row at its centroid: id and type of its first
-    sphere, velocity sum w_i v_i, the body's mass, and ``radius`` its largest sphere's (species
-    by radius then tell clumps from dust). Frames without clumps come back unchanged.
+    sphere, velocity sum w_i v_i, the body's mass, its union ``volume`` (m3; spheres: their own),
+    and ``radius`` its largest sphere's (species by radius then tell clumps from dust). Frames without clumps come back unchanged.
     ``centres``: :func:`body_centres` of the frame, if already computed."""
     centre, blocks = centres or body_centres(frame)
     if blocks is None:
@@ -103,23 +106,25 @@ def body_frame(frame, particle_density: float | None = None, centres=None):
     vel, rad, pos = frame.velocities(), frame.radii(), frame.positions()
     loose = np.ones(frame.n, bool)
     tables = []
-    for rows, w in blocks:
+    for rows, w, volume in blocks:
         loose[rows.ravel()] = False
         first = rows[:, 0]
         if "mass" in d:
             mass = frame.column("mass").astype(float)[first]
         elif particle_density:
-            mass = np.array([particle_density * union_volume(pos[r], rad[r]) for r in rows])
+            mass = particle_density * volume
         else:
             raise ValueError(f"{frame.source}: clumps need a mass column or a particle density")
         v = np.einsum("mk,mkd->md", w, vel[rows])
         tables.append(pd.DataFrame({
             "id": frame.column("id")[first], "type": frame.column("type")[first], "mol": frame.column("mol")[first],
             "x": centre[first, 0], "y": centre[first, 1], "z": centre[first, 2],
-            "vx": v[:, 0], "vy": v[:, 1], "vz": v[:, 2], "radius": rad[rows].max(axis=1), "mass": mass}))
+            "vx": v[:, 0], "vy": v[:, 1], "vz": v[:, 2], "radius": rad[rows].max(axis=1), "mass": mass,
+            "volume": volume}))
     keep = ["id", "type", "mol", "x", "y", "z", "vx", "vy", "vz", "radius"]
     rest = d.loc[loose, [c for c in keep if c in d]].copy()
     rest["radius"] = rad[loose]
+    rest["volume"] = 4.0 / 3.0 * np.pi * rad[loose] ** 3
     if "mass" in d:
         rest["mass"] = d.loc[loose, "mass"].to_numpy(float)
     elif particle_density:

@@ -12,7 +12,7 @@ s_i) and contacts (force f_ij on i from j, branch b_ij = r_i - r_j):
     sigma_c     = sum_ij f_ij (x) b_ij int_0^1 phi(x - r_j - s b_ij) ds   contact stress, Pa
                   (compressive positive; the line integral by Gauss-Legendre, 2-16 points by
                   branch length over kernel width: see line_points_needed)
-    phi_s = rho / rho_p,  pressures p = trace / 3.
+    phi_s = rho / rho_p (with species: sum_a rho_a / rho_a,p),  pressures p = trace / 3.
 
 Grids:
 * Cartesian: cell centres of a regular grid.
@@ -575,9 +575,12 @@ def coarse_grain_frame(grid, kernel: Kernel, pos, vel, mass, species=None, n_spe
     return out
 
 
-def fields_from_sums(sums: dict, particle_density: float | None = None, n_species: int = 0) -> dict:
+def fields_from_sums(sums: dict, particle_density: float | None = None, n_species: int = 0,
+                     species_density=None) -> dict:
     """Continuum fields from (time-averaged) kernel sums: rho, phi, P, V, kinetic stress and
-    pressure, partial fields per species, contact stress and pressure."""
+    pressure, partial fields per species, contact stress and pressure. ``species_density``
+    (kg/m3 per species): the partial solid fractions are rho_a / rho_a,p and the solid fraction
+    their sum (species of different densities, e.g. scaled dust); else rho / ``particle_density``."""
     part = sums["particles"]
     ncol = len(PARTICLE_COLUMNS)
     rho = part[..., 0]
@@ -605,7 +608,10 @@ def fields_from_sums(sums: dict, particle_density: float | None = None, n_specie
         f["rho_species"] = np.stack(rho_a, axis=-1)
         f["kinetic_stress_species"] = np.stack(kin_a, axis=-2)
         f["kinetic_pressure_species"] = f["kinetic_stress_species"][..., :3].sum(axis=-1) / 3.0
-        if particle_density:
+        if species_density is not None:
+            f["solid_fraction_species"] = f["rho_species"] / np.asarray(species_density, float)
+            f["solid_fraction"] = f["solid_fraction_species"].sum(axis=-1)
+        elif particle_density:
             f["solid_fraction_species"] = f["rho_species"] / particle_density
     if "contact" in sums:
         c = sums["contact"]
@@ -688,6 +694,7 @@ class CoarseGraining:
         self.grid, self.kernel, self.rho_p = grid, kernel, particle_density
         self.species, self.classes, self.per_frame, self.n_s = species, species_classes, per_frame, n_s
         self.sum = None
+        self.class_density = None               # kg/m3 per species class, from the first frame
         self.frames: list[dict] = []
         self.steps: list[int] = []
 
@@ -708,6 +715,14 @@ class CoarseGraining:
         sp, labels = species_of(frame, self.species, self.classes)
         if self.species is not None and self.classes is None:
             self.classes = labels              # the first frame fixes the classes
+        if self.species is not None and self.class_density is None and "mass" in frame.data:
+            volume = frame.column("volume").astype(float) if "volume" in frame.data else \
+                4.0 / 3.0 * np.pi * frame.radii() ** 3
+            mass = frame.column("mass").astype(float)
+            k = len(self.classes)
+            m, v = np.bincount(sp, mass, k), np.bincount(sp, volume, k)
+            if np.all(v > 0):                  # each class's mass per solid volume
+                self.class_density = m / v
         sums = coarse_grain_frame(self.grid, self.kernel, frame.positions(), frame.velocities(), self._mass(frame),
                                   sp, len(self.classes or []), joined, self.n_s)
         if self.per_frame:
@@ -735,7 +750,7 @@ class CoarseGraining:
             sums = {key: v / len(self.steps) for key, v in self.sum.items()}
         else:
             sums = self.frames[k]
-        return fields_from_sums(sums, self.rho_p, len(self.classes or []))
+        return fields_from_sums(sums, self.rho_p, len(self.classes or []), self.class_density)
 
     def dataset(self, k: int | None = None):
         """The fields as an xarray Dataset with coordinates and units (SI)."""
@@ -754,7 +769,8 @@ class CoarseGraining:
                 "kinetic_stress": (dims + ("sym",), f["kinetic_stress"], "Pa", "kinetic stress"),
                 "kinetic_pressure": (dims, f["kinetic_pressure"], "Pa", "trace of the kinetic stress / 3")}
         if "solid_fraction" in f:
-            data["solid_fraction"] = (dims, f["solid_fraction"], "1", "rho / rho_p")
+            data["solid_fraction"] = (dims, f["solid_fraction"], "1", "rho / rho_p" if self.class_density is None
+                                      else "sum over species of rho_a / rho_a,p")
         if "contact_stress" in f:
             data["contact_stress"] = (dims + ("tensor",), f["contact_stress"], "Pa", "contact stress")
             data["contact_pressure"] = (dims, f["contact_pressure"], "Pa", "trace of the contact stress / 3")
@@ -775,6 +791,8 @@ class CoarseGraining:
         ds.attrs.update({"grid": self.grid.kind, "frames": len(self.steps), "first_step": self.steps[0],
                          "last_step": self.steps[-1], "contact_line_points": "adaptive: 2 + ceil(2 L / s)" if self.n_s is None else self.n_s,
                          **{f"kernel_{k}": v for k, v in self.kernel.describe().items()}})
+        if self.class_density is not None:
+            ds.attrs["species_density_kg_m3"] = [float(v) for v in self.class_density]
         if getattr(self.grid, "slab", False):
             ds.attrs["slab_thickness_m"] = float(self.grid.spacing[1])
             ds.attrs["slab_average"] = "kernel integrated over y, divided by the slab thickness"

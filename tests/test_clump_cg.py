@@ -144,3 +144,23 @@ def test_clump_contact_branches_run_through_the_centroids():
     np.testing.assert_allclose(integral, expect.ravel(), atol=5e-3 * np.abs(expect).max())
     spheres = np.outer(f1, pos[0] - pos[5]) + np.outer(fw, pos[2] - wall_point)
     assert np.abs(integral - spheres.ravel()).max() > 0.05 * np.abs(expect).max()
+
+
+def test_solid_fraction_counts_volumes_when_species_differ_in_density():
+    """Scaled (heavy) dust among clumps: the solid fraction is each species' partial density over
+    its own particle density, so its integral is the solid volume (clumps' unions, dust spheres),
+    not the mass over the grains' density."""
+    from siloflow.clumps import union_volume
+    frame = clump_frame(seed=2)
+    dust = frame.data.type == 2
+    frame.data.loc[dust, "mass"] = 8.0e5 * 4 / 3 * math.pi * 0.00025 ** 3         # dust x400
+    grain_volume = union_volume(*WHEAT)
+    frame.data.loc[~dust, "mass"] = 1000.0 * grain_volume
+    grid = CartesianGrid([-0.04, -0.04, 0.0], [0.04, 0.04, 0.1], (32, 32, 40))
+    cg = CoarseGraining(grid, gaussian(0.003), particle_density=1000.0, species="type").run([frame])
+    f = cg.fields()
+    solid = 40 * grain_volume + 15 * 4 / 3 * math.pi * 0.00025 ** 3
+    assert f["solid_fraction"].sum() * grid.cell_volume == pytest.approx(solid, rel=0.005)
+    np.testing.assert_allclose(cg.class_density, [1000.0, 8.0e5], rtol=1e-9)
+    # rho / rho_p would have counted the dust's mass as grain volume
+    assert f["rho"].sum() * grid.cell_volume / 1000.0 > 1.2 * solid
