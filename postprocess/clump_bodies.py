@@ -25,8 +25,9 @@ from siloflow.clumps import union_centroid, union_volume
 
 from .porosity import clump_bodies
 
-#: shape key (order-aware) -> (affine weights of the sphere centres giving the union's
-#: centroid, union volume m3)
+#: shape key (order-aware, scale-free) -> (affine weights of the sphere centres giving the
+#: union's centroid, union volume / sum of the spheres' volumes); both survive rigid motion
+#: and scaling
 _WEIGHTS: dict[tuple, tuple] = {}
 
 
@@ -56,9 +57,8 @@ def _body_blocks(body: np.ndarray):
 
 def _block_weights(pos, rad, rows) -> tuple[np.ndarray, np.ndarray]:
     """Centroid weights (m, n) and union volumes (m,) (m3) of a block of bodies, computed once
-    per shape: the key is the
-    radii and pair distances in row order (the weights follow the rows), rounded to 1e-4 of the
-    largest radius (dumps carry about six digits)."""
+    per shape: the key is the radii and pair distances in row order (the weights follow the
+    rows) over the largest radius, rounded to 1e-4 (dumps carry about six digits)."""
     P, R = pos[rows], rad[rows]
     n = rows.shape[1]
     iu = np.triu_indices(n, 1)
@@ -66,14 +66,15 @@ def _block_weights(pos, rad, rows) -> tuple[np.ndarray, np.ndarray]:
     scale = 1e-4 * R.max(axis=1, keepdims=True)
     keys = np.concatenate([np.round(R / scale), np.round(D / scale)], axis=1).astype(np.int64)
     unique, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    spheres = 4.0 / 3.0 * np.pi * (R ** 3).sum(axis=1)
     table = np.empty((len(unique), n))
-    volume = np.empty(len(unique))
+    share = np.empty(len(unique))
     for u, (key, b) in enumerate(zip(unique, first)):
         k = (tuple(key[:n]), tuple(key[n:]))
         if k not in _WEIGHTS:
-            _WEIGHTS[k] = centroid_weights(P[b], R[b]), union_volume(P[b], R[b])
-        table[u], volume[u] = _WEIGHTS[k]
-    return table[inverse.ravel()], volume[inverse.ravel()]
+            _WEIGHTS[k] = centroid_weights(P[b], R[b]), union_volume(P[b], R[b]) / spheres[b]
+        table[u], share[u] = _WEIGHTS[k]
+    return table[inverse.ravel()], share[inverse.ravel()] * spheres
 
 
 def body_centres(frame):

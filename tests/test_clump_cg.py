@@ -164,3 +164,19 @@ def test_solid_fraction_counts_volumes_when_species_differ_in_density():
     np.testing.assert_allclose(cg.class_density, [1000.0, 8.0e5], rtol=1e-9)
     # rho / rho_p would have counted the dust's mass as grain volume
     assert f["rho"].sum() * grid.cell_volume / 1000.0 > 1.2 * solid
+
+
+def test_clumps_of_one_shape_and_two_sizes_get_their_own_volumes():
+    from siloflow.clumps import union_volume
+    frame = clump_frame(n_bodies=4, n_dust=0, seed=4)
+    big = frame.data.mol.to_numpy() >= 3                      # bodies 3 and 4 scaled x2 about their middle
+    pos = frame.positions()
+    for b in (3, 4):
+        m = frame.data.mol.to_numpy() == b
+        mid = pos[m][1]
+        frame.data.loc[m, ["x", "y", "z"]] = mid + 2.0 * (pos[m] - mid)
+        frame.data.loc[m, "radius"] = 0.004
+    bodies = body_frame(frame).data.set_index("mol")
+    assert bodies.loc[1, "volume"] == pytest.approx(union_volume(*WHEAT), rel=1e-9)
+    assert bodies.loc[3, "volume"] == pytest.approx(8 * union_volume(*WHEAT), rel=1e-9)
+    assert big.sum() == 6
