@@ -98,8 +98,9 @@ def body_centres(frame):
 def body_frame(frame, particle_density: float | None = None, centres=None):
     """The frame with each clump replaced by one row at its centroid: id and type of its first
     sphere, velocity sum w_i v_i, the body's mass, its union ``volume`` (m3; spheres: their own),
-    and ``radius`` its largest sphere's (species by radius then tell clumps from dust). Frames without clumps come back unchanged.
-    ``centres``: :func:`body_centres` of the frame, if already computed."""
+    and ``radius`` its largest sphere's (species by radius then tell clumps from dust). Frames
+    without clumps come back unchanged. ``centres``: :func:`body_centres` of the frame, if
+    already computed."""
     centre, blocks = centres or body_centres(frame)
     if blocks is None:
         return frame

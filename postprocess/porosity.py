@@ -132,7 +132,7 @@ def clump_bodies(frame):
     return body, int(multi.sum())
 
 
-def rows_by_body(body: np.ndarray, rows: np.ndarray):
+def _rows_by_body(body: np.ndarray, rows: np.ndarray):
     """The given rows grouped by their body index (>= 0), one array per body, by one sort."""
     rows = rows[body[rows] >= 0]
     rows = rows[np.argsort(body[rows], kind="stable")]
@@ -143,7 +143,7 @@ def rows_by_body(body: np.ndarray, rows: np.ndarray):
 _UNION_CACHE: dict = {}
 
 
-def clump_key(pos, rad) -> tuple:
+def _clump_key(pos, rad) -> tuple:
     """Shape of a clump up to rigid motion, rounded to 1e-4 of its largest radius (dumps carry about
     six digits; shapes that close share one union volume, good to about 1e-4)."""
     scale = 1e-4 * rad.max()
@@ -161,8 +161,8 @@ def grain_weights(frame) -> np.ndarray | None:
     body, _ = found
     pos, rad = frame.positions(), frame.radii()
     weights = np.ones(frame.n)
-    for rows in rows_by_body(body, np.arange(frame.n)):
-        key = clump_key(pos[rows], rad[rows])
+    for rows in _rows_by_body(body, np.arange(frame.n)):
+        key = _clump_key(pos[rows], rad[rows])
         if key not in _UNION_CACHE:
             _UNION_CACHE[key] = union_volume(pos[rows], rad[rows]) / float((4.0 / 3.0 * np.pi * rad[rows] ** 3).sum())
         weights[rows] = _UNION_CACHE[key]
@@ -181,7 +181,7 @@ def section_weights(frame, axis: int, plane: float) -> np.ndarray | None:
     cut = (h < rad) & (body >= 0)
     weights = np.ones(frame.n)
     keep = [k for k in range(3) if k != axis]
-    for rows in rows_by_body(body, np.flatnonzero(cut)):
+    for rows in _rows_by_body(body, np.flatnonzero(cut)):
         if len(rows) < 2:
             continue
         circle = np.sqrt(rad[rows] ** 2 - h[rows] ** 2)
