@@ -135,36 +135,29 @@ def body_frame(frame, particle_density: float | None = None, centres=None):
     return replace(frame, data=data)
 
 
-def body_contacts(frame, contacts_frame, centres=None):
-    """(pos_i, pos_j, force on i) of a LIGGGHTS contact frame with clumps: each pair contact
-    becomes two pieces, X_i - c and c - X_j (c the contact point between the spheres' surfaces,
-    X the bodies' centroids); a wall contact runs from the wall point to X_i. Needs ``id1``
-    (and ``id2``) columns to find the bodies; ``centres`` as in :func:`body_frame`."""
-    d = contacts_frame.data
+def body_contacts(frame, pos_i, pos_j, force, id_i, id_j=None, centres=None):
+    """Contacts (:func:`postprocess.coarse_grain.liggghts_contacts` with ids) with their branches
+    through the clumps' centroids X: each pair contact (id_j given) becomes two pieces, X_i - c
+    and c - X_j (c the contact point between the spheres' surfaces); a wall contact (pos_j the
+    wall point) runs from the wall point to X_i. Returns (pos_i, pos_j, force on i);
+    ``centres`` as in :func:`body_frame`."""
     centre, _ = centres or body_centres(frame)
     ids = frame.column("id").astype(np.int64)
     order = np.argsort(ids)
 
-    def rows_of(col):
-        if col not in d:
-            raise ValueError(f"{contacts_frame.source}: clump contact stress needs the {col} column")
-        want = d[col].to_numpy(np.int64)
+    def rows_of(want):
         k = np.clip(np.searchsorted(ids[order], want), 0, len(ids) - 1)
         if np.any(ids[order][k] != want):
-            raise ValueError(f"{contacts_frame.source}: a contact names an atom that step {frame.timestep} "
-                             "does not have")
+            raise ValueError(f"{frame.source}: a contact names an atom that step {frame.timestep} does not have")
         return order[k]
 
-    force = d[["fx", "fy", "fz"]].to_numpy(float)
-    i = rows_of("id1")
-    if "xw" in d:            # wall: the branch runs from the contact point on the wall to the centre
-        return centre[i], d[["xw", "yw", "zw"]].to_numpy(float), force
-    keep = (d["periodic"].to_numpy() == 0) if "periodic" in d else np.ones(len(d), bool)
-    j = rows_of("id2")
+    i = rows_of(id_i)
+    if id_j is None:
+        return centre[i], pos_j, force
+    j = rows_of(id_j)
     mol = frame.column("mol").astype(np.int64)
-    keep &= ~((mol[i] == mol[j]) & (mol[i] > 0))     # inside one rigid body (LIGGGHTS reports none)
-    i, j, force = i[keep], j[keep], force[keep]
-    xi, xj = d.loc[keep, ["x1", "y1", "z1"]].to_numpy(float), d.loc[keep, ["x2", "y2", "z2"]].to_numpy(float)
+    keep = ~((mol[i] == mol[j]) & (mol[i] > 0))     # inside one rigid body (LIGGGHTS reports none)
+    i, j, force, xi, xj = i[keep], j[keep], force[keep], pos_i[keep], pos_j[keep]
     rad = frame.radii()
     gap = np.linalg.norm(xj - xi, axis=1)
     n = (xj - xi) / np.maximum(gap, 1e-300)[:, None]

@@ -647,9 +647,10 @@ def species_of(frame, by: str | None, classes=None):
     return idx, list(labels)
 
 
-def liggghts_contacts(contacts_frame):
+def liggghts_contacts(contacts_frame, with_ids: bool = False):
     """(pos_i, pos_j, force on i) from a LIGGGHTS pair/gran/local frame (pos and force columns)
     or wall/gran/local frame (pos: wall point then particle; branch from the wall point).
+    ``with_ids``: also (id_i, id_j), id_j None for a wall frame (needs the id columns).
 
     LIGGGHTS reports the force on the first particle of a pair (checked on a settled bed: the
     normal force points from particle 2 to particle 1 in 99 % of contacts, the rest being
@@ -658,11 +659,17 @@ def liggghts_contacts(contacts_frame):
     if "fx" not in d or not ("x1" in d):
         raise ValueError(f"{contacts_frame.source}: contact stress needs pos and force columns "
                          "(compute pair/gran/local pos id force)")
-    force = d[["fx", "fy", "fz"]].to_numpy()
-    if "xw" in d:   # wall contact: the branch runs from the contact point on the wall to the centre
-        return d[["x1", "y1", "z1"]].to_numpy(), d[["xw", "yw", "zw"]].to_numpy(), force
-    keep = (d["periodic"].to_numpy() == 0) if "periodic" in d else np.ones(len(d), bool)
-    return (d.loc[keep, ["x1", "y1", "z1"]].to_numpy(), d.loc[keep, ["x2", "y2", "z2"]].to_numpy(), force[keep])
+    wall = "xw" in d   # wall contact: the branch runs from the contact point on the wall to the centre
+    keep = (d["periodic"].to_numpy() == 0) if "periodic" in d and not wall else np.ones(len(d), bool)
+    rows = d.loc[keep]
+    out = (rows[["x1", "y1", "z1"]].to_numpy(float), rows[["xw", "yw", "zw"] if wall else ["x2", "y2", "z2"]]
+           .to_numpy(float), rows[["fx", "fy", "fz"]].to_numpy(float))
+    if not with_ids:
+        return out
+    names = ["id1"] if wall else ["id1", "id2"]
+    if any(n not in d for n in names):
+        raise ValueError(f"{contacts_frame.source}: clump contact stress needs the {' and '.join(names)} column(s)")
+    return out + (rows["id1"].to_numpy(np.int64), None if wall else rows["id2"].to_numpy(np.int64))
 
 
 def _joined_contacts(*frames, atoms=None, centres=None):
@@ -670,7 +677,8 @@ def _joined_contacts(*frames, atoms=None, centres=None):
     none. With ``atoms`` and its clumps' ``centres`` (:func:`clump_bodies.body_centres`), the
     branches run through the clumps' centroids."""
     if centres is not None and centres[1] is not None:
-        parts = [body_contacts(atoms, f, centres) for f in frames if f is not None]
+        parts = [body_contacts(atoms, *liggghts_contacts(f, with_ids=True), centres=centres)
+                 for f in frames if f is not None]
     else:
         parts = [liggghts_contacts(f) for f in frames if f is not None]
     if not parts:
