@@ -62,8 +62,7 @@ def variant_data(base: dict, scale: float, seed: int, keep_dt: bool) -> dict:
     data["particles"]["dust"]["density_scale"] = scale
     data["seed"] = seed
     if keep_dt:
-        true = copy.deepcopy(base)
-        true["particles"]["dust"]["density_scale"] = 1.0
+        true = variant_data(base, 1.0, seed, keep_dt=False)
         engine = data.setdefault("engine", {})
         fraction = engine.get("timestep_fraction", case_from_dict(data).engine.timestep_fraction)
         engine["timestep_fraction"] = fraction * derive(case_from_dict(true)).timestep / derive(case_from_dict(data)).timestep
