@@ -6,7 +6,9 @@ siloflow's named errors, mapped here to a message and exit code 1.
 from __future__ import annotations
 
 import json
+import re
 import signal
+import sys
 from pathlib import Path
 from typing import List, Optional
 
@@ -23,10 +25,20 @@ err = Console(stderr=True)
 out = Console()
 
 
+_ANSI = re.compile(r"\x1b(\[[0-?]*[ -/]*[@-~]|\][^\x07\x1b]*(\x07|\x1b\\)?|[@-Z\\-_])")
+
+
+def printable(text: str) -> str:
+    """``text`` safe for a terminal: escape sequences removed, other control characters and
+    undecodable bytes shown as escapes (engine output and case keys can hold anything)."""
+    text = _ANSI.sub("", str(text))
+    return "".join(c if c in "\n\t" or c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 def _fail(exc: SiloflowError) -> None:
     kind = "invalid case" if isinstance(exc, CaseError) else type(exc).__name__
     err.print(f"[bold red]siloflow: {kind}[/bold red]")
-    err.print(str(exc), markup=False, highlight=False)
+    err.print(printable(exc), markup=False, highlight=False)
     raise typer.Exit(1)
 
 
@@ -55,7 +67,7 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
     from .derived import derive
     try:
         case = load_case(case_file)
-        folder = render_deck(case, output, force=force)
+        folder = render_deck(case, output, force=force, keep=[case_file])
         d = derive(case)
     except SiloflowError as exc:
         _fail(exc)
@@ -127,7 +139,7 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         engine.command(case.engine.ranks)  # binary and launcher present before anything is written
         derived = derive(case)
         sizes = check_disk_space(case, derived, output, allow_large_output)
-        folder = engine.prepare(case, output, force=force)
+        folder = engine.prepare(case, output, force=force, keep=[case_file])
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
@@ -164,6 +176,7 @@ def _drive(folder: Path, work, post_process: bool) -> None:
 
 
 def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
+    from .deck import verify_deck
     from .engine import get_engine
     from .engine.base import run_state
     try:
@@ -171,6 +184,8 @@ def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
         engine = get_engine(case.engine.name, executable=liggghts)
         engine.command(case.engine.ranks)
         state = run_state(folder).get("state")
+        if state not in ("running", "complete"):
+            verify_deck(folder)         # before the progress bar: a foreign or edited deck never starts
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
@@ -245,7 +260,7 @@ def status(folder: Path = typer.Argument(..., help="a run folder")) -> None:
     except SiloflowError as exc:
         _fail(exc)
     extra = ", ".join(f"{k} {v}" for k, v in st.items() if k in ("stage", "step", "reason"))
-    out.print(f"{folder}: {st['state']}" + (f" ({extra})" if extra else ""))
+    out.print(printable(f"{folder}: {st['state']}" + (f" ({extra})" if extra else "")), markup=False, highlight=False)
 
 
 @app.command()
@@ -364,5 +379,17 @@ def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folder
     out.print(f"table: {output}; fit: {output.with_suffix('.json')}")
 
 
+def main() -> None:
+    """The ``siloflow`` command: the app, with an operating-system error (a file that cannot be
+    read or written) told in one line rather than a traceback."""
+    from .atomic_files import os_error
+    try:
+        app()
+    except OSError as exc:
+        err.print("[bold red]siloflow: SetupError[/bold red]")
+        err.print(printable(os_error(exc, exc.filename or "a file", "use")), markup=False, highlight=False)
+        sys.exit(1)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    app()
+    main()

@@ -8,6 +8,7 @@ contain the commands siloflow itself writes.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import re
 from importlib import resources
@@ -20,8 +21,9 @@ from .atomic_files import new_folder, write_json, write_text
 from .case import SAFE_NAME_PATTERN, Case, case_to_yaml
 from .derived import Derived, _modulus_of, derive
 from .engine_output import CONTACT_KEYWORDS, WALL_CONTACT_KEYWORDS, local_columns
-from .errors import SiloflowError
+from .errors import SetupError, SiloflowError
 from .meshes import silo_meshes, write_stl
+from .run_folder import MANIFEST_NAME
 
 DECK_NAME = "in.liggghts"
 RESUME_DECK_NAME = "in.resume.liggghts"
@@ -286,9 +288,55 @@ def write_resume_deck(folder) -> Path:
     return folder / RESUME_DECK_NAME
 
 
-def render(case: Case, folder, force: bool = False) -> Path:
-    """Render ``case`` into a new deck folder (atomically: all or nothing). Returns the folder."""
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def write_manifest(folder: Path) -> None:
+    """List every file of a freshly written deck folder, with its SHA-256, in the manifest
+    (siloflow's marker: ``--force`` and ``--resume`` read it)."""
+    files = sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+    write_json(folder / MANIFEST_NAME, {"siloflow_version": __version__,
+                                        "files": {f: _sha256(folder / f) for f in files}})
+
+
+def verify_deck(folder) -> None:
+    """Check that a run folder's deck is the one its own validated case renders, before an
+    engine runs it: the case is loaded and validated again, the deck rendered anew into a
+    scratch folder, and ``in.liggghts``, ``derived.json`` and every mesh compared byte by byte
+    (and the deck checked against the allowlist). A folder from elsewhere, edited by hand or
+    rendered by another siloflow version is refused with the first file that differs."""
+    import tempfile
+    from .case import load_case
     folder = Path(folder)
-    with new_folder(folder, force=force) as tmp:
+    deck = folder / DECK_NAME
+    try:
+        check_deck(deck.read_text(encoding="utf-8", errors="replace"))
+    except OSError as exc:
+        raise SetupError(f"{folder} has no readable {DECK_NAME}: {exc.strerror}") from None
+    except DeckError as exc:
+        raise SetupError(f"{deck} is not a deck siloflow wrote ({exc}): refusing to run it") from None
+    case = load_case(folder / CASE_NAME)
+    with tempfile.TemporaryDirectory(prefix="siloflow-verify-") as scratch:
+        fresh = Path(scratch)
+        write_deck(case, fresh)
+        names = [DECK_NAME, DERIVED_NAME] + sorted(p.relative_to(fresh).as_posix()
+                                                   for p in (fresh / "meshes").glob("*.stl"))
+        for name in names:
+            mine = folder / name
+            if not mine.is_file() or mine.read_bytes() != (fresh / name).read_bytes():
+                raise SetupError(f"{mine} is not what the folder's {CASE_NAME} renders (edited, or written by "
+                                 f"another siloflow version): refusing to run it; render the case anew with "
+                                 f"'siloflow render {folder / CASE_NAME} -o NEW_FOLDER'")
+
+
+def render(case: Case, folder, force: bool = False, keep=()) -> Path:
+    """Render ``case`` into a new deck folder (atomically: all or nothing). Returns the folder.
+    ``force`` replaces an existing siloflow folder (never one holding a file of ``keep``, the
+    files being read, nor one holding files siloflow did not write)."""
+    folder = Path(folder)
+    keep = list(keep) + [ins.file for ins in case.inserts]
+    with new_folder(folder, force=force, keep=keep) as tmp:
         write_deck(case, tmp)
+        write_manifest(tmp)
     return folder.absolute()

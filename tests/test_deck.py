@@ -36,8 +36,12 @@ def test_existing_folder_is_never_overwritten_silently(quick_dict, tmp_path):
     with pytest.raises(SetupError, match="--force"):
         render(case, folder)
     assert marker.read_text() == "user data"
+    with pytest.raises(SetupError, match="did not write"):      # --force never deletes a user's file
+        render(case, folder, force=True)
+    assert marker.read_text() == "user data"
+    marker.unlink()
     render(case, folder, force=True)
-    assert not marker.exists() and (folder / "in.liggghts").is_file()
+    assert (folder / "in.liggghts").is_file()
 
 
 def test_failed_render_leaves_nothing(quick_dict, tmp_path):

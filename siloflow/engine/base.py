@@ -6,6 +6,7 @@ left and checks it finished properly. ``run`` composes the three.
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
 import time
@@ -45,37 +46,85 @@ class RunRecord:
         return asdict(self)
 
 
+STATES = ("rendered", "running", "complete", "failed", "interrupted")
+
+
 def write_status(folder: Path, state: str, **extra) -> None:
-    """Record the run state (``rendered``, ``running``, ``complete``, ``failed``, ``interrupted``)."""
-    write_json(Path(folder) / STATUS_NAME, {"state": state, "time": time.time(), **extra})
+    """Record the run state (``rendered``, ``running``, ``complete``, ``failed``, ``interrupted``).
 
-
-def _alive(pid) -> bool:
+    A ``running`` status names siloflow's process with its start time, so a PID reused by
+    another process is not taken for the run. On a full disk the status is rewritten in place
+    (its blocks are already allocated), so a failure can still be recorded."""
+    if state == "running":
+        extra = {"siloflow_pid": os.getpid(), "siloflow_start": process_start(os.getpid()), **extra}
+    path = Path(folder) / STATUS_NAME
+    data = {"state": state, "time": time.time(), **extra}
     try:
-        os.kill(int(pid), 0)
-    except (ProcessLookupError, ValueError, TypeError):
+        write_json(path, data)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EDQUOT) or not path.is_file():
+            raise
+        text = json.dumps(data).encode()
+        with open(path, "r+b") as fh:
+            fh.write(text)
+            fh.truncate(len(text))
+
+
+def process_start(pid) -> Optional[int]:
+    """The start time of process ``pid`` in clock ticks since boot (Linux /proc), or None."""
+    try:
+        stat = Path(f"/proc/{int(pid)}/stat").read_text()
+        return int(stat.rsplit(")", 1)[1].split()[19])
+    except (OSError, ValueError, IndexError, OverflowError):
+        return None
+
+
+def _alive(pid, start=None) -> bool:
+    """Whether ``pid`` is a live process, and (when ``start`` is known) the same one that
+    recorded it: a reused PID has another start time."""
+    if isinstance(pid, bool) or not isinstance(pid, int) or not 0 < pid < 2 ** 22:
+        return False
+    try:
+        os.kill(pid, 0)
+    except (ProcessLookupError, OverflowError):
         return False
     except PermissionError:
-        return True
-    return True
+        pass
+    if start is None:                    # a status written before start times were recorded
+        try:
+            return b"python" in Path(f"/proc/{pid}/cmdline").read_bytes() or b"siloflow" in Path(
+                f"/proc/{pid}/cmdline").read_bytes()
+        except OSError:
+            return True
+    return process_start(pid) == start
 
 
 def run_state(folder: Path) -> dict:
-    """The run's status, with a ``running`` run whose siloflow process is gone reported as
-    ``abandoned`` (siloflow was killed without a chance to record it)."""
+    """The run's status. A ``running`` run whose siloflow process is gone (or whose PID now
+    belongs to another process) is reported as ``abandoned``; a deck folder without a status
+    (``siloflow render``) as ``rendered``."""
+    from ..run_folder import is_siloflow_folder
+    folder = Path(folder)
+    if not (folder / STATUS_NAME).exists() and is_siloflow_folder(folder) and not (folder / "log.liggghts").exists():
+        return {"state": "rendered"}
     status = read_status(folder)
-    if status.get("state") == "running" and not _alive(status.get("siloflow_pid")):
+    if status["state"] == "running" and not _alive(status.get("siloflow_pid"), status.get("siloflow_start")):
         status = {**status, "state": "abandoned",
                   "reason": "siloflow stopped without recording it (killed?); the engine was stopped with it"}
     return status
 
 
 def read_status(folder: Path) -> dict:
+    """The folder's status.json, checked: a JSON object with a known ``state``."""
     path = Path(folder) / STATUS_NAME
     try:
-        return json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
-        raise ReadError(f"no readable {STATUS_NAME} in {folder}: {exc}") from None
+        raise ReadError(f"no readable {STATUS_NAME} in {folder}: {getattr(exc, 'strerror', None) or exc}") from None
+    if not isinstance(data, dict) or data.get("state") not in STATES:
+        raise ReadError(f"{path} is not a siloflow status (expected an object with a state of "
+                        f"{', '.join(STATES)}); was the folder made by siloflow?")
+    return data
 
 
 class Engine(ABC):

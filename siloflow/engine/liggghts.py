@@ -12,11 +12,12 @@ from pathlib import Path
 from typing import Optional
 
 from ..case import Case
-from ..deck import DECK_NAME, DERIVED_NAME, RESTART_FILE, RESUME_DECK_NAME, render, write_resume_deck
+from ..deck import (DECK_NAME, DERIVED_NAME, RESTART_FILE, RESUME_DECK_NAME, DeckError, check_deck, render,
+                    verify_deck, write_resume_deck)
 from ..engine_output import FLOW_COLUMNS, read_ave_time
-from ..atomic_files import write_text
-from ..errors import EngineRunError, ReadError, SetupError
-from .base import Engine, ProgressCallback, RunRecord, run_state, write_status
+from ..atomic_files import os_error, write_text
+from ..errors import EngineRunError, ReadError, SetupError, SiloflowError
+from .base import Engine, ProgressCallback, RunRecord, read_status, run_state, write_status
 from .liggghts_log import LogState, decode, diagnose, parse_log_text
 
 LOG_NAME = "log.liggghts"
@@ -49,11 +50,19 @@ class LiggghtsEngine(Engine):
 
     # ------------------------------------------------------------------ set-up
     def _which(self, program: str, what: str) -> str:
+        """The absolute path of ``program`` (a relative path is taken from the current directory,
+        not from the run folder the engine runs in)."""
         path = shutil.which(program)
         if path is None:
-            raise SetupError(f"{what} '{program}' not found on PATH: install it with "
-                             "'make install-engine' (Debian package liggghts) or set SILOFLOW_LIGGGHTS")
-        return path
+            if program == self.mpirun:
+                fix = ("install Open MPI (Debian: apt-get install openmpi-bin), or set engine.ranks: 1 in the "
+                       "case file")
+            else:
+                fix = ("install it with 'make install-engine' (Debian package liggghts), or name the binary with "
+                       "--liggghts PATH or SILOFLOW_LIGGGHTS=PATH")
+            where = "" if os.sep in program else " on PATH"
+            raise SetupError(f"{what} '{program}' not found{where} (or not executable): {fix}")
+        return os.path.abspath(path)
 
     def version(self) -> str:
         exe = self._which(self.executable, "LIGGGHTS binary")
@@ -63,8 +72,8 @@ class LiggghtsEngine(Engine):
                 return line.strip()
         return "LIGGGHTS (version not reported)"
 
-    def prepare(self, case: Case, folder: Path, force: bool = False) -> Path:
-        folder = render(case, folder, force=force)
+    def prepare(self, case: Case, folder: Path, force: bool = False, keep=()) -> Path:
+        folder = render(case, folder, force=force, keep=keep)
         write_status(folder, "rendered")
         return folder
 
@@ -98,6 +107,10 @@ class LiggghtsEngine(Engine):
         if missing or not (folder / deck).is_file():
             raise SetupError(f"{folder} is incomplete: missing {', '.join(missing) or deck}; "
                              "re-render it with 'siloflow render'")
+        try:                                 # defence in depth: only siloflow's commands reach the engine
+            check_deck((folder / deck).read_text(encoding="utf-8", errors="replace"))
+        except DeckError as exc:
+            raise SetupError(f"{folder / deck} is not a deck siloflow wrote ({exc}): refusing to run it") from None
         cmd = self.command(int(derived["engine_ranks"]), deck, log)
         planned = {k: int(v) for k, v in derived["planned_steps"].items()}
         state = LogState()
@@ -106,8 +119,10 @@ class LiggghtsEngine(Engine):
         proc = subprocess.Popen(cmd, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, start_new_session=True, preexec_fn=_die_with_parent)
         write_status(folder, "running", command=cmd, engine_pid=proc.pid, siloflow_pid=os.getpid())
+        disk_full = None
         try:
             with open(folder / screen_name, "wb") as screen:
+                checked = time.monotonic()
                 for raw in proc.stdout:
                     screen.write(raw)
                     line = decode(raw)
@@ -117,22 +132,52 @@ class LiggghtsEngine(Engine):
                     if state.fatal:                  # nothing good comes of running on
                         _stop(proc)
                         break
+                    if time.monotonic() - checked > DISK_CHECK_SECONDS:
+                        checked = time.monotonic()
+                        disk_full = _disk_full(folder)
+                        if disk_full:                # the engine's writes fail silently: stop it
+                            _stop(proc)
+                            break
             returncode = proc.wait()
+        except OSError as exc:                   # screen.txt could not be written: the disk is full
+            _stop(proc)
+            message = str(os_error(exc, f"the engine's output in {folder}"))
+            write_status(folder, "failed", reason=message)
+            raise EngineRunError(message, command=cmd, returncode=proc.returncode, folder=folder,
+                                 fix=DISK_FIX, log_tail="\n".join(tail)) from None
         except BaseException:  # Ctrl-C or SIGTERM turned into an exception: stop the whole group
             _stop(proc)
             write_status(folder, "interrupted", step=state.step, stage=state.stage)
             raise
         wall = time.perf_counter() - start
+        disk_full = disk_full or _disk_full(folder)
         record = RunRecord(folder=str(folder), engine=self.name, command=cmd, returncode=returncode,
                            wall_time=wall, stage_steps=state.stage_steps, inserted=state.inserted,
                            settled_ke_pe=state.settled_ke_pe, completed=state.done,
                            warnings=state.warnings)
-        (folder / RECORD_NAME).write_text(json.dumps(record.to_json(), indent=2))
+        if disk_full:
+            message = f"the disk is full ({disk_full}): the engine's outputs in {folder} are incomplete"
+            write_status(folder, "failed", reason=message)
+            raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder, fix=DISK_FIX,
+                                 log_tail="\n".join(tail))
+        try:
+            write_text(folder / RECORD_NAME, json.dumps(record.to_json(), indent=2))
+        except OSError as exc:
+            message = str(os_error(exc, folder / RECORD_NAME))
+            write_status(folder, "failed", reason=message)
+            raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder, fix=DISK_FIX) from None
         if returncode != 0 or state.errors:
             message, cause, fix = diagnose(state.errors, state.warnings, returncode, tuple(tail))
             write_status(folder, "failed", reason=message)
             raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder,
                                  cause=cause, fix=fix, log_tail="\n".join(tail))
+        if not (folder / log).is_file():
+            message = f"the engine exited with code 0 but wrote no {log}: it did not run the deck"
+            write_status(folder, "failed", reason=message)
+            raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder,
+                                 cause="the binary is not LIGGGHTS, or it could not write in the run folder",
+                                 fix="check --liggghts / SILOFLOW_LIGGGHTS, and read screen.txt in the run folder",
+                                 log_tail="\n".join(tail))
         return record
 
     def resume(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
@@ -142,6 +187,7 @@ class LiggghtsEngine(Engine):
         state = run_state(folder).get("state")
         if state in ("running", "complete"):
             raise SetupError(f"{folder} is {state}: there is nothing to resume")
+        verify_deck(folder)             # a folder can come from anyone: run only what its case renders
         restart = folder / RESTART_FILE
         step = _restart_step(folder)
         if not restart.is_file() or step is None:          # interrupted before the bed settled
@@ -159,14 +205,28 @@ class LiggghtsEngine(Engine):
         return self.collect(folder)
 
     def collect(self, folder: Path) -> RunRecord:
-        """Check the run: every stage reached, insertion complete, no particle lost through a wall."""
+        """Check the run: every stage reached, insertion complete, no particle lost through a wall.
+        Any failure to read or write the folder is recorded as ``failed`` with its reason."""
         folder = Path(folder)
+        try:
+            return self._collect(folder)
+        except OSError as exc:
+            error = os_error(exc, f"the run record in {folder}")
+            _record_failure(folder, str(error))
+            raise error from None
+        except SiloflowError as exc:
+            _record_failure(folder, str(exc).splitlines()[0])
+            raise
+
+    def _collect(self, folder: Path) -> RunRecord:
         derived = _read_derived(folder)
         try:
             text = _log_text(folder)
             record = RunRecord(**json.loads((folder / RECORD_NAME).read_text()))
         except (OSError, ValueError, TypeError) as exc:
-            raise ReadError(f"{folder} holds no finished LIGGGHTS run ({exc})") from None
+            message = f"{folder} holds no finished LIGGGHTS run ({exc})"
+            write_status(folder, "failed", reason=message)
+            raise ReadError(message) from None
         state = parse_log_text(text)
         record.stage_steps, record.inserted, record.completed = state.stage_steps, state.inserted, state.done
         record.settled_ke_pe = state.settled_ke_pe
@@ -225,6 +285,31 @@ class LiggghtsEngine(Engine):
 
 
 _RESTART_MARK = "SILOFLOW_RESTART "
+#: free bytes below which the disk counts as full during a run (the engine's writes fail silently)
+DISK_RESERVE = 1 << 20
+DISK_CHECK_SECONDS = 2.0
+DISK_FIX = ("free space on that disk (or choose a run folder on another one) and run again; "
+            "'siloflow run' estimates a run's output before it starts unless --allow-large-output is given")
+
+
+def _record_failure(folder: Path, reason: str) -> None:
+    """Mark the run failed unless its status already says why (written by the check that failed)."""
+    try:
+        if read_status(folder).get("state") == "failed":
+            return
+    except ReadError:
+        pass
+    write_status(folder, "failed", reason=reason)
+
+
+def _disk_full(folder: Path) -> str:
+    """A description of the disk's state if it is (nearly) full, else ''."""
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:
+        return ""
+    return f"{free} bytes free" if free < DISK_RESERVE else ""
+
 #: atoms that may leave the box during the fill (recorded) before the run counts as failed
 FILL_LOSS_LIMIT = 0.01
 
@@ -261,7 +346,9 @@ def _log_text(folder: Path) -> str:
 
 def _splice_table(before: Path, after: Path, step: int) -> None:
     """One ave/time table from the first part's rows before ``step`` and the resumed part's rows
-    (headers of the first part), written atomically over ``after``."""
+    (headers of the first part), written atomically over ``after``. The first part's row at
+    ``step`` itself is kept when the resumed part has none there: an average over several
+    samples (``Nrepeat > 1``, the wall forces) is not written at the step a run starts from."""
     if not before.is_file():
         return
     old = before.read_text(errors="replace").splitlines()
@@ -274,8 +361,11 @@ def _splice_table(before: Path, after: Path, step: int) -> None:
             return None
 
     head = [ln for ln in old if ln.startswith("#")]
-    rows = [ln for ln in old if not ln.startswith("#") and (step_of(ln) is not None and step_of(ln) < step)]
-    rows += [ln for ln in new if not ln.startswith("#") and step_of(ln) is not None]
+    resumed = [ln for ln in new if not ln.startswith("#") and step_of(ln) is not None]
+    resumed_steps = {step_of(ln) for ln in resumed}
+    rows = [ln for ln in old if not ln.startswith("#") and step_of(ln) is not None and (
+        step_of(ln) < step or (step_of(ln) == step and step not in resumed_steps))]
+    rows += resumed
     write_text(after, "\n".join(head + rows) + "\n")
     before.unlink()
 

@@ -1,0 +1,341 @@
+"""Run folders: --force never deletes what siloflow did not write, resume runs only the deck the
+folder's case renders, output folders fail with messages, and the status tells the truth."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from siloflow.case import case_from_dict
+from siloflow.cli import app, printable
+from siloflow.deck import render
+from siloflow.engine import LiggghtsEngine
+from siloflow.engine.base import process_start, read_status, run_state, write_status
+from siloflow.errors import EngineRunError, ReadError, SetupError
+from siloflow.run_folder import MANIFEST_NAME, foreign_entries
+
+ROOT = Path(__file__).resolve().parents[1]
+runner = CliRunner()
+
+
+def _cli(*args, cwd=None, env=None):
+    """``python -m siloflow.cli ARGS`` in a subprocess (cwd, environment as given)."""
+    return subprocess.run([sys.executable, "-m", "siloflow.cli", *map(str, args)], cwd=cwd or ROOT,
+                          capture_output=True, text=True, timeout=300, env={**os.environ, "COLUMNS": "400", **(env or {})})
+
+
+def _tree(folder: Path) -> dict:
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture
+def case_file(tmp_path, quick_dict):
+    path = tmp_path / "case.yaml"
+    path.write_text(yaml.safe_dump(quick_dict))
+    return path
+
+
+# ----------------------------------------------------------------------------- item 1: --force
+def test_force_never_replaces_the_folder_holding_the_case_file(tmp_path, quick_dict):
+    p = tmp_path / "p"
+    p.mkdir()
+    (p / "my_case.yaml").write_text(yaml.safe_dump(quick_dict))
+    (p / "thesis.tex").write_text("draft")
+    before = _tree(p)
+    done = _cli("render", p / "my_case.yaml", "-o", p, "--force")
+    assert done.returncode == 1
+    assert "my_case.yaml" in done.stderr and "Traceback" not in done.stderr
+    assert _tree(p) == before
+
+
+def test_force_never_replaces_the_current_directory_or_an_ancestor(tmp_path, case_file):
+    work = tmp_path / "work" / "inner"
+    work.mkdir(parents=True)
+    (work / "notes.txt").write_text("mine")
+    for target in (".", "..", str(tmp_path)):
+        done = _cli("render", case_file, "-o", target, "--force", cwd=work)
+        assert done.returncode == 1, target
+        assert "current directory" in done.stderr and "Traceback" not in done.stderr
+    assert (work / "notes.txt").read_text() == "mine" and case_file.is_file()
+
+
+def test_force_refuses_a_folder_siloflow_did_not_make(tmp_path, quick_dict):
+    case = case_from_dict(quick_dict)
+    folder = tmp_path / "data"
+    folder.mkdir()
+    (folder / "results.csv").write_text("1,2\n")
+    with pytest.raises(SetupError, match="not a folder siloflow made"):
+        render(case, folder, force=True)
+    assert (folder / "results.csv").read_text() == "1,2\n"
+
+
+@pytest.mark.parametrize("foreign", ["thesis.tex", "results/my_notes.odt", "output/keep/x.dat", "meshes/mine.obj"])
+def test_force_refuses_a_siloflow_folder_holding_a_foreign_file(tmp_path, quick_dict, foreign):
+    case = case_from_dict(quick_dict)
+    folder = render(case, tmp_path / "run")
+    (folder / foreign).parent.mkdir(parents=True, exist_ok=True)
+    (folder / foreign).write_text("user data")
+    before = _tree(folder)
+    with pytest.raises(SetupError, match="did not write"):
+        render(case, folder, force=True)
+    assert _tree(folder) == before
+
+
+def test_force_replaces_a_folder_holding_only_siloflow_files(tmp_path, quick_dict):
+    case = case_from_dict(quick_dict)
+    folder = render(case, tmp_path / "run")
+    write_status(folder, "failed", reason="test")
+    (folder / "results").mkdir()
+    (folder / "results" / "summary.json").write_text("{}")
+    (folder / "output" / "flow.txt").write_text("# old\n")
+    quick_dict["fill"]["count"] -= 10
+    render(case_from_dict(quick_dict), folder, force=True)
+    assert not (folder / "results").exists() and not (folder / "output" / "flow.txt").exists()
+    assert (folder / MANIFEST_NAME).is_file() and foreign_entries(folder) == []
+    assert [p.name for p in tmp_path.iterdir()] == ["run"]          # nothing left aside
+
+
+def test_force_refuses_a_symlink_inside(tmp_path, quick_dict):
+    case = case_from_dict(quick_dict)
+    folder = render(case, tmp_path / "run")
+    precious = tmp_path / "precious"
+    precious.mkdir()
+    (precious / "data.csv").write_text("keep")
+    (folder / "results").mkdir()
+    (folder / "results" / "link").symlink_to(precious)
+    with pytest.raises(SetupError, match="did not write"):
+        render(case, folder, force=True)
+    assert (precious / "data.csv").read_text() == "keep"
+
+
+def test_manifest_lists_every_file_render_wrote(tmp_path, quick_dict):
+    folder = render(case_from_dict(quick_dict), tmp_path / "run")
+    listed = set(json.loads((folder / MANIFEST_NAME).read_text())["files"])
+    files = {p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()} - {MANIFEST_NAME}
+    assert listed == files and "in.liggghts" in listed and any(f.startswith("meshes/") for f in listed)
+
+
+# ----------------------------------------------------------------------------- item 2: resume
+FAKE_LIGGGHTS = """#!/bin/sh
+# stands in for LIGGGHTS: like it, it runs the deck's 'shell' lines
+deck="$2"
+grep '^shell ' "$deck" | sed 's/^shell //' | sh
+echo "LIGGGHTS (fake)"
+"""
+
+
+@pytest.fixture
+def fake_liggghts(tmp_path):
+    exe = tmp_path / "fake_liggghts.sh"
+    exe.write_text(FAKE_LIGGGHTS)
+    exe.chmod(0o755)
+    return exe
+
+
+@pytest.mark.parametrize("edit", ["shell", "number", "mesh"])
+def test_resume_refuses_a_deck_its_case_does_not_render(tmp_path, case_file, fake_liggghts, edit):
+    folder = tmp_path / "t"
+    assert _cli("render", case_file, "-o", folder).returncode == 0
+    (folder / "status.json").write_text('{"state": "interrupted"}')
+    pwned = tmp_path / "PWNED"
+    if edit == "shell":
+        (folder / "in.liggghts").write_text(f"shell touch {pwned}\n")
+    elif edit == "number":
+        deck = (folder / "in.liggghts").read_text()
+        (folder / "in.liggghts").write_text(deck.replace("timestep        ", "timestep        2*", 1))
+    else:
+        mesh = next((folder / "meshes").glob("*.stl"))
+        mesh.write_bytes(mesh.read_bytes()[:-40])
+    done = _cli("run", "--resume", folder, env={"SILOFLOW_LIGGGHTS": str(fake_liggghts)})
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert "refusing to run it" in done.stderr
+    assert not pwned.exists()
+    assert not (folder / "log.liggghts").exists()
+
+
+def test_a_rendered_folder_has_state_rendered_and_resume_starts_it(tmp_path, case_file, fake_liggghts):
+    folder = tmp_path / "r"
+    assert _cli("render", case_file, "-o", folder).returncode == 0
+    assert "rendered" in _cli("status", folder).stdout
+    done = _cli("run", "--resume", folder, env={"SILOFLOW_LIGGGHTS": str(fake_liggghts)})
+    # the fake engine runs and writes no log: a failure named as such, recorded in the status
+    assert done.returncode == 1 and "wrote no log.liggghts" in done.stderr
+    assert read_status(folder)["state"] == "failed"
+
+
+def test_execute_refuses_a_deck_with_foreign_commands(tmp_path, quick_dict, fake_liggghts):
+    engine = LiggghtsEngine(executable=str(fake_liggghts))
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    (folder / "in.liggghts").write_text((folder / "in.liggghts").read_text() + f"shell touch {tmp_path}/PWNED\n")
+    with pytest.raises(SetupError, match="refusing to run it"):
+        engine.execute(folder)
+    assert not (tmp_path / "PWNED").exists()
+
+
+# ----------------------------------------------------------------------------- item 6, 7: folders and disks
+@contextmanager
+def _mounted(path: Path, options: str):
+    path.mkdir(parents=True, exist_ok=True)
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)], capture_output=True)
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here (needs root): {done.stderr.decode(errors='replace').strip()}")
+    try:
+        yield path
+    finally:
+        subprocess.run(["umount", "-l", str(path)], capture_output=True)
+
+
+def test_output_inside_a_file_is_a_message(tmp_path, case_file):
+    (tmp_path / "afile").write_text("x")
+    done = _cli("render", case_file, "-o", tmp_path / "afile" / "deck")
+    assert done.returncode == 1 and "is a file" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_read_only_file_system_is_a_message(tmp_path, case_file):
+    with _mounted(tmp_path / "ro", "ro,size=1m") as ro:
+        done = _cli("render", case_file, "-o", ro / "deck")
+        assert done.returncode == 1 and "read-only" in done.stderr and "Traceback" not in done.stderr
+
+
+def test_full_disk_during_render_leaves_nothing(tmp_path, case_file):
+    with _mounted(tmp_path / "small", "size=48k") as small:
+        done = _cli("render", case_file, "-o", small / "deck")
+        assert done.returncode == 1 and "disk is full" in done.stderr and "Traceback" not in done.stderr
+        assert list(small.iterdir()) == []                                   # no .partial left behind
+
+
+def test_a_mount_point_is_never_replaced(tmp_path, quick_dict):
+    case = case_from_dict(quick_dict)
+    with _mounted(tmp_path / "mnt", "size=4m") as mnt:
+        with pytest.raises(SetupError, match="mount point"):
+            render(case, mnt)                       # empty: the rename would fail (EBUSY)
+        render(case, mnt / "deck")
+        with pytest.raises(SetupError, match="mount point"):
+            render(case, mnt, force=True)
+        assert (mnt / "deck" / "in.liggghts").is_file()
+        assert [p.name for p in mnt.iterdir()] == ["deck"]
+
+
+FILLING_LIGGGHTS = """#!/bin/sh
+# stands in for LIGGGHTS on a small disk: writes until the disk is full, ignoring the errors
+echo "LIGGGHTS (fake)"
+i=0
+while [ $i -lt 400 ]; do
+  head -c 65536 /dev/zero >> output/big.bin 2>/dev/null
+  echo "Step $i"; i=$((i+1)); sleep 0.02
+done
+exit 0
+"""
+
+
+def test_full_disk_during_a_run_is_recorded_as_failed(tmp_path, quick_dict):
+    exe = tmp_path / "filling.sh"
+    exe.write_text(FILLING_LIGGGHTS)
+    exe.chmod(0o755)
+    engine = LiggghtsEngine(executable=str(exe))
+    with _mounted(tmp_path / "small", "size=2m") as small:
+        folder = engine.prepare(case_from_dict(quick_dict), small / "run")
+        with pytest.raises(EngineRunError, match="disk is full"):
+            engine.execute(folder)
+        status = read_status(folder)
+        assert status["state"] == "failed" and "disk is full" in status["reason"]
+        assert run_state(folder)["state"] == "failed"
+
+
+def test_status_is_recorded_in_place_when_the_disk_is_full(tmp_path):
+    with _mounted(tmp_path / "small", "size=64k") as small:
+        write_status(small, "running")
+        fd = os.open(small / "filler", os.O_WRONLY | os.O_CREAT)      # fill the disk
+        try:
+            while True:
+                os.write(fd, b"\0" * 4096)
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+        with pytest.raises(OSError):
+            (small / "probe").write_text("x" * 8192)            # the disk is full indeed
+        write_status(small, "failed", reason="disk full")
+        assert read_status(small)["state"] == "failed"
+
+
+# ----------------------------------------------------------------------------- item 8: states
+@pytest.mark.parametrize("text", ["[1, 2]", '"running"', "{}", '{"state": "exploded"}', "not json", ""])
+def test_malformed_status_is_a_read_error(tmp_path, text):
+    (tmp_path / "status.json").write_text(text)
+    with pytest.raises(ReadError, match="status"):
+        run_state(tmp_path)
+
+
+@pytest.mark.parametrize("pid", [1, 10 ** 30, -5, "12", True])
+def test_a_pid_that_is_not_the_run_is_abandoned(tmp_path, pid):
+    """PID 1 is alive, but it is not the siloflow that recorded the run (other start time)."""
+    (tmp_path / "status.json").write_text(json.dumps({"state": "running", "siloflow_pid": pid,
+                                                      "siloflow_start": 1}))
+    assert run_state(tmp_path)["state"] == "abandoned"
+
+
+def test_a_live_run_is_running(tmp_path):
+    write_status(tmp_path, "running")
+    assert read_status(tmp_path)["siloflow_start"] == process_start(os.getpid())
+    assert run_state(tmp_path)["state"] == "running"
+
+
+def test_engine_that_exits_zero_without_a_log_fails(tmp_path, quick_dict):
+    engine = LiggghtsEngine(executable="/bin/true")
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    with pytest.raises(EngineRunError, match="wrote no log.liggghts"):
+        engine.execute(folder)
+    assert read_status(folder)["state"] == "failed"
+
+
+# ----------------------------------------------------------------------------- item 9: engine lookup
+def test_relative_engine_path_is_taken_from_the_current_directory(tmp_path, case_file):
+    (tmp_path / "x.sh").write_text("#!/bin/sh\necho 'LIGGGHTS (fake)'\n")
+    (tmp_path / "x.sh").chmod(0o755)
+    engine = LiggghtsEngine(executable="./x.sh")
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        command = engine.command(1)
+    finally:
+        os.chdir(cwd)
+    assert str(tmp_path / "x.sh") in command
+
+
+def test_missing_mpirun_names_the_launcher_fix():
+    engine = LiggghtsEngine(executable="sh", mpirun="no-such-mpirun-here")
+    with pytest.raises(SetupError, match="engine.ranks: 1") as info:
+        engine.command(2)
+    assert "SILOFLOW_LIGGGHTS" not in str(info.value)
+
+
+# ----------------------------------------------------------------------------- item 11
+def test_splice_keeps_the_first_parts_average_at_the_restart_step(tmp_path):
+    """ave/time with Nrepeat > 1 (the wall forces) writes no row at the step a run starts from:
+    the first part's row there is kept (it averages samples before the restart)."""
+    from siloflow.engine.liggghts import _splice_table
+
+    before, after = tmp_path / "wall_forces.txt.before_resume", tmp_path / "wall_forces.txt"
+    before.write_text("# h\n13120 1\n13440 2\n13760 8\n")
+    after.write_text("# h\n13760 3\n14080 4\n")
+    _splice_table(before, after, 13440)
+    assert after.read_text() == "# h\n13120 1\n13440 2\n13760 3\n14080 4\n"
+
+
+def test_printed_messages_are_sanitised():
+    assert printable("a\x1b[31mred\x1b[0m\x1b]0;title\x07 \x00\x9b end\n") == "ared \\x00\\x9b end\n"
+
+
+def test_ansi_in_a_case_key_is_not_echoed_raw(write_case, quick_dict):
+    quick_dict["\x1b[2Jevil"] = 1
+    result = runner.invoke(app, ["validate", str(write_case(quick_dict))])
+    assert result.exit_code == 1 and "\x1b" not in result.output and "evil" in result.output
