@@ -30,7 +30,8 @@ CONTACT_LINES = ("fix             material", "pair_style", "pair_coeff", "timest
 REFINE = 20
 
 
-def contact_deck(case, radius: float, density: float, v_rel: float, offset: float = 0.0) -> tuple[str, float]:
+def contact_deck(case, radius: float, density: float, v_rel: float, offset: float = 0.0,
+                 gap: float | None = None, setup: str = "") -> tuple[str, float]:
     """A two-sphere deck with the case deck's contact law: sphere 1 at rest, sphere 2 coming at
     it along -x at ``v_rel`` (m/s), its centre ``offset`` (m) off the line in y. Returns the deck
     and its time step (s). Written every step: positions and velocities of both spheres."""
@@ -40,7 +41,7 @@ def contact_deck(case, radius: float, density: float, v_rel: float, offset: floa
     lines = [ln for ln in text.splitlines() if ln.startswith(CONTACT_LINES) and not ln.startswith("timestep")]
     dt = d.timestep / REFINE
     lines.append(f"timestep        {dt!r}")
-    gap = 0.05 * radius
+    gap = 0.05 * radius if gap is None else gap
     box = 10 * radius
     out = f"""atom_style      granular
 atom_modify     map array
@@ -60,7 +61,7 @@ set             atom 2 diameter {2 * radius} density {density}
 group           a id 1
 group           b id 2
 velocity        b set {-v_rel} 0.0 0.0 units box
-fix             integrate all nve/sphere
+{setup}fix             integrate all nve/sphere
 variable        dx equal x[2]-x[1]
 variable        dy equal y[2]-y[1]
 variable        vx1 equal vx[1]
@@ -254,3 +255,33 @@ def test_linear_impact_of_paper_a_has_its_stiffness_restitution_and_friction(tmp
     dn, dtan = impulses_per_step(table, r)
     ratio = dtan / np.maximum(dn, 1e-300)
     assert np.mean(np.abs(ratio - pp.friction) < 0.01 * pp.friction) > 0.95
+
+
+def test_rolling_friction_torque_is_mu_r_times_the_normal_force_times_r_star(tmp_path):
+    """Rolling friction (cdt), where a case sets it: two spheres held at a fixed overlap d,
+    counter-rotating (their surfaces roll, not slide), slow down at mu_r Fn R* / I, with
+    Fn = 4/3 Y* sqrt(R*) d^(3/2) (Hertz, no damping at rest) and I = 2/5 m r^2.
+    Measured: 625.7257 rad/s^2 against 625.7253."""
+    data = yaml.safe_load(SMALL.read_text())
+    data["materials"]["particle_particle"]["rolling_friction"] = 0.1
+    case = case_from_dict(data)
+    r, rho, mat = case.particles.radius, case.materials.particle.density, case.materials.particle
+    overlap = 1e-3 * r
+    spin = ("set             atom 1 omegaz 10.0\nset             atom 2 omegaz -10.0\n"
+            "fix             hold all setforce 0.0 0.0 0.0\n"
+            "dump            spin all custom 200 spin.txt id omegaz\ndump_modify     spin sort id\n")
+    deck, dt = contact_deck(case, r, rho, 0.0, gap=-overlap, setup=spin)
+    (tmp_path / "in.contact").write_text(deck + "run             4000\n")
+    done = subprocess.run(["liggghts", "-in", "in.contact", "-log", "log.contact"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+    assert done.returncode == 0, done.stdout[-2000:]
+    frames = (tmp_path / "spin.txt").read_text().split("ITEM: TIMESTEP")[1:]
+    steps = np.array([int(f.split()[0]) for f in frames])
+    omega = np.array([[float(row.split()[1]) for row in f.strip().splitlines()[-2:]] for f in frames])
+    assert np.allclose(omega[:, 0], -omega[:, 1])                 # equal and opposite: no sliding
+    y_eff = mat.youngs_modulus / (2 * (1 - mat.poisson_ratio ** 2))
+    r_eff = r / 2
+    fn = 4 / 3 * y_eff * math.sqrt(r_eff) * overlap ** 1.5
+    inertia = 0.4 * (4 / 3 * math.pi * r ** 3 * rho) * r ** 2
+    slope = np.polyfit(steps * dt, omega[:, 0], 1)[0]
+    assert -slope == pytest.approx(0.1 * fn * r_eff / inertia, rel=1e-4)
