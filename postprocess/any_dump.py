@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from siloflow.atomic_files import write_json, write_text
-from siloflow.errors import ReadError
+from siloflow.errors import ReadError, SetupError
 
 from .analysis_base import FrameAnalysis
 from .coordination import Coordination
@@ -48,10 +48,38 @@ class FrameSummary(FrameAnalysis):
                            ylabel="particles")
 
 
+_MUST_BE_FINITE = ("x", "y", "z", "xu", "yu", "zu", "xs", "ys", "zs", "xsu", "ysu", "zsu", "vx", "vy", "vz")
+_MUST_BE_POSITIVE = ("radius", "diameter", "mass")
+
+
+def checked(frame):
+    """``frame`` if the columns the analyses use hold finite values (positive radii and masses);
+    else a ReadError naming the file, step and row (nan in a dump: the run blew up?)."""
+    data = frame.data
+    cols = [c for c in data.columns if frame.kind == "entries" or c in _MUST_BE_FINITE + _MUST_BE_POSITIVE]
+    for col in cols:
+        values = data[col].to_numpy()
+        bad = ~np.isfinite(values) | ((values <= 0) if col in _MUST_BE_POSITIVE else False)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            line = f", line {frame.meta['line'] + k}" if "line" in frame.meta else f", row {k + 1}"
+            want = "a positive finite number" if col in _MUST_BE_POSITIVE else "a finite number"
+            raise ReadError(f"{frame.source}: frame at step {frame.timestep}{line}: {col} = {values[k]:g}, "
+                            f"expected {want} (did the run blow up?)")
+    return frame
+
+
+def _checked_frames(frames):
+    return None if frames is None else (checked(f) for f in frames)
+
+
 def default_sphere(frame) -> MeasureRegion:
     """A measurement sphere about the grains' median position, radius a quarter of the
     smallest extent of their bounding box (inside the packing for a compact bed)."""
     pos = frame.positions()
+    if len(pos) == 0:
+        raise ReadError(f"{frame.source}: the last frame (step {frame.timestep}) has no grains; "
+                        "give a measurement sphere with --sphere x,y,z,R")
     lo, hi = np.percentile(pos, 2, axis=0), np.percentile(pos, 98, axis=0)
     radius = 0.25 * float((hi - lo).min())
     if not radius > 2.0 * float(frame.radii().mean()):
@@ -60,21 +88,41 @@ def default_sphere(frame) -> MeasureRegion:
     return MeasureRegion("sphere_1", "sphere", tuple(float(c) for c in np.median(pos, axis=0)), radius)
 
 
+def _results_folder(out: Path, create: bool) -> None:
+    """Check (and with ``create``, make) the results folder ``out``: SetupError if a file is in
+    the way or it cannot be made."""
+    for p in (out, *out.parents):
+        if p.exists() and not p.is_dir():
+            what = "is" if p == out else f"(in the results folder's path {out}) is"
+            raise SetupError(f"{p} {what} a file, not a folder; give a results folder with -o")
+        if p.exists():
+            break
+    if create:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise SetupError(f"cannot create the results folder {out}: {exc.strerror or exc}") from None
+
+
 def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, every: int = 1) -> dict:
     """Analyse the dumps ``source`` (file, glob or folder); write tables, figures and summary.json to ``out``."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     files = dump_files(source)
+    _results_folder(out, create=False)     # before the (long) read
 
     def contact_frames(steps=None):
         """Contact frames streamed from disk (None without contact dumps)."""
-        return read_frames(contacts, columns=contact_columns, steps=steps) if contacts else None
+        return _checked_frames(read_frames(contacts, columns=contact_columns, steps=steps)) if contacts else None
 
-    last = last_frame(files)
+    def frames_of():
+        return _checked_frames(read_frames(files, every=every))
+
+    last = checked(last_frame(files))      # reads and checks every frame
+    _results_folder(out, create=True)
     summary: dict = {"source": [str(f) for f in files][:3] + (["..."] if len(files) > 3 else []),
                      "files": len(files)}
 
-    frames = FrameSummary().run(read_frames(files, every=every), contact_frames())
+    frames = FrameSummary().run(frames_of(), contact_frames())
     frames.save(out)
     summary["frames"] = frames.n_frames
     summary["last_step"] = int(last.timestep)
@@ -88,7 +136,7 @@ def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, 
             except ReadError as exc:
                 summary["porosity_skipped"] = str(exc)
         if regions:
-            por = Porosity(regions).run(read_frames(files, every=every))
+            por = Porosity(regions).run(frames_of())
             por.save(out)
             final = por.table[por.table.step == por.table.step.max()]
             summary["porosity_last"] = dict(zip(final.region, final.porosity.astype(float)))
@@ -96,7 +144,7 @@ def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, 
                 summary["bulk_density_last_kg_m3"] = dict(zip(final.region, final.bulk_density.astype(float)))
             summary["regions"] = [{"name": r.name, "shape": r.shape, "center": list(r.center), "radius": r.radius}
                                   for r in regions]
-        coord = Coordination().run(read_frames(files, every=every), contact_frames())
+        coord = Coordination().run(frames_of(), contact_frames())
         coord.save(out)
         table = coord.table[coord.table.species == "all"]
         row = table[table.step == table.step.max()].iloc[0]

@@ -3,6 +3,8 @@ LIGGGHTS' legacy-VTK ``dump custom/vtk``, plain or gzip-compressed, one or many 
 file, with a particle count that may change from frame to frame (filling, discharge).
 
 Frames are streamed one at a time (memory is one frame), each parsed by pandas' C parser.
+Each frame is checked against its header (row count, one number per named column): a malformed
+or truncated file raises ReadError naming the file, frame and line, before the frame is yielded.
 Positions given as ``xs``/``xu``/``x`` are all returned as unwrapped-or-plain Cartesian
 ``x y z`` in the dump's length unit (SI for our decks).
 
@@ -12,10 +14,13 @@ Positions given as ``xs``/``xu``/``x`` are all returned as unwrapped-or-plain Ca
 """
 from __future__ import annotations
 
+import csv
 import glob
 import gzip
 import io
 import re
+import sys
+import zlib
 from dataclasses import dataclass, field
 from itertools import islice
 from pathlib import Path
@@ -117,6 +122,18 @@ def _dump_like(name: str) -> bool:
 
 # ----------------------------------------------------------------------------------------
 # text dumps
+#
+# Every frame is checked against its header: the rows until the next 'ITEM: TIMESTEP' must be
+# exactly the announced count, each with exactly one field per column name, each a number.
+# The happy path costs a few C-level checks on the joined block and the parsed array's shape;
+# only a block that fails them is walked line by line, to name the first bad line.
+
+_INT_COLUMNS = ("id", "type", "mol", "id1", "id2", "periodic", "mesh", "triangle", "ix", "iy", "iz")
+_NUMBER = re.compile(rb"[+-]?(?:\d+\.?\d*(?:[eE][+-]?\d+)?|\.\d+(?:[eE][+-]?\d+)?|nan|inf(?:inity)?)", re.I)
+_INTEGER = re.compile(rb"\s*[+-]?\d+\s*")
+# what a broken or truncated gzip stream (or an unreadable file) raises while reading
+_STREAM_ERRORS = (EOFError, OSError, zlib.error)
+
 
 def _open(path: Path):
     with open(path, "rb") as probe:
@@ -124,70 +141,222 @@ def _open(path: Path):
     return gzip.open(path, "rb") if magic == b"\x1f\x8b" else open(path, "rb", buffering=1 << 20)
 
 
-def _expect(f, prefix: bytes, path: Path) -> bytes:
-    line = f.readline()
-    if not line.startswith(prefix):
-        raise ReadError(f"{path}: expected '{prefix.decode()}', found {line[:60]!r}")
-    return line
+def _stream_problem(exc: BaseException, path: Path, where: str = "") -> ReadError:
+    """A ReadError for an exception raised while reading ``path`` (gzip or I/O)."""
+    if isinstance(exc, EOFError):
+        what = "the gzip data is cut short (truncated .gz file?)"
+    elif isinstance(exc, gzip.BadGzipFile):
+        what = f"not a valid gzip file ({exc})"
+    elif isinstance(exc, zlib.error):
+        what = f"corrupt gzip data ({exc})"
+    else:
+        what = f"cannot read the file ({getattr(exc, 'strerror', None) or exc})"
+    return ReadError(f"{path}: {where}{': ' if where else ''}{what}")
 
 
-def _parse_block(block: bytes, names: list[str], n: int, path: Path, step: int) -> pd.DataFrame:
+class _Lines:
+    """Binary line reader that counts lines, for messages."""
+
+    def __init__(self, f):
+        self.f = f
+        self.lineno = 0
+        self.frame = None    # (timestep, line of its 'ITEM: TIMESTEP') of the frame being read
+
+    def where(self) -> str:
+        if self.frame is None:
+            return f"line {self.lineno + 1}" if self.lineno else ""
+        step, line = self.frame
+        return f"frame {'' if step is None else f'at step {step} '}(from line {line})"
+
+    def readline(self) -> bytes:
+        line = self.f.readline()
+        if line:
+            self.lineno += 1
+        return line
+
+    def nonblank(self) -> bytes:
+        line = self.readline()
+        while line and not line.strip():
+            line = self.readline()
+        return line
+
+    def take(self, n: int) -> tuple[bytes, int]:
+        lines = list(islice(self.f, n))
+        self.lineno += len(lines)
+        return b"".join(lines), len(lines)
+
+
+def _show(line: bytes) -> str:
+    return repr(line.rstrip(b"\r\n")[:60])
+
+
+def _header(r: _Lines, path: Path, columns):
+    """Parse the rest of a frame header (after its 'ITEM: TIMESTEP' line), checking every line."""
+    step = None
+
+    def fail(what: str):
+        frame = f"frame at step {step}, " if step is not None else ""
+        return ReadError(f"{path}: {frame}line {r.lineno}: {what}")
+
+    def whole_line() -> bytes:
+        line = r.readline()
+        if line and not line.endswith(b"\n"):
+            raise fail("the file ends in the middle of this line (truncated file?)")
+        return line
+
+    def integer(what: str) -> int:
+        line = whole_line()
+        if not _INTEGER.fullmatch(line):
+            raise fail(f"expected the {what} (an integer), found {_show(line) if line else 'the end of the file'}")
+        return int(line)
+
+    def item(prefixes: tuple[bytes, ...]) -> bytes:
+        line = whole_line()
+        if not line.startswith(prefixes):
+            want = " or ".join(repr(p.decode()) for p in prefixes)
+            raise fail(f"expected {want}, found {_show(line) if line else 'the end of the file'}")
+        text = line.decode("ascii", "replace").rstrip("\r\n")
+        if not text.replace("\t", " ").isprintable():
+            raise fail(f"the header line {_show(line)} is not plain text")
+        return text
+
+    step = integer("timestep")
+    count_item = item((b"ITEM: NUMBER OF ATOMS", b"ITEM: NUMBER OF ENTRIES"))
+    kind = "atoms" if "ATOMS" in count_item else "entries"
+    n = integer(f"number of {kind}")
+    if n < 0:
+        raise fail(f"the header announces a negative number of {kind} ({n})")
+    if n > sys.maxsize:
+        raise fail(f"the header announces an impossible number of {kind} ({n})")
+    box_line = item((b"ITEM: BOX BOUNDS",)).split()[3:]
+    triclinic = bool(box_line) and box_line[0] == "xy"
+    box = np.zeros((3, 2))
+    for k in range(3):
+        fields = whole_line().split()
+        if len(fields) != (3 if triclinic else 2) or not all(_NUMBER.fullmatch(v) for v in fields):
+            raise fail(f"expected box bounds ({'lo hi tilt' if triclinic else 'lo hi'}), "
+                       f"found {_show(b' '.join(fields))}")
+        box[k] = float(fields[0]), float(fields[1])
+    names = item((b"ITEM: ATOMS",) if kind == "atoms" else (b"ITEM: ENTRIES",)).split()[2:]
+    if columns is not None:
+        if len(columns) != len(names):
+            raise ReadError(f"{path}: {len(columns)} column names given for {len(names)} columns "
+                            f"({' '.join(names)})")
+        names = list(columns)
+    if len(set(names)) != len(names):
+        raise ReadError(f"{path}: repeated column names {names}; pass column names explicitly")
+    boundary = tuple(box_line[3:] if triclinic else box_line)
+    return step, kind, n, box, boundary, triclinic, names
+
+
+def _strict_rows(block: bytes, names: list[str], n: int, path: Path, step: int, first: int) -> np.ndarray:
+    """Slow path: walk the rows, raise a ReadError naming the first bad line, else return them."""
+    rows = []
+    for k, line in enumerate(io.BytesIO(block)):
+        where = f"{path}: frame at step {step}, line {first + k}"
+        if line.startswith(b"ITEM:"):
+            raise ReadError(f"{where}: the header announces {n} rows but has {k}; "
+                            f"{_show(line)} follows row {k} (wrong count in the header?)")
+        if not line.endswith(b"\n"):
+            raise ReadError(f"{where}: the file ends in the middle of this line (truncated file?)")
+        tokens = line.split()
+        if not tokens:
+            raise ReadError(f"{where}: blank line among the {n} rows the header announces")
+        if len(tokens) != len(names):
+            shown = " ".join(names) if len(names) <= 20 else " ".join(names[:20]) + " ..."
+            raise ReadError(f"{where}: {len(tokens)} fields, but the header names {len(names)} columns ({shown})")
+        for t in tokens:
+            if not _NUMBER.fullmatch(t):
+                raise ReadError(f"{where}: {_show(t)} is not a number")
+        rows.append(tokens)
+    if len(rows) != n:
+        raise ReadError(f"{path}: frame at step {step}, line {first + len(rows)}: announces {n} rows but has "
+                        f"{len(rows)} (truncated file?)")
+    return np.array(rows, dtype=np.float64).reshape(n, len(names))
+
+
+_NAN = ["nan", "-nan", "+nan", "NaN", "-NaN", "+NaN", "NAN", "-NAN", "+NAN"]
+
+
+def _read_csv(block: bytes, **na) -> pd.DataFrame | None:
+    """pandas' C parser on a block of rows, or None if it fails. No names and no index column:
+    pandas cannot move a column into the index when rows have more fields than names."""
+    try:
+        return pd.read_csv(io.BytesIO(block), sep=r"\s+", header=None, engine="c", dtype=np.float64,
+                           index_col=False, quoting=csv.QUOTE_NONE, **na)
+    except (ValueError, OverflowError):
+        return None
+
+
+def _parse_block(block: bytes, nlines: int, names: list[str], n: int, path: Path, step: int,
+                 first: int) -> pd.DataFrame:
+    """The ``n`` rows of one frame (``block``, from line ``first``) as a DataFrame, checked."""
     if n == 0:
         return pd.DataFrame({c: np.empty(0) for c in names})
-    try:
-        data = pd.read_csv(io.BytesIO(block), sep=r"\s+", header=None, names=names, engine="c",
-                           dtype=np.float64, na_filter=False)
-    except (ValueError, pd.errors.ParserError) as exc:
-        raise ReadError(f"{path}: frame at step {step}: cannot parse the data lines ({exc})") from None
-    if len(data) != n:
-        raise ReadError(f"{path}: frame at step {step} announces {n} rows but has {len(data)} (truncated file?)")
-    for col in ("id", "type", "mol", "id1", "id2", "periodic", "mesh", "triangle", "ix", "iy", "iz"):
-        if col in data:
-            data[col] = data[col].astype(np.int64)
+    data = None
+    if nlines == n and block.endswith(b"\n"):     # (an 'ITEM:' line among the rows fails to parse)
+        data = _read_csv(block, na_filter=False)
+        if data is None and b"nan" in block.lower():    # printf's nan (a run that blew up)
+            data = _read_csv(block, na_filter=True, keep_default_na=False, na_values=_NAN)
+        if data is not None and data.shape != (n, len(names)):
+            data = None
+    if data is None:   # something is off (or nan/inf values): find it, or parse strictly
+        data = pd.DataFrame(_strict_rows(block, names, n, path, step, first), columns=names)
+    else:
+        data.columns = names
+    _to_int_columns(data, path, step, first)
     return data
 
 
+def _to_int_columns(data: pd.DataFrame, path, step, first: int | None) -> None:
+    """Integer columns (ids, types, image flags) to int64; refuses non-integer values."""
+    for col in _INT_COLUMNS:
+        if col in data:
+            values = data[col].to_numpy()
+            with np.errstate(invalid="ignore"):
+                ints = values.astype(np.int64)
+                bad = np.flatnonzero(ints != values)
+            if bad.size:
+                where = f"line {first + bad[0]}" if first is not None else f"point {bad[0]}"
+                raise ReadError(f"{path}: frame at step {step}, {where}: column {col!r} holds "
+                                f"{float(values[bad[0]]):.17g}, not an integer")
+            data[col] = ints
+
+
 def _text_frames(path: Path, columns: Sequence[str] | None, wanted: set | None = None) -> Iterator[Frame]:
-    with _open(path) as f:
-        while True:
-            line = f.readline()
-            if not line:
-                return
-            if not line.strip():
-                continue
-            if not line.startswith(b"ITEM: TIMESTEP"):
-                raise ReadError(f"{path}: not a LAMMPS/LIGGGHTS text dump (expected 'ITEM: TIMESTEP', "
-                                f"found {line[:60]!r})")
-            try:
-                step = int(f.readline().split()[0])
-                count_item = f.readline()
-                if not count_item.startswith((b"ITEM: NUMBER OF ATOMS", b"ITEM: NUMBER OF ENTRIES")):
-                    raise ReadError(f"{path}: step {step}: expected 'ITEM: NUMBER OF ...', found {count_item[:60]!r}")
-                kind = "atoms" if b"ATOMS" in count_item else "entries"
-                n = int(f.readline().split()[0])
-                box_line = _expect(f, b"ITEM: BOX BOUNDS", path).decode().split()[3:]
-                triclinic = bool(box_line) and box_line[0] == "xy"
-                bounds = [f.readline().split() for _ in range(3)]
-                box = np.array([[float(b[0]), float(b[1])] for b in bounds])
-                header = _expect(f, b"ITEM: ATOMS" if kind == "atoms" else b"ITEM: ENTRIES", path)
-            except (IndexError, ValueError):
-                raise ReadError(f"{path}: malformed frame header near byte {f.tell()}") from None
-            names = header.decode().split()[2:]
-            if columns is not None:
-                if len(columns) != len(names):
-                    raise ReadError(f"{path}: {len(columns)} column names given for {len(names)} columns "
-                                    f"({' '.join(names)})")
-                names = list(columns)
-            if len(set(names)) != len(names):
-                raise ReadError(f"{path}: repeated column names {names}; pass column names explicitly")
-            if wanted is not None and step not in wanted:   # skip the rows unparsed
-                for _ in islice(f, n):
-                    pass
-                continue
-            block = b"".join(islice(f, n))
-            data = _parse_block(block, names, n, path, step)
-            boundary = tuple(box_line[3:] if triclinic else box_line)
-            yield Frame(step, box, data, kind, boundary, str(path), {"triclinic": triclinic})
+    r = None
+    try:
+        with _open(path) as f:
+            r = _Lines(f)
+            yield from _frames_of(r, path, columns, wanted)
+    except _STREAM_ERRORS as exc:
+        raise _stream_problem(exc, path, r.where() if r else "") from None
+
+
+def _frames_of(r: _Lines, path: Path, columns, wanted) -> Iterator[Frame]:
+    line = r.nonblank()
+    if line and not line.startswith(b"ITEM: TIMESTEP"):
+        raise ReadError(f"{path}: not a LAMMPS/LIGGGHTS text dump (line {r.lineno}: expected 'ITEM: TIMESTEP', "
+                        f"found {_show(line)})")
+    while line:
+        r.frame = (None, r.lineno)
+        step, kind, n, box, boundary, triclinic, names = _header(r, path, columns)
+        r.frame = (step, r.frame[1])
+        first = r.lineno + 1
+        block, nlines = r.take(n)
+        if wanted is not None and step not in wanted:   # skipped unparsed; its row count is checked
+            data = None
+            if nlines != n or (n and not block.endswith(b"\n")) or b"ITEM:" in block:
+                _strict_rows(block, names, n, path, step, first)
+        else:
+            data = _parse_block(block, nlines, names, n, path, step, first)
+        line = r.nonblank()
+        if line and not line.startswith(b"ITEM: TIMESTEP"):
+            raise ReadError(f"{path}: frame at step {step}, line {r.lineno}: expected 'ITEM: TIMESTEP' after "
+                            f"the {n} rows the header announces, found {_show(line)} "
+                            f"(more rows than the header says?)")
+        if data is not None:
+            yield Frame(step, box, data, kind, boundary, str(path), {"triclinic": triclinic, "line": first})
 
 
 # ----------------------------------------------------------------------------------------
@@ -199,29 +368,85 @@ def _vtk_step(path: Path) -> int:
     return int(digits[-1]) if digits else 0
 
 
+def _read_all(path: Path) -> bytes:
+    try:
+        with _open(path) as f:
+            return f.read()
+    except _STREAM_ERRORS as exc:
+        raise _stream_problem(exc, path) from None
+
+
 def _vtk_frame(path: Path) -> Frame:
-    with _open(path) as f:
-        raw = f.read()
-    head, _, body = raw.partition(b"\nPOINTS ")
-    if not body or b"DATASET POLYDATA" not in head:
+    """One LIGGGHTS legacy-VTK particle file; every count is checked against the data."""
+    raw = _read_all(path)
+    head, sep, body = raw.partition(b"\nPOINTS ")
+    if not sep or b"DATASET POLYDATA" not in head:
         raise ReadError(f"{path}: not a LIGGGHTS particle VTK file (no POLYDATA points)")
     lines = head.split(b"\n")
     if len(lines) > 2 and lines[2].strip() == b"BINARY":
         raise ReadError(f"{path}: binary VTK is not supported; write ASCII (dump_modify binary no)")
+    if not raw.endswith(b"\n"):
+        last = raw.count(b"\n") + 1
+        raise ReadError(f"{path}: line {last}: the file ends in the middle of this line "
+                        "(truncated file?)")
     tokens = body.split()
-    n = int(tokens[0])
-    pos = np.asarray(tokens[2:2 + 3 * n], dtype=float).reshape(n, 3)
+
+    def line_of(needle: bytes) -> int:
+        at = raw.find(needle)
+        return raw.count(b"\n", 0, at) + 1 + (needle.startswith(b"\n")) if at >= 0 else 0
+
+    def fail(section: bytes, what: str):
+        name = section.strip().decode("ascii", "replace")
+        name = name if name.isprintable() else repr(section.strip())
+        return ReadError(f"{path}: {name} (line {line_of(section)}): {what}")
+
+    def count(i: int, section: bytes, what: str) -> int:
+        t = tokens[i] if i < len(tokens) else b""
+        if not re.fullmatch(rb"\d+", t):
+            raise fail(section, f"expected the {what} (a count), found {_show(t) if t else 'the end of the file'}")
+        return int(t)
+
+    def numbers(i: int, size: int, section: bytes, what: str) -> np.ndarray:
+        chunk = tokens[i:i + size]
+        try:
+            if len(chunk) < size or b"_" in b"".join(chunk):
+                raise ValueError
+            return np.asarray(chunk, dtype=np.float64)
+        except ValueError:
+            bad = next((t for t in chunk if not _NUMBER.fullmatch(t)), None)
+            found = f"{_show(bad)} among them" if bad is not None else f"only {len(chunk)}"
+            raise fail(section, f"expected {size} numbers ({what}), found {found}") from None
+
+    points = b"\nPOINTS "
+    n = count(0, points, "number of points")
+    pos = numbers(2, 3 * n, points, f"x y z of {n} points").reshape(n, 3)
+    if 2 + 3 * n < len(tokens) and _NUMBER.fullmatch(tokens[2 + 3 * n]):
+        raise fail(points, f"announces {n} points, but more numbers follow their x y z")
     columns: dict[str, np.ndarray] = {"x": pos[:, 0], "y": pos[:, 1], "z": pos[:, 2]}
     try:
         i = tokens.index(b"POINT_DATA", 2 + 3 * n)
     except ValueError:
         i = len(tokens)
-    if i < len(tokens) and tokens[i + 2] == b"FIELD":
-        nfields = int(tokens[i + 4])
+    if i < len(tokens):
+        pdata = b"\nPOINT_DATA "
+        if count(i + 1, pdata, "number of points") != n:
+            raise fail(pdata, f"announces {int(tokens[i + 1])} points, POINTS has {n}")
+    if i + 2 < len(tokens) and tokens[i + 2] == b"FIELD":
+        fdata = b"\nFIELD "
+        nfields = count(i + 4, fdata, "number of arrays")
         j = i + 5
         for _ in range(nfields):
-            name, ncomp, ntup = tokens[j].decode(), int(tokens[j + 1]), int(tokens[j + 2])
-            values = np.asarray(tokens[j + 4:j + 4 + ncomp * ntup], dtype=float).reshape(ntup, ncomp)
+            if j + 4 > len(tokens):
+                raise fail(fdata, f"announces {nfields} arrays, the file ends before all of them")
+            name = tokens[j].decode("ascii", "replace")
+            if not name.isprintable() or "\ufffd" in name:
+                raise fail(fdata, f"array name {_show(tokens[j])} is not plain text")
+            section = b"\n" + tokens[j] + b" "
+            ncomp = count(j + 1, section, "number of components")
+            ntup = count(j + 2, section, "number of tuples")
+            if ntup != n or ncomp < 1:
+                raise fail(section, f"{ntup} tuples of {ncomp} components; expected {n} tuples (one per point)")
+            values = numbers(j + 4, ncomp * ntup, section, f"{ntup} x {ncomp} values").reshape(ntup, ncomp)
             j += 4 + ncomp * ntup
             if ncomp == 1:
                 columns[name] = values[:, 0]
@@ -229,11 +454,11 @@ def _vtk_frame(path: Path) -> Frame:
                 names = _VTK_VECTORS.get(name, tuple(f"{name}{k + 1}" for k in range(ncomp)))
                 for k, col in enumerate(names[:ncomp]):
                     columns[col] = values[:, k]
+        if j < len(tokens) and tokens[j] not in (b"CELL_DATA", b"POINT_DATA", b"FIELD"):
+            raise fail(fdata, f"announces {nfields} arrays, but more follow ({_show(tokens[j])} ...)")
     data = pd.DataFrame(columns)
-    for col in ("id", "type", "ix", "iy", "iz"):
-        if col in data:
-            data[col] = data[col].astype(np.int64)
     step = _vtk_step(path)
+    _to_int_columns(data, path, step, None)
     box = np.column_stack([pos.min(axis=0), pos.max(axis=0)]) if n else np.zeros((3, 2))
     return Frame(step, box, data, "atoms", (), str(path), {"box_from_points": True})
 
@@ -274,5 +499,6 @@ def last_frame(source, columns: Sequence[str] | None = None) -> Frame:
     for frame in read_frames(source, columns):
         pass
     if frame is None:
-        raise ReadError(f"{source}: no frames")
+        names = [str(p) for p in dump_files(source)]
+        raise ReadError(f"{', '.join(names[:3])}{', ...' if len(names) > 3 else ''}: no frames (empty file?)")
     return frame
