@@ -1,18 +1,21 @@
 """The case file: a pydantic model of everything a silo simulation needs.
 
 All quantities are SI (m, kg, s, Pa, N/m). Unknown keys are errors, numbers must
-be finite, and every string that can reach a deck or a file name is restricted
-to a safe alphabet. ``load_case`` turns a YAML file into a validated ``Case`` or
-raises ``CaseError`` listing every problem with its field path.
+be finite, integers strict (``true`` is not 1), and every string that can reach a deck or a
+file name is restricted to a safe alphabet. ``load_case`` reads at most ``MAX_CASE_BYTES`` of a
+regular file, parses it with a safe YAML loader and turns it into a validated ``Case``, or
+raises ``CaseError`` listing every problem with its field path (or its line, for YAML errors).
 """
 from __future__ import annotations
 
 import math
+import os
+import stat
 from pathlib import Path
 from typing import Annotated, Literal, Optional, Union
 
 import yaml
-from pydantic import (BaseModel, ConfigDict, Field, StringConstraints, ValidationError,
+from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, StringConstraints, ValidationError,
                       model_validator)
 
 from .errors import CaseError
@@ -21,10 +24,38 @@ from .errors import CaseError
 SAFE_NAME_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$"
 SafeName = Annotated[str, StringConstraints(pattern=SAFE_NAME_PATTERN)]
 
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False, ge=-1e6, le=1e6)]
-NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-Fraction = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)]
+
+
+def _refuse_bool(value):
+    """A number field refuses YAML's true/false (pydantic would read them as 1.0 and 0.0)."""
+    if isinstance(value, bool):
+        raise ValueError("must be a number, not true/false")
+    return value
+
+
+#: a float that is not a bool
+Real = Annotated[float, BeforeValidator(_refuse_bool)]
+#: strict integer: true/false (count 1), 5.0 and "5" are refused
+Int = Annotated[int, Field(strict=True)]
+Positive = Annotated[Real, Field(gt=0, allow_inf_nan=False)]
+FiniteFloat = Annotated[Real, Field(allow_inf_nan=False, ge=-1e6, le=1e6)]
+NonNegative = Annotated[Real, Field(ge=0, allow_inf_nan=False)]
+Fraction = Annotated[Real, Field(gt=0, le=1, allow_inf_nan=False)]
+
+# Physical floors of the grains' properties; the consequences of values near them are warned
+# about by siloflow.derived.physics_warnings (overlap under the bed's weight, air drag).
+#: m: below 1 um Brownian motion and van der Waals adhesion dominate, which these dry contact laws omit
+MIN_GRAIN_RADIUS = 1e-6
+#: kg/m3: the density of air at 20 C; lighter grains would float, and siloflow models no gas
+MIN_DENSITY = 1.2
+#: Pa: ten times softer than the softest grains of silo experiments (hydrogel spheres, ~10 kPa);
+#: benchmarks use 1e6 Pa on purpose, so the consequence (overlap) is a warning, not a refusal
+MIN_YOUNGS_MODULUS = 1e3
+#: Pa: stiffer than diamond (1.2e12 Pa) with a margin
+MAX_YOUNGS_MODULUS = 1e13
+#: below 1/1000 of the contact time the step adds only cost and round-off, no accuracy
+MIN_TIMESTEP_FRACTION = 1e-3
+GrainRadius = Annotated[Positive, Field(ge=MIN_GRAIN_RADIUS)]
 
 
 class Strict(BaseModel):
@@ -34,11 +65,20 @@ class Strict(BaseModel):
 
 
 # --------------------------------------------------------------------------- geometry
+#: m: the tallest hopper accepted, like the wall's height bound (a half angle of 1e-7 degrees
+#: makes a hopper 1e7 m tall, whose meshes would not fit in memory)
+MAX_HOPPER_HEIGHT = 1000.0
+
+
 def _smaller(model, small: str, large: str):
-    """Validator body: field ``small`` (an outlet) must be smaller than field ``large``."""
+    """Validator body: field ``small`` (an outlet) must be smaller than field ``large``; a hopper
+    must not be taller than ``MAX_HOPPER_HEIGHT``."""
     a, b = getattr(model, small), getattr(model, large)
     if a >= b:
         raise ValueError(f"{small} ({a} m) must be smaller than {large} ({b} m)")
+    if model.hopper_height > MAX_HOPPER_HEIGHT:
+        raise ValueError(f"half_angle_deg ({model.half_angle_deg} deg) makes the hopper {model.hopper_height:.3g} m "
+                         f"tall, more than {MAX_HOPPER_HEIGHT:g} m")
     return model
 
 
@@ -49,7 +89,7 @@ class CylinderGeometry(Strict):
     radius: Positive = Field(description="inner radius of the cylinder, m", le=100)
     height: Positive = Field(description="height of the cylinder wall, m", le=1000)
     orifice_radius: Positive = Field(description="radius of the centred orifice, m")
-    mesh_segments: int = Field(64, ge=16, le=1024, description="facets around the circumference")
+    mesh_segments: Int = Field(64, ge=16, le=1024, description="facets around the circumference")
 
     _orifice_fits = model_validator(mode="after")(lambda self: _smaller(self, "orifice_radius", "radius"))
 
@@ -72,10 +112,10 @@ class HopperGeometry(Strict):
     kind: Literal["hopper"]
     radius: Positive = Field(description="inner radius of the cylinder, m", le=100)
     height: Positive = Field(description="height of the cylinder wall above the cone, m", le=1000)
-    half_angle_deg: float = Field(description="hopper half angle from the vertical, degrees",
+    half_angle_deg: Real = Field(description="hopper half angle from the vertical, degrees",
                                   gt=0, lt=90, allow_inf_nan=False)
     outlet_radius: Positive = Field(description="radius of the hopper outlet, m")
-    mesh_segments: int = Field(64, ge=16, le=1024)
+    mesh_segments: Int = Field(64, ge=16, le=1024)
 
     _outlet_fits = model_validator(mode="after")(lambda self: _smaller(self, "outlet_radius", "radius"))
 
@@ -100,7 +140,7 @@ class PlanarGeometry(Strict):
     width: Positive = Field(description="inner width between the side walls, m", le=100)
     height: Positive = Field(description="height of the vertical side walls above the hopper, m", le=1000)
     thickness: Positive = Field(description="distance between the front and back faces, m", le=100)
-    half_angle_deg: float = Field(60.0, gt=0, lt=90, allow_inf_nan=False,
+    half_angle_deg: Real = Field(60.0, gt=0, lt=90, allow_inf_nan=False,
                                   description="hopper half angle from the vertical, degrees")
     outlet_width: Positive = Field(description="width of the outlet slot, m")
     face_friction: NonNegative = Field(0.0, le=10, description="grain friction on the front and back faces")
@@ -130,10 +170,10 @@ Geometry = Annotated[Union[CylinderGeometry, HopperGeometry, PlanarGeometry],
 class WallSensors(Strict):
     """Horizontal bands up the cylinder wall, each split into ``sectors`` azimuthal meshes."""
 
-    bands: Optional[int] = Field(None, ge=1, le=100, description="number of equal bands")
+    bands: Optional[Int] = Field(None, ge=1, le=100, description="number of equal bands")
     heights: Optional[list[NonNegative]] = Field(
         None, description="band boundaries in m above the cylinder's base, increasing", max_length=101)
-    sectors: int = Field(4, ge=3, le=32, description="azimuthal sectors per band (>= 3: a full "
+    sectors: Int = Field(4, ge=3, le=32, description="azimuthal sectors per band (>= 3: a full "
                          "ring's radial forces cancel)")
 
     @model_validator(mode="after")
@@ -150,21 +190,24 @@ class WallSensors(Strict):
 
 # --------------------------------------------------------------------------- materials
 class ParticleMaterial(Strict):
-    density: Positive = Field(description="solid density, kg/m3", le=1e5)
-    youngs_modulus: Optional[Positive] = Field(None, description="Pa (Hertz model)", ge=5e6, le=1e13)
-    poisson_ratio: float = Field(0.3, gt=-1, lt=0.5, allow_inf_nan=False)
+    density: Positive = Field(description="solid density, kg/m3", ge=MIN_DENSITY,
+                              le=1e5)  # le: four times osmium, the densest element (22.6e3)
+    youngs_modulus: Optional[Positive] = Field(None, description="Pa (Hertz model)", ge=MIN_YOUNGS_MODULUS,
+                                               le=MAX_YOUNGS_MODULUS)
+    poisson_ratio: Real = Field(0.3, gt=-1, lt=0.5, allow_inf_nan=False)
 
 
 class WallMaterial(Strict):
-    youngs_modulus: Optional[Positive] = Field(None, description="Pa (Hertz model)", ge=5e6, le=1e13)
-    poisson_ratio: float = Field(0.3, gt=-1, lt=0.5, allow_inf_nan=False)
+    youngs_modulus: Optional[Positive] = Field(None, description="Pa (Hertz model)", ge=MIN_YOUNGS_MODULUS,
+                                               le=MAX_YOUNGS_MODULUS)
+    poisson_ratio: Real = Field(0.3, gt=-1, lt=0.5, allow_inf_nan=False)
 
 
 class PairContact(Strict):
     """Contact parameters of one material pair."""
 
     friction: NonNegative = Field(description="Coulomb sliding friction coefficient", le=10)
-    restitution: float = Field(0.5, gt=0, le=1, allow_inf_nan=False,
+    restitution: Real = Field(0.5, gt=0, le=1, allow_inf_nan=False,
                                description="normal coefficient of restitution")
     rolling_friction: NonNegative = Field(0.0, le=10, description="rolling friction coefficient (cdt)")
     kn: Optional[Positive] = Field(None, description="normal spring stiffness, N/m (linear model)", le=1e12)
@@ -194,11 +237,11 @@ class Materials(Strict):
     wall: WallMaterial = WallMaterial()
     particle_particle: PairContact
     particle_wall: PairContact
-    tangential_damping_ratio: float = Field(
+    tangential_damping_ratio: Real = Field(
         0.1, ge=0, le=1, allow_inf_nan=False, description="gamma_t / gamma_n (linear and hooke models)")
     characteristic_velocity: Optional[Positive] = Field(
         None, le=1000, description="impact speed that sets kn of model 'hooke', m/s")
-    tangential_stiffness_ratio: float = Field(
+    tangential_stiffness_ratio: Real = Field(
         2.0 / 7.0, gt=0, le=1, allow_inf_nan=False, description="kt / kn (model 'hooke'; paper B: 2/7)")
 
     @model_validator(mode="after")
@@ -224,16 +267,17 @@ class Dust(Strict):
     ``density_scale`` remedy multiplies the dust density (mass scaling: contact times grow as
     its square root) and its effect on results is measured in benchmarks/dust_density_scaling.py."""
 
-    radius: Positive = Field(description="dust sphere radius, m", le=1.0)
-    density: Positive = Field(description="dust solid density, kg/m3", le=1e5)
-    number_ratio: float = Field(description="dust spheres per grain (paper A: 0.1)", gt=0, le=100,
+    radius: GrainRadius = Field(description="dust sphere radius, m", le=1.0)
+    density: Positive = Field(description="dust solid density, kg/m3", ge=MIN_DENSITY, le=1e5)
+    number_ratio: Real = Field(description="dust spheres per grain (paper A: 0.1)", gt=0, le=100,
                                 allow_inf_nan=False)
-    youngs_modulus: Optional[Positive] = Field(None, description="Pa (hertz and hooke models)", ge=5e6, le=1e13)
-    poisson_ratio: float = Field(0.3, gt=-1, lt=0.5, allow_inf_nan=False)
+    youngs_modulus: Optional[Positive] = Field(None, description="Pa (hertz and hooke models)",
+                                               ge=MIN_YOUNGS_MODULUS, le=MAX_YOUNGS_MODULUS)
+    poisson_ratio: Real = Field(0.3, gt=-1, lt=0.5, allow_inf_nan=False)
     dust_dust: PairContact
     dust_particle: PairContact
     dust_wall: PairContact
-    density_scale: float = Field(1.0, ge=1.0, le=1e6, allow_inf_nan=False,
+    density_scale: Real = Field(1.0, ge=1.0, le=1e6, allow_inf_nan=False,
                                  description="time-step remedy: the dust runs with density x this factor "
                                  "(1 = no scaling)")
 
@@ -247,7 +291,7 @@ class MonodisperseSpheres(Strict):
     """Spheres of one radius."""
 
     kind: Literal["spheres"]
-    radius: Positive = Field(description="sphere radius, m", le=1.0)
+    radius: GrainRadius = Field(description="sphere radius, m", le=1.0)
     dust: Optional[Dust] = None
 
     @property
@@ -276,7 +320,7 @@ class PolydisperseSpheres(Strict):
     """
 
     kind: Literal["polydisperse_spheres"]
-    radii: list[Positive] = Field(min_length=2, max_length=20, description="sphere radii, m")
+    radii: list[GrainRadius] = Field(min_length=2, max_length=20, description="sphere radii, m")
     fractions: list[Fraction] = Field(min_length=2, max_length=20, description="fraction of each radius; sum 1")
     basis: Literal["number", "mass"] = Field(description="what the fractions count")
     protocol: Literal["insert", "shrink_after_settling"] = Field(
@@ -328,7 +372,7 @@ def paper_b_radii(rb: float, sizes: int = 7) -> list[float]:
 
 class ClumpSphere(Strict):
     center: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(description="m, body frame")
-    radius: Positive = Field(le=1.0, description="m")
+    radius: GrainRadius = Field(le=1.0, description="m")
 
 
 class Clumps(Strict):
@@ -338,11 +382,11 @@ class Clumps(Strict):
 
     kind: Literal["clumps"]
     shape: Literal["wheat", "spheres"] = "wheat"
-    length: Positive = Field(6e-3, le=1.0, description="wheat grain length, m")
-    width: Positive = Field(4e-3, le=1.0, description="wheat grain width (sphere diameter), m")
+    length: GrainRadius = Field(6e-3, le=1.0, description="wheat grain length, m")
+    width: GrainRadius = Field(4e-3, le=1.0, description="wheat grain width (sphere diameter), m")
     spheres: Optional[list[ClumpSphere]] = Field(None, min_length=2, max_length=50,
                                                  description="clump spheres (shape 'spheres')")
-    monte_carlo_tries: int = Field(1_000_000, ge=10_000, le=100_000_000,
+    monte_carlo_tries: Int = Field(1_000_000, ge=10_000, le=100_000_000,
                                    description="LIGGGHTS' Monte Carlo samples for mass and inertia")
     dust: Optional[Dust] = None
 
@@ -394,7 +438,7 @@ Particles = Annotated[Union[MonodisperseSpheres, PolydisperseSpheres, Clumps], F
 class Settle(Strict):
     """Settling ends when kinetic / potential energy (above the outlet) drops below ``ke_pe_ratio``."""
 
-    ke_pe_ratio: float = Field(1e-5, gt=0, lt=1, allow_inf_nan=False)
+    ke_pe_ratio: Real = Field(1e-5, gt=0, lt=1, allow_inf_nan=False)
     check_interval: Positive = Field(0.02, description="time between checks, s", le=10)
     max_time: Positive = Field(2.0, description="cap on settling time, s", le=1e4)
     static_window: Positive = Field(0.02, description="time the settled bed is sampled for static "
@@ -404,13 +448,13 @@ class Settle(Strict):
 class Fill(Strict):
     """How the silo is filled: a particle count, or a fill height converted with ``packing_fraction``."""
 
-    count: Optional[int] = Field(None, ge=1, le=50_000_000)
+    count: Optional[Int] = Field(None, ge=1, le=50_000_000)
     height: Optional[Positive] = Field(None, description="target bed height above the outlet, m")
     packing_fraction: Fraction = Field(0.6, description="solid fraction used to convert height to count")
     insertion_z_min: Optional[Positive] = Field(None, description="bottom of the insertion region, m "
                                                 "(default: upper quarter of the silo)")
     insertion_z_max: Optional[Positive] = Field(None, description="top of the insertion region, m")
-    batch_volume_fraction: float = Field(0.15, gt=0, le=0.4, allow_inf_nan=False,
+    batch_volume_fraction: Real = Field(0.15, gt=0, le=0.4, allow_inf_nan=False,
                                          description="solid fraction of one insertion batch in the region")
     pour_radius: Optional[Positive] = Field(None, le=100, description="radius (a slab: half width) of the "
                                             "pouring region about the axis, m; default the whole cross-section "
@@ -438,7 +482,7 @@ class Discharge(Strict):
 
     duration: Optional[Positive] = Field(None, description="discharge time after opening, s", le=1e5)
     until_empty: bool = False
-    empty_fraction: float = Field(0.01, gt=0, lt=1, allow_inf_nan=False,
+    empty_fraction: Real = Field(0.01, gt=0, lt=1, allow_inf_nan=False,
                                   description="'empty' when less than this fraction of the mass remains")
     max_time: Positive = Field(60.0, description="cap on an until_empty discharge, s", le=1e5)
     opening: Opening = Opening()
@@ -463,9 +507,9 @@ class Outputs(Strict):
 
 class EngineSettings(Strict):
     name: Literal["liggghts"] = "liggghts"
-    ranks: int = Field(1, ge=1, le=1024, description="MPI ranks")
-    timestep_fraction: Fraction = Field(0.15, description="time step as a fraction of the critical "
-                                        "(contact) time")
+    ranks: Int = Field(1, ge=1, le=1024, description="MPI ranks")
+    timestep_fraction: Fraction = Field(0.15, ge=MIN_TIMESTEP_FRACTION, description="time step as a "
+                                        "fraction of the critical (contact) time")
 
 
 class MeasurementRegion(Strict):
@@ -513,7 +557,7 @@ class Analysis(Strict):
     porosity_regions: list[MeasurementRegion] = Field(
         default_factory=list, max_length=1000,
         description="measurement regions (paper A: nine circles); default: the bulk core of the settled bed")
-    relative_density: Optional[float] = Field(
+    relative_density: Optional[Real] = Field(
         None, ge=0, le=1, allow_inf_nan=False,
         description="Dr of the real material, for paper A's 2D -> 3D porosity conversion of circle regions")
     porosity_conversion: Literal["as_printed", "hexagonal"] = Field(
@@ -537,7 +581,7 @@ class Case(Strict):
     analysis: Analysis = Analysis()
     inserts: list[WallInsert] = Field(default_factory=list, max_length=20,
                                       description="extra walls from STL files (inserts, baffles)")
-    seed: int = Field(12345, ge=0, le=2**31 - 1)
+    seed: Int = Field(12345, ge=0, le=2**31 - 1)
 
     @model_validator(mode="after")
     def _consistent(self):
@@ -581,9 +625,28 @@ class Case(Strict):
         if self.sensors.heights is not None and self.sensors.heights[-1] > g.height:
             problems.append(f"sensors.heights: last boundary ({self.sensors.heights[-1]} m) is above "
                             f"the vertical wall ({g.height} m)")
+        problems += _sampling_problems(self)
         if problems:
             raise ValueError("; ".join(problems))
         return self
+
+
+def _sampling_problems(case: "Case") -> list[str]:
+    """The sample interval must fit the stages it measures: the discharge (flow rate, dynamic
+    wall loads) and the static window (post-processing averages only samples taken wholly inside
+    it, which needs two intervals)."""
+    si, dis, static = case.outputs.sample_interval, case.discharge, case.fill.settle.static_window
+    field, t_dis = ("discharge.duration", dis.duration) if dis.duration is not None else \
+        ("discharge.max_time", dis.max_time)
+    problems = []
+    if si > t_dis:
+        problems.append(f"outputs.sample_interval ({si} s) is longer than the discharge ({field} {t_dis} s): "
+                        "no sample of the flow or the dynamic wall loads would be written")
+    if static < 2 * si:
+        problems.append(f"fill.settle.static_window ({static} s) must be at least two "
+                        f"outputs.sample_interval (2 x {si} s): the static wall loads are averaged over "
+                        "samples taken wholly inside the window")
+    return problems
 
 
 def _particle_problems(case: "Case") -> list[str]:
@@ -606,22 +669,66 @@ def _particle_problems(case: "Case") -> list[str]:
 
 
 # --------------------------------------------------------------------------- loading
+#: case files larger than this are refused unread (the largest real case is a few kB)
+MAX_CASE_BYTES = 1_000_000
+#: deepest nesting of YAML lists and mappings accepted (a case nests at most 5; the composer and
+#: the validation recurse per level, so 400 levels would exhaust Python's stack)
+MAX_CASE_DEPTH = 32
+
+
+def _short(value, limit: int = 60) -> str:
+    """``repr`` of a value cut to ``limit`` characters (a 4301-digit number stays readable)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 class _UniqueKeyLoader(yaml.SafeLoader):
-    """Safe YAML loader that refuses duplicate keys and aliases (no 'billion laughs')."""
+    """Safe YAML loader that refuses duplicate keys, aliases (no 'billion laughs'), collection
+    keys (``? [a, b]``) and nesting deeper than ``MAX_CASE_DEPTH``; a scalar that its tag cannot
+    convert (``!!int "abc"``, ``2020-13-45``, a 4301-digit integer) is a ``ConstructorError`` at
+    the scalar's line instead of a bare ``ValueError``."""
+
+    _depth = 0
 
     def compose_node(self, parent, index):
         if self.check_event(yaml.events.AliasEvent):
             _refuse_alias(self)
-        return super().compose_node(parent, index)
+        collection = self.check_event(yaml.events.SequenceStartEvent, yaml.events.MappingStartEvent)
+        self._depth += collection
+        try:
+            if self._depth > MAX_CASE_DEPTH:
+                raise yaml.composer.ComposerError(
+                    None, None, f"nested deeper than {MAX_CASE_DEPTH} levels", self.peek_event().start_mark)
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= collection
+
+    def construct_object(self, node, deep=False):
+        try:
+            return super().construct_object(node, deep=deep)
+        except yaml.YAMLError:
+            raise
+        except (ValueError, TypeError, ArithmeticError, LookupError, AttributeError) as exc:
+            value = node.value if isinstance(node, yaml.ScalarNode) else node.id
+            tag = node.tag.rsplit(":", 1)[-1]
+            # a ValueError's text says what is wrong ("month must be in 1..12"); others are internals
+            detail = str(exc).split(";")[0][:120] if type(exc) is ValueError else ""
+            detail = "" if detail.startswith(("could not convert", "invalid literal")) else detail
+            raise yaml.constructor.ConstructorError(
+                None, None, f"{_short(value)} is not a valid {tag}" + (f" ({detail})" if detail else ""),
+                node.start_mark) from None
 
 
 def _construct_mapping(loader, node, deep=False):
     seen = set()
     for key_node, _ in node.value:
+        if not isinstance(key_node, yaml.ScalarNode):
+            raise yaml.constructor.ConstructorError(
+                None, None, "a mapping key must be a plain name, not a list or mapping", key_node.start_mark)
         key = loader.construct_object(key_node, deep=deep)
         if key in seen:
             raise yaml.constructor.ConstructorError(
-                None, None, f"duplicate key {key!r}", key_node.start_mark)
+                None, None, f"duplicate key {_short(key)}", key_node.start_mark)
         seen.add(key)
     return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
 
@@ -633,8 +740,6 @@ def _refuse_alias(loader, *args, **kwargs):
 
 
 _UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
-
-MAX_CASE_BYTES = 1_000_000
 
 
 def _field_path(loc) -> str:
@@ -661,6 +766,10 @@ def validation_problems(error: ValidationError) -> list[tuple[str, str]]:
                    f"with . or -); got {str(err.get('input'))[:80]!r}")
         elif err["type"] == "finite_number":
             msg = "must be a finite number (NaN and infinity are refused)"
+        elif err["type"] == "int_type":
+            got = err.get("input")
+            msg = ("must be a whole number, not true/false" if isinstance(got, bool) else
+                   f"must be a whole number (got {_short(got)})")
         msg = msg.removeprefix("Value error, ")
         problems.append((_field_path(err["loc"]), msg))
     return problems
@@ -696,25 +805,77 @@ def check_inserts(case: Case, base: Path, source: str = "case") -> Case:
     return case.model_copy(update={"inserts": resolved})
 
 
-def load_case(path) -> Case:
-    """Read and validate a YAML case file, raising ``CaseError`` on any problem."""
+def read_case_bytes(path) -> bytes:
+    """The bytes of a case file, at most ``MAX_CASE_BYTES``: regular files only (a FIFO, a device
+    such as /dev/zero or a directory is refused before it is read), opened non-blocking so a FIFO
+    swapped in after the check cannot hang, and read up to one byte past the limit, never whole.
+    Raises ``CaseError``."""
     path = Path(path)
+    source = str(path)
+
+    def refuse(message):
+        return CaseError([("(file)", message)], source)
+
+    def kind(mode) -> str:
+        return ("a directory" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode)
+                else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+                else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+
     try:
-        raw = path.read_bytes()
+        mode = os.stat(path).st_mode
+        if not stat.S_ISREG(mode):
+            raise refuse(f"{path} is {kind(mode)}; a case must be a regular file")
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0))
     except OSError as exc:
-        raise CaseError([("(file)", f"cannot read {path}: {exc.strerror}")], str(path)) from None
-    if len(raw) > MAX_CASE_BYTES:
-        raise CaseError([("(file)", f"larger than {MAX_CASE_BYTES} bytes")], str(path))
+        raise refuse(f"cannot read {path}: {exc.strerror or exc}") from None
+    except ValueError as exc:               # e.g. a NUL byte in the path
+        raise refuse(f"cannot read {path!r}: {exc}") from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):          # replaced between the stat and the open
+            raise refuse(f"{path} is {kind(mode)}; a case must be a regular file")
+        chunks, size = [], 0
+        while size <= MAX_CASE_BYTES:
+            chunk = os.read(fd, MAX_CASE_BYTES + 1 - size)
+            if not chunk:
+                break
+            chunks.append(chunk)
+            size += len(chunk)
+    except OSError as exc:
+        raise refuse(f"cannot read {path}: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if size > MAX_CASE_BYTES:
+        raise refuse(f"larger than {MAX_CASE_BYTES} bytes")
+    return b"".join(chunks)
+
+
+def parse_case_yaml(raw: bytes, source: str = "case"):
+    """Parse case-file bytes with the safe loader; any problem is a ``CaseError`` naming the line
+    and column where the parser knows them."""
     try:
         text = raw.decode("utf-8")
-        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
-    except UnicodeDecodeError:
-        raise CaseError([("(file)", "not UTF-8 text")], str(path)) from None
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise CaseError([("(file)", f"not UTF-8 text (line {line}, byte {exc.start + 1})")], source) from None
+    try:
+        return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
         problem = getattr(exc, "problem", None) or str(exc)
-        raise CaseError([("(yaml)", f"{where}{problem}")], str(path)) from None
+        raise CaseError([("(yaml)", f"{where}{problem}")], source) from None
+    except (RecursionError, MemoryError):
+        raise CaseError([("(yaml)", "nested too deeply or too large to read")], source) from None
+    except (ValueError, TypeError, ArithmeticError, LookupError, AttributeError) as exc:
+        raise CaseError([("(yaml)", f"cannot be read as YAML ({type(exc).__name__}: {str(exc)[:120]})")],
+                        source) from None
+
+
+def load_case(path) -> Case:
+    """Read and validate a YAML case file, raising ``CaseError`` on any problem."""
+    path = Path(path)
+    data = parse_case_yaml(read_case_bytes(path), str(path))
     return check_inserts(case_from_dict(data, str(path)), path.parent, str(path))
 
 

@@ -44,12 +44,16 @@ def _fail(exc: SiloflowError) -> None:
 
 @app.command()
 def validate(case_file: Path = typer.Argument(..., help="YAML case file")) -> None:
-    """Check a case file; report every problem with its field path."""
+    """Check a case file; report every problem with its field path, and the physics warnings."""
+    from .derived import derive
     try:
         case = load_case(case_file)
+        d = derive(case)
     except SiloflowError as exc:
         _fail(exc)
-    out.print(f"{case_file}: valid case '{case.name}' ({case.geometry.kind}, {case.materials.model})")
+    out.print(printable(f"{case_file}: valid case '{case.name}' ({case.geometry.kind}, {case.materials.model})"),
+              markup=False, highlight=False)
+    _warn(d)
 
 
 @app.command()
@@ -58,19 +62,32 @@ def schema() -> None:
     print(json.dumps(Case.model_json_schema(), indent=2))
 
 
+FORCE_HELP = "replace an existing folder siloflow made (never one holding files it did not write)"
+ALLOW_LONG_HELP = "run a case whose planned steps exceed the cap (siloflow.derived.MAX_RUN_STEPS)"
+
+
+def _warn(d) -> None:
+    """Print the case's physics warnings (each names its consequence)."""
+    for line in d.warnings:
+        err.print(printable(f"warning: {line}"), style="yellow", markup=False, highlight=False)
+
+
 @app.command()
 def render(case_file: Path = typer.Argument(..., help="YAML case file"),
            output: Path = typer.Option(..., "-o", "--output", help="deck folder to create"),
-           force: bool = typer.Option(False, "--force", help="replace an existing folder")) -> None:
+           force: bool = typer.Option(False, "--force", help=FORCE_HELP),
+           allow_long: bool = typer.Option(False, help=ALLOW_LONG_HELP)) -> None:
     """Write a self-contained LIGGGHTS deck folder (deck, meshes, case copy, derived parameters)."""
     from .deck import render as render_deck
-    from .derived import derive
+    from .derived import check_run_length, derive
     try:
         case = load_case(case_file)
-        folder = render_deck(case, output, force=force, keep=[case_file])
         d = derive(case)
+        check_run_length(d, allow_long)
+        folder = render_deck(case, output, force=force, keep=[case_file])
     except SiloflowError as exc:
         _fail(exc)
+    _warn(d)
     out.print(f"deck written to {folder}: {d.particle_count} particles, dt = {d.timestep:.3g} s "
               f"({case.engine.timestep_fraction} x {d.critical_time_source} {d.critical_time:.3g} s)")
     for line in (clump_note(d), dust_note(d)):
@@ -117,13 +134,14 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         output: Optional[Path] = typer.Option(None, "-o", "--output", help="run folder to create"),
         resume: Optional[Path] = typer.Option(None, "--resume", help="finish this interrupted run folder "
                                               "(from its settled bed's restart file if it got that far)"),
-        force: bool = typer.Option(False, "--force", help="replace an existing run folder"),
+        force: bool = typer.Option(False, "--force", help=FORCE_HELP),
+        allow_long: bool = typer.Option(False, help=ALLOW_LONG_HELP),
         liggghts: Optional[str] = typer.Option(None, "--liggghts", envvar="SILOFLOW_LIGGGHTS",
                                                help="LIGGGHTS binary (default: liggghts on PATH)"),
         post_process: bool = typer.Option(True, "--post/--no-post", help="compute first results"),
         allow_large_output: bool = typer.Option(False, help="run even if the estimated output exceeds the free disk")) -> None:
     """Render, run LIGGGHTS with a progress bar, check the run, and compute first results."""
-    from .derived import derive
+    from .derived import check_run_length, derive
     from .disk_estimate import check_disk_space
     from .engine import get_engine
     if resume is not None:
@@ -138,11 +156,13 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         engine = get_engine(case.engine.name, executable=liggghts)
         engine.command(case.engine.ranks)  # binary and launcher present before anything is written
         derived = derive(case)
+        check_run_length(derived, allow_long)
         sizes = check_disk_space(case, derived, output, allow_large_output)
         folder = engine.prepare(case, output, force=force, keep=[case_file])
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
+    _warn(derived)
     out.print(f"run folder: {folder} (expected output up to {sizes['total'] / 1e6:.0f} MB, "
               f"{sizes['frames']} dump frames)")
     if dust_note(derived):

@@ -11,10 +11,31 @@ from dataclasses import asdict, dataclass, field, replace
 
 from . import contact_physics as cp
 from .case import Case, HopperGeometry, PlanarGeometry
-from .errors import CaseError
+from .errors import CaseError, SetupError
 
 #: speed at which grains are inserted downwards, m/s (keeps batches clear of the region)
 INSERTION_SPEED = 1.5
+
+#: planned steps above which a run needs an explicit override (``--allow-long``): LIGGGHTS takes
+#: about 1 us per particle and step, so 1e9 steps are days even for a bed of a few hundred grains
+#: (the shipped cases plan 6e4-6e8 steps; paper_a_clumps, 40 s of discharge with dust, is the top)
+MAX_RUN_STEPS = 1_000_000_000
+#: mean Hertz overlap under the bed's weight, relative to the radius, above which a warning is
+#: given: the usual DEM guidance keeps it below ~1 %, where the stiffness no longer moves the bulk
+#: density (the bed's volume shrinks by about 1.5 overlap / radius)
+OVERLAP_WARNING = 0.01
+#: time-step fraction above which a warning is given: velocity Verlet is unstable for a linear
+#: contact above 2/omega = 0.64 contact times, and a Hertz contact stiffens during the impact
+TIMESTEP_FRACTION_WARNING = 0.3
+#: contacts per grain in a static packing, for the mean contact force under a pressure: 6 is the
+#: upper end (frictional packings have 4-5, so forces up to 1.5 times larger, and force chains carry
+#: 2-3 times the mean): the overlap estimate is a typical value, not the largest
+STATIC_COORDINATION = 6.0
+#: air at 20 C: density kg/m3, dynamic viscosity Pa s (drag estimate; siloflow models no gas)
+AIR_DENSITY, AIR_VISCOSITY = 1.2, 1.8e-5
+#: air drag at the outlet speed above this fraction of a grain's weight gives a warning
+#: (Newton drag goes as (v / v_terminal)^2: 10 % at v_terminal = 3.2 v)
+DRAG_WARNING = 0.1
 
 
 @dataclass
@@ -144,6 +165,8 @@ class Derived:
     dust_count: int = 0
     dust_batch: int = 0
     timestep_without_dust: float | None = None            # s; the dust's cost is this / timestep
+    run_length_fields: dict = field(default_factory=dict)  # stage (and "timestep") -> case fields setting it
+    warnings: list = field(default_factory=list)          # physics warnings (str), each naming its consequence
 
     @property
     def wall_type(self) -> int:
@@ -202,6 +225,11 @@ class Derived:
                 "static": self.static_steps,
                 "open": self.open_steps,
                 "discharge": self.discharge_chunk_steps * self.discharge_max_chunks}
+
+    @property
+    def total_planned_steps(self) -> int:
+        """Upper bound of the steps of the whole run (every stage at its cap)."""
+        return sum(self.planned_steps.values())
 
     def to_json(self) -> dict:
         out = asdict(self)
@@ -360,6 +388,137 @@ def shrink_classes(radii, number_fractions) -> list[tuple[float, float]]:
     return out
 
 
+def _radius_field(case: Case) -> str:
+    """The case field of the grains' size."""
+    p = case.particles
+    if p.kind == "clumps":
+        return "particles.width" if p.shape == "wheat" else "particles.spheres"
+    return "particles.radius" if p.kind == "spheres" else "particles.radii"
+
+
+def run_length_fields(case: Case, critical_source: str) -> dict[str, list[str]]:
+    """The case fields that set the time step (``"timestep"``) and each stage's length."""
+    m, dusty = case.materials, "dust" in critical_source
+    size = (["particles.dust.radius", "particles.dust.density", "particles.dust.density_scale"] if dusty
+            else [_radius_field(case), "materials.particle.density"])
+    if m.model == "linear":
+        stiffness = ([f"particles.dust.{k}.kn" for k in ("dust_dust", "dust_particle", "dust_wall")] if dusty
+                     else ["materials.particle_particle.kn", "materials.particle_wall.kn"])
+    else:
+        stiffness = ["particles.dust.youngs_modulus" if dusty else "materials.particle.youngs_modulus"]
+        stiffness += ["materials.wall.youngs_modulus"] if "wall" in critical_source else []
+        stiffness += ["materials.characteristic_velocity"] if m.model == "hooke" else []
+    dis = case.discharge
+    out = {"timestep": size + stiffness + ["engine.timestep_fraction"],
+           "fill": ["fill.count" if case.fill.count is not None else "fill.height",
+                    "fill.batch_volume_fraction", "geometry.height", "gravity"],
+           "settle": ["fill.settle.max_time"], "shrink": ["fill.settle.max_time"],
+           "static": ["fill.settle.static_window"], "open": ["discharge.opening.speed"],
+           "discharge": ["discharge.duration" if dis.duration is not None else "discharge.max_time"]}
+    return out
+
+
+def check_run_length(derived: Derived, allow_long: bool = False) -> int:
+    """The planned steps of the whole run (every stage at its cap); raises ``SetupError`` naming
+    the case fields that set the time step and the longest stages when they exceed
+    ``MAX_RUN_STEPS``, unless ``allow_long`` (the CLI's ``--allow-long``)."""
+    total = derived.total_planned_steps
+    if total <= MAX_RUN_STEPS or allow_long:
+        return total
+    fields = derived.run_length_fields
+    dt = derived.timestep
+    stages = sorted(derived.planned_steps.items(), key=lambda kv: -kv[1])
+    longest = [f"{stage} {n:.3g} steps = {n * dt:.3g} s ({', '.join(fields.get(stage, []))})"
+               for stage, n in stages if n >= 0.1 * total]
+    raise SetupError(
+        f"the planned run takes up to {total:.3g} steps, more than the cap of {MAX_RUN_STEPS:.0e}: the "
+        f"time step is {dt:.3g} s, set by the {derived.critical_time_source} "
+        f"({', '.join(fields.get('timestep', []))}); the longest stages: {'; '.join(longest)}. "
+        "Change these fields, or pass --allow-long to run it anyway.")
+
+
+def bed_pressure(case: Case, bulk_density: float, depth: float) -> float:
+    """Vertical pressure at the bottom of a bed ``depth`` m deep, Pa: Janssen's
+    rho_b g lambda (1 - exp(-depth / lambda)) with lambda = A / (K sum(mu_wall perimeter)) and
+    Jaky's K = 1 - sin(atan(friction)); hydrostatic rho_b g depth without wall friction."""
+    g = case.geometry
+    m = case.materials
+    if isinstance(g, PlanarGeometry):
+        area = g.width * g.thickness
+        grip = 2 * g.thickness * m.particle_wall.friction + 2 * g.width * g.face_friction
+    else:
+        area = math.pi * g.radius ** 2
+        grip = 2 * math.pi * g.radius * m.particle_wall.friction
+    hydrostatic = bulk_density * case.gravity * depth
+    k = 1.0 - math.sin(math.atan(m.particle_particle.friction))
+    if grip * k <= 0:
+        return hydrostatic
+    lam = area / (k * grip)
+    return min(hydrostatic, bulk_density * case.gravity * lam * -math.expm1(-depth / lam))
+
+
+def air_drag_fraction(radius: float, density: float, gravity: float, speed: float) -> tuple[float, float]:
+    """Air drag on a sphere at ``speed`` m/s as a fraction of its weight, and its terminal speed
+    in air, m/s. The drag is at least Stokes' (fraction v / v_S, v_S = 2 rho g r^2 / (9 mu)) and
+    Newton's (fraction (v / v_N)^2, v_N = sqrt(8 rho g r / (3 rho_air 0.44))); both are lower
+    estimates of the fraction, and the smaller speed an upper estimate of the terminal speed."""
+    stokes = 2.0 * density * gravity * radius ** 2 / (9.0 * AIR_VISCOSITY)
+    newton = math.sqrt(8.0 * density * gravity * radius / (3.0 * AIR_DENSITY * 0.44))
+    return max(speed / stokes, (speed / newton) ** 2), min(stokes, newton)
+
+
+def physics_warnings(case: Case, d: Derived) -> list[str]:
+    """Warnings about values that are valid but have consequences a user should know: overlaps
+    under the bed's weight, a coarse time step, air drag the model leaves out. Each names the
+    fields and the consequence."""
+    out = []
+    m, f, g = case.materials, case.fill, case.geometry
+    grains = d.grains
+    small = min(grains, key=lambda sp: sp.radius)
+    # overlap under the bed's weight: mean contact force 4 pi R^2 p / (phi Z) of a packing
+    # (Cauchy stress of its contacts), Hertz delta = (3 F / (4 E* sqrt(R*)))^(2/3) or F / kn
+    depth = d.bed_height_estimate
+    volume = bed_volume(case, depth)
+    if depth > 0 and volume > 0:
+        p = bed_pressure(case, d.total_mass / volume, depth)
+        force = 4.0 * math.pi * small.radius ** 2 * p / (f.packing_fraction * STATIC_COORDINATION)
+        pair = d.pairs["particle_particle"]
+        if pair.kn is not None:
+            overlap = force / pair.kn
+            law = f"kn {pair.kn:.3g} N/m"
+            remedy = ("materials.particle_particle.kn (overlap ~ 1/kn)" if m.model == "linear" else
+                      "materials.particle.youngs_modulus or materials.characteristic_velocity")
+        else:
+            overlap = (3.0 * force / (4.0 * pair.y_eff * math.sqrt(pair.r_eff))) ** (2.0 / 3.0)
+            law = f"Hertz, E* {pair.y_eff:.3g} Pa"
+            remedy = "materials.particle.youngs_modulus (overlap ~ E^-2/3)"
+        ratio = overlap / small.radius
+        if ratio > OVERLAP_WARNING:
+            out.append(f"soft grains: under the bed's weight (about {p:.3g} Pa at its bottom, {depth:.3g} m "
+                       f"deep) grains overlap by about {ratio:.1%} of their radius ({law}), so the bed is "
+                       f"compressed by about {1.5 * ratio:.1%} in volume and its solid fraction and wall "
+                       f"pressures are shifted by as much; raise {remedy} if that matters")
+    if case.engine.timestep_fraction > TIMESTEP_FRACTION_WARNING:
+        out.append(f"engine.timestep_fraction {case.engine.timestep_fraction} resolves the shortest contact "
+                   f"({d.critical_time_source}) with only {1 / case.engine.timestep_fraction:.2g} steps: "
+                   "velocity Verlet is unstable above 0.64 contact times and Hertz contacts stiffen during "
+                   "impact, so contacts may gain energy; 0.1-0.2 is usual")
+    # air drag at the outlet speed sqrt(g D_outlet), against the grains' weight (their real density)
+    v_out = math.sqrt(case.gravity * 2.0 * g.outlet_radius)
+    dust = getattr(case.particles, "dust", None)
+    for sp in [small] + ([d.dust] if d.dust is not None else []):
+        density = dust.density if sp.stream == "dust" else m.particle.density
+        r_v = (3.0 * sp.volume / (4.0 * math.pi)) ** (1.0 / 3.0)        # volume-equivalent sphere
+        drag, v_t = air_drag_fraction(r_v, density, case.gravity, v_out)
+        if drag > DRAG_WARNING:
+            what = "particles.dust" if sp.stream == "dust" else "the grains"
+            share = "more than their weight" if drag >= 1 else f"at least {drag:.0%} of their weight"
+            out.append(f"air drag: {what} fall at most about {v_t:.3g} m/s in air, so at the outlet speed "
+                       f"(about {v_out:.3g} m/s) air drag is {share}; siloflow models no gas, so its "
+                       "discharge is faster than the same grains' in air")
+    return out
+
+
 def derive(case: Case) -> Derived:
     """Compute the derived parameters of a cylinder or hopper case.
 
@@ -497,7 +656,11 @@ def derive(case: Case) -> Derived:
     box = {"xlo": -g.half_width - margin, "xhi": max(g.half_width, plate_shift + g.outlet_radius) + margin,
            "ylo": -half_y - margin, "yhi": half_y + margin,
            "zlo": outlet_z - plate_travel - margin, "zhi": top + margin}
-    return Derived(
+    static_steps = _steps(s.static_window, dt)
+    if static_steps < 2 * sample_freq:      # the time check of the case can miss by a rounded step
+        raise CaseError([("fill.settle.static_window", f"{static_steps} steps hold fewer than two samples of "
+                          f"{sample_freq} steps (outputs.sample_interval): no static wall-load sample")])
+    derived = Derived(
         particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass, particle_count=count,
         total_mass=count * final_mass + (dust_count * dust.mass if dust is not None else 0.0), bed_height_estimate=h_bed, impact_velocity=v_impact,
         pairs=pairs, rayleigh_time=rayleigh, critical_time=t_crit, critical_time_source=source,
@@ -505,7 +668,7 @@ def derive(case: Case) -> Derived:
         insertion_region=insertion_region,
         insertion_batch=batch, insert_every=insert_every, insertion_speed=INSERTION_SPEED,
         fill_steps=fill_steps, settle_chunk_steps=settle_chunk, settle_max_chunks=settle_chunks,
-        static_steps=_steps(s.static_window, dt), open_steps=open_steps,
+        static_steps=static_steps, open_steps=open_steps,
         discharge_chunk_steps=d_chunk, discharge_max_chunks=d_chunks,
         thermo_every=thermo_every, sample_every=sample_every, sample_repeat=sample_repeat,
         sample_freq=sample_freq, dump_every=dump_every,
@@ -521,4 +684,7 @@ def derive(case: Case) -> Derived:
         type_pairs=type_pairs, species=species, dust_count=dust_count, has_faces=planar,
         dust_batch=math.ceil(batch * dust_ratio) if dust is not None else 0,
         timestep_without_dust=dt_without_dust,
+        run_length_fields=run_length_fields(case, source),
     )
+    derived.warnings = physics_warnings(case, derived)
+    return derived

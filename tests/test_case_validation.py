@@ -7,9 +7,10 @@ import math
 import pytest
 from typer.testing import CliRunner
 
-from siloflow.case import load_case
+from siloflow.case import case_from_dict, load_case
 from siloflow.cli import app
-from siloflow.errors import CaseError
+from siloflow.derived import MAX_RUN_STEPS, check_run_length, derive
+from siloflow.errors import CaseError, SetupError
 
 from conftest import QUICK, set_path
 
@@ -30,7 +31,7 @@ BAD = [
     ("materials.particle_particle.friction", -0.1, "materials.particle_particle.friction", "greater than or equal"),
     ("materials.particle_wall.friction", -1.0, "materials.particle_wall.friction", "greater than or equal"),
     ("engine.timestep_fraction", 1.5, "engine.timestep_fraction", "less than or equal to 1"),
-    ("engine.timestep_fraction", 0.0, "engine.timestep_fraction", "greater than 0"),
+    ("engine.timestep_fraction", 0.0, "engine.timestep_fraction", "greater than or equal to 0.001"),
     ("particles.radius", 0.009, "(top level)", "smaller than the outlet"),
     ("name", "quick\nshell rm -rf /", "name", "only letters"),
     ("name", "a;shell ls", "name", "only letters"),
@@ -124,3 +125,102 @@ def test_schema_cli_prints_json_schema():
     schema = json.loads(result.output)
     assert {"geometry", "materials", "fill", "discharge", "engine"} <= set(schema["properties"])
     assert schema.get("additionalProperties") is False
+
+
+# ----------------------------------------------------------------- issue 13, item 10: absurd values
+ABSURD = [
+    # (path, value, field named, words): each passed validation before
+    ("particles.radius", 1e-12, "particles.radius", "greater than or equal to 0.000001"),
+    ("engine.timestep_fraction", 1e-9, "engine.timestep_fraction", "greater than or equal to 0.001"),
+    ("materials.particle.density", 1e-9, "materials.particle.density", "greater than or equal to 1.2"),
+    ("materials.particle.density", True, "materials.particle.density", "not true/false"),
+    ("fill.count", True, "fill.count", "whole number, not true/false"),
+    ("seed", False, "seed", "whole number, not true/false"),
+    ("fill.count", 5000.5, "fill.count", "whole number"),
+    ("outputs.sample_interval", 2.0, "(top level)", "longer than the discharge (discharge.duration 1.0 s)"),
+    ("fill.settle.static_window", 0.006, "(top level)", "at least two outputs.sample_interval"),
+]
+
+
+@pytest.mark.parametrize("path,value,field,words", ABSURD, ids=[f"{a[0]}={a[1]!r}" for a in ABSURD])
+def test_absurd_values_are_refused(quick_dict, path, value, field, words):
+    set_path(quick_dict, path, value)
+    with pytest.raises(CaseError) as info:
+        case_from_dict(quick_dict)
+    assert any(f.startswith(field) and words in m for f, m in info.value.problems), info.value.problems
+
+
+def test_sample_interval_is_checked_against_an_until_empty_discharge(quick_dict):
+    quick_dict["discharge"] = {"until_empty": True, "max_time": 0.5}
+    quick_dict["outputs"]["sample_interval"] = 0.6
+    quick_dict["fill"]["settle"]["static_window"] = 1.2
+    with pytest.raises(CaseError, match=r"discharge.max_time 0.5 s"):
+        case_from_dict(quick_dict)
+
+
+def test_a_run_over_the_step_cap_needs_allow_long(quick_dict):
+    quick_dict["discharge"]["duration"] = 1e5        # valid on its own (le 1e5 s), 3.6e9 steps
+    d = derive(case_from_dict(quick_dict))
+    assert d.total_planned_steps > MAX_RUN_STEPS
+    with pytest.raises(SetupError) as info:
+        check_run_length(d, allow_long=False)
+    message = str(info.value)
+    for words in ("discharge.duration", "particles.radius", "materials.particle.youngs_modulus",
+                  "engine.timestep_fraction", "--allow-long", f"{d.total_planned_steps:.3g} steps"):
+        assert words in message, message
+    assert check_run_length(d, allow_long=True) == d.total_planned_steps
+
+
+@pytest.mark.parametrize("case_file", sorted((QUICK.parent).glob("*.yaml")), ids=lambda p: p.name)
+def test_shipped_decks_are_within_the_step_cap_and_warn_about_nothing(case_file):
+    d = derive(load_case(case_file))
+    assert check_run_length(d) == d.total_planned_steps <= MAX_RUN_STEPS
+    assert d.warnings == []
+
+
+def test_soft_benchmark_modulus_is_accepted_with_a_warning_naming_the_consequence(quick_dict):
+    """Published hopper benchmarks use E = 1e6 Pa on purpose: it validates, and the expected overlap
+    under the bed's weight (Hertz, Janssen pressure) comes with a warning saying what it does."""
+    quick_dict["materials"]["particle"]["youngs_modulus"] = 1e6
+    quick_dict["materials"]["wall"]["youngs_modulus"] = 1e6
+    d = derive(case_from_dict(quick_dict))
+    [warning] = d.warnings
+    for words in ("overlap", "% of their radius", "compressed", "materials.particle.youngs_modulus"):
+        assert words in warning, warning
+    assert "warnings" in d.to_json()
+
+
+def test_overlap_warning_follows_hertz_scaling(quick_dict):
+    """The overlap goes as E^(-2/3): ten times softer grains overlap 10^(2/3) = 4.64 times more."""
+    import re
+
+    def overlap(e):
+        data = {**quick_dict, "materials": {**quick_dict["materials"],
+                                            "particle": {**quick_dict["materials"]["particle"], "youngs_modulus": e},
+                                            "wall": {"youngs_modulus": e, "poisson_ratio": 0.3}}}
+        [warning] = derive(case_from_dict(data)).warnings
+        return float(re.search(r"overlap by about ([0-9.]+)%", warning).group(1))
+
+    assert overlap(1e4) / overlap(1e5) == pytest.approx(10 ** (2 / 3), rel=0.02)
+
+
+def test_coarse_timestep_and_air_drag_are_warned_about(quick_dict):
+    quick_dict["engine"]["timestep_fraction"] = 0.5
+    [warning] = derive(case_from_dict(quick_dict)).warnings
+    assert "engine.timestep_fraction" in warning and "unstable" in warning
+    quick_dict["engine"]["timestep_fraction"] = 0.15
+    quick_dict["particles"]["radius"] = 2e-5          # 40 um powder: air matters, siloflow models none
+    warnings = derive(case_from_dict(quick_dict)).warnings
+    assert any("air drag" in w and "no gas" in w for w in warnings), warnings
+
+
+def test_a_needle_hopper_is_refused_before_its_meshes_fill_memory(tmp_path):
+    """Found by the scaled fuzz test: a half angle of 6e-8 degrees made a wedge hopper 1.4e7 m tall
+    whose meshes needed gigabytes (MemoryError); the hopper's height is now bounded like the wall's."""
+    import yaml
+    from conftest import ROOT
+    data = yaml.safe_load((ROOT / "tests" / "data" / "slab_dust.yaml").read_text())
+    data["geometry"]["half_angle_deg"] = 6e-8
+    with pytest.raises(CaseError) as info:
+        case_from_dict(data)
+    assert any(f == "geometry" and "makes the hopper" in m for f, m in info.value.problems), info.value.problems

@@ -1,7 +1,8 @@
 """Property-based fuzzing of case files (fixed seed, a few hundred examples each): every
 generated case validates or is refused with a CaseError naming fields, never a traceback;
-a refused case leaves no deck on disk; a rendered deck holds only whitelisted commands and
-none of the case's free text."""
+an accepted case has only finite numbers at every depth and derives and renders a checked
+deck or is refused with a SiloflowError; a refused case leaves no deck on disk; a rendered
+deck holds only whitelisted commands and none of the case's free text."""
 from __future__ import annotations
 
 import copy
@@ -12,10 +13,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from siloflow.case import case_from_dict, load_case
-from siloflow.deck import FORBIDDEN_WORDS, check_deck, render
+from siloflow.deck import FORBIDDEN_WORDS, check_deck, render, render_deck_text
+from siloflow.derived import check_run_length, derive
 from siloflow.errors import CaseError, SiloflowError
+from siloflow.meshes import silo_meshes
 
-from conftest import QUICK
+from conftest import QUICK, ROOT
+from test_case_loading import memory_cap
 
 BASE = yaml.safe_load(QUICK.read_text())
 FUZZ = settings(max_examples=300, deadline=None, derandomize=True,
@@ -82,9 +86,90 @@ def test_mutated_cases_validate_or_are_refused_by_field(mutations):
     except CaseError as exc:
         assert_refusal_is_clean(exc)
         return
-    # accepted: every number that can reach a deck is finite
-    for key, value in case.model_dump().items():
-        assert not (isinstance(value, float) and not math.isfinite(value)), key
+    # accepted: every number, at any depth, is finite
+    for where, value in numbers_in(case.model_dump()):
+        assert math.isfinite(value), where
+    # and it derives and renders a checked deck, or is refused with a SiloflowError
+    assert_derives_and_renders(case)
+
+
+def numbers_in(data, where="case"):
+    """(path, number) of every int and float in a nested dump of dicts, lists and tuples."""
+    if isinstance(data, dict):
+        for k, v in data.items():
+            yield from numbers_in(v, f"{where}.{k}")
+    elif isinstance(data, (list, tuple)):
+        for k, v in enumerate(data):
+            yield from numbers_in(v, f"{where}[{k}]")
+    elif isinstance(data, (int, float)) and not isinstance(data, bool):
+        yield where, data
+
+
+def assert_derives_and_renders(case):
+    """``case`` derives and renders a deck that passes the deck check, or a SiloflowError says why
+    not; any other exception fails the test."""
+    try:
+        with memory_cap(2 * 2 ** 30):         # a runaway mesh fails the test instead of the machine
+            derived, deck = _derive_and_render(case)
+    except SiloflowError as exc:
+        assert str(exc).strip()
+        return
+    check_deck(deck)
+    assert not FORBIDDEN_WORDS.search(deck)
+
+
+def _derive_and_render(case):
+    """(derived, deck text) of a case, checking the derived record on the way."""
+    derived = derive(case)
+    assert all(isinstance(w, str) and w for w in derived.warnings)
+    assert check_run_length(derived, allow_long=True) == derived.total_planned_steps
+    for where, value in numbers_in(derived.to_json(), "derived"):
+        assert math.isfinite(value), where
+    walls = silo_meshes(case, derived.outlet_z, derived.outlet_disc_radius)
+    return derived, render_deck_text(case, derived, walls)
+
+
+SCALED_BASES = {name: yaml.safe_load((ROOT / name).read_text()) for name in [
+    "decks/quick.yaml", "decks/paper_b_quick.yaml", "tests/data/small_silo.yaml", "tests/data/poly_silo.yaml",
+    "tests/data/shrink_silo.yaml", "tests/data/slab_silo.yaml", "tests/data/slab_dust.yaml",
+    "tests/data/clump_silo.yaml"]}
+FACTORS = [0.0, 1e-9, 1e-6, 1e-3, 0.1, 0.5, 0.9, 0.99, 1.01, 1.1, 2.0, 10.0, 1e3, 1e6, 1e9, -1.0]
+
+
+@settings(max_examples=200, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_scaled_cases_derive_and_render_or_are_refused(data):
+    """Plausible cases with numbers scaled towards and past their bounds (most stay valid, unlike
+    random values): each is refused with a CaseError, or derives and renders a checked deck or
+    is refused with a SiloflowError."""
+    name = data.draw(st.sampled_from(sorted(SCALED_BASES)))
+    case_data = copy.deepcopy(SCALED_BASES[name])
+    paths = numeric_paths(case_data)
+    for path in data.draw(st.lists(st.sampled_from(paths), min_size=1, max_size=3, unique=True)):
+        value = _get(case_data, path)
+        new = value * data.draw(st.sampled_from(FACTORS))
+        case_data = mutate(case_data, path, "set", round(new) if isinstance(value, int) else new)
+    try:
+        case = case_from_dict(case_data)
+    except CaseError as exc:
+        assert_refusal_is_clean(exc)
+        return
+    for where, value in numbers_in(case.model_dump()):
+        assert math.isfinite(value), where
+    assert_derives_and_renders(case)
+
+
+def _get(data, path):
+    for key in path:
+        data = data[key]
+    return data
+
+
+def numeric_paths(data) -> list:
+    """Paths of the int and float leaves of a case dict."""
+    return sorted((p for p in set(leaf_paths(data)) if p and isinstance(_get(data, p), (int, float))
+                   and not isinstance(_get(data, p), bool)), key=str)
 
 
 @FUZZ
