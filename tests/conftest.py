@@ -41,11 +41,15 @@ def write_case(tmp_path):
     return _write
 
 
-def hooke_materials(density: float, youngs_modulus: float, restitution: float) -> dict:
-    """A ``materials`` section for paper B's hooke law (v_c = 1 m/s, friction 0.5, same particle and wall)."""
+def hooke_materials(density: float, youngs_modulus: float, restitution: float,
+                    characteristic_velocity: float = 1.0) -> dict:
+    """A ``materials`` section for paper B's hooke law (v_c in m/s, default 1; friction 0.5, same
+    particle and wall). Test Eq. 10 at v_c != 1 too (the paper decks use 1.37 and 0.88): at 1 a
+    V^2 -> V slip in the formula is invisible."""
     elastic = {"youngs_modulus": youngs_modulus, "poisson_ratio": 0.3}
     pair = {"friction": 0.5, "restitution": restitution}
-    return {"model": "hooke", "characteristic_velocity": 1.0, "particle": {"density": density, **elastic},
+    return {"model": "hooke", "characteristic_velocity": characteristic_velocity,
+            "particle": {"density": density, **elastic},
             "wall": dict(elastic), "particle_particle": dict(pair), "particle_wall": dict(pair)}
 
 

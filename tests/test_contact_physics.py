@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
 
 from siloflow import contact_physics as cp
 from siloflow.case import case_from_dict
@@ -49,12 +50,30 @@ def test_restitution_round_trip_and_limits():
         cp.damping_ratio_from_restitution(0.0)
 
 
-def test_rayleigh_time_known_value():
-    # r = 1.5 mm, rho = 2500, E = 5e6, nu = 0.3: G = 1.923e6 Pa
-    g = 5e6 / 2.6
-    expected = math.pi * 1.5e-3 * math.sqrt(2500 / g) / (0.1631 * 0.3 + 0.8766)
-    assert cp.rayleigh_time(1.5e-3, 2500, 5e6, 0.3) == pytest.approx(expected, rel=1e-12)
-    assert expected == pytest.approx(1.8358e-4, rel=1e-3)
+def rayleigh_root(nu: float) -> float:
+    """c_R / c_s from the Rayleigh equation (2 - x^2)^2 = 4 sqrt(1 - x^2) sqrt(1 - k x^2),
+    k = c_s^2 / c_p^2 = (1 - 2 nu) / (2 (1 - nu)), solved numerically (its root in (0, 1))."""
+    k = (1 - 2 * nu) / (2 * (1 - nu))
+    return brentq(lambda x: (2 - x * x) ** 2 - 4 * math.sqrt(1 - x * x) * math.sqrt(1 - k * x * x),
+                  0.5, 1 - 1e-12, xtol=1e-15)
+
+
+def test_rayleigh_root_solver_gives_the_classical_poisson_solid_value():
+    # Rayleigh (1885), nu = 1/4: x^2 = 2 - 2/sqrt(3), c_R = 0.9194 c_s
+    assert rayleigh_root(0.25) == pytest.approx(math.sqrt(2 - 2 / math.sqrt(3)), rel=1e-12)
+    assert rayleigh_root(0.25) == pytest.approx(0.91940, abs=1e-5)
+
+
+@pytest.mark.parametrize("nu", [0.0, 0.1, 0.25, 0.3, 0.4, 0.49])
+@pytest.mark.parametrize("radius,density,youngs", [(1.5e-3, 2500.0, 5e6), (1 / 64, 7520.0, 1.2e11)])
+def test_rayleigh_time_is_the_rayleigh_wave_crossing_a_grain(radius, density, youngs, nu):
+    """dt_R = pi r / c_R: a Rayleigh wave (speed from the root of the Rayleigh equation, not
+    from the 0.1631 nu + 0.8766 fit) crossing half a grain's circumference. The fit LIGGGHTS
+    uses deviates from the root by at most 0.30 % over 0 <= nu <= 0.5 (0.29 % at nu = 0,
+    0.20 % at 0.3): tolerance 0.35 %."""
+    c_s = math.sqrt(youngs / (2 * (1 + nu)) / density)        # shear wave speed sqrt(G / rho)
+    expected = math.pi * radius / (rayleigh_root(nu) * c_s)
+    assert cp.rayleigh_time(radius, density, youngs, nu) == pytest.approx(expected, rel=3.5e-3)
 
 
 def test_masses_and_moduli():
@@ -156,7 +175,7 @@ def test_hooke_model_per_size_pair(quick_dict):
     from siloflow.contact_physics import effective_modulus, hooke_kn, reduced, sphere_mass
     from conftest import hooke_materials
     from siloflow.deck import _properties
-    quick_dict["materials"] = hooke_materials(7520.0, 1.2e11, 0.88)
+    quick_dict["materials"] = hooke_materials(7520.0, 1.2e11, 0.88, characteristic_velocity=1.37)
     quick_dict["particles"] = {"kind": "polydisperse_spheres", "radii": [0.0015, 0.001], "fractions": [0.5, 0.5],
                                "basis": "number"}
     case = case_from_dict(quick_dict)
@@ -166,8 +185,11 @@ def test_hooke_model_per_size_pair(quick_dict):
     p12 = d.type_pairs[(1, 2)]
     # Eq. 10 by hand: the linear spring with Hertz's maximum overlap at speed V
     r, m = reduced(0.0015, 0.001), reduced(m1, m2)
-    assert p12.kn == pytest.approx(16 / 15 * math.sqrt(r) * y * (15 * m * 1.0 / (16 * math.sqrt(r) * y)) ** 0.2)
-    assert p12.kn == pytest.approx(hooke_kn(m, r, y, 1.0))
+    v = 1.37                 # not 1: at V = 1 a V^2 -> V slip in Eq. 10 would be invisible
+    assert p12.kn == pytest.approx(16 / 15 * math.sqrt(r) * y * (15 * m * v ** 2 / (16 * math.sqrt(r) * y)) ** 0.2)
+    assert p12.kn == pytest.approx(hooke_kn(m, r, y, v))
+    # and its meaning: Hertz's largest overlap at V (integrated), independent of the algebra
+    assert p12.kn == pytest.approx(m * v * v / hertz_max_overlap(m, r, y, v) ** 2, rel=1e-6)
     assert p12.kt == pytest.approx(2 / 7 * p12.kn) and p12.gammat == pytest.approx(0.1 * p12.gamman)
     # the smallest pair has the shortest contact, and sets the time step
     times = {k: v.contact_time for k, v in d.type_pairs.items()}
@@ -177,6 +199,63 @@ def test_hooke_model_per_size_pair(quick_dict):
     matrix = np.array(kn).reshape(3, 3)
     assert np.allclose(matrix, matrix.T) and matrix[0, 1] == pytest.approx(p12.kn)
     assert matrix[1, 2] == pytest.approx(d.type_pairs[(2, 3)].kn)      # size class 2 with the wall
+
+
+# Paper B's largest pair (rb = 1/64 m, rho 7520 kg/m3, Y 120 GPa, nu 0.3), worked by hand:
+#   m  = 7520 x 4/3 pi (1/64)^3 = 7520 x 1.59790e-5 m3 = 0.1201618 kg;  m* = m/2 = 0.0600809 kg
+#   R* = rb/2 = 1/128 m = 0.0078125 m;  sqrt(R*) = 0.0883883
+#   Y* = 1 / (2 (1 - 0.3^2) / 1.2e11) = 1.2e11 / 1.82 = 6.59341e10 Pa
+#   Eq. 10: kn = 16/15 sqrt(R*) Y* (15 m* V^2 / (16 sqrt(R*) Y*))^(1/5)
+#           = 16/15 x 0.0883883 x 6.59341e10 x (0.901214 V^2 / 9.32449e10)^(1/5)
+#           = 6.21632e9 x (9.66502e-12 V^2)^(1/5)
+#   V = 1.37 m/s (paper_b.yaml):       (1.81403e-11)^(1/5) = 7.10770e-3 -> kn = 4.41837e7 N/m
+#   V = 0.88 m/s (paper_b_quick.yaml): (7.48459e-12)^(1/5) = 5.95434e-3 -> kn = 3.70141e7 N/m
+#   (paper_b_quick's Y is 1.2e8: kn scales as Y*^(4/5), 1000^(-4/5) = 3.98107e-3 -> 1.47356e5 N/m)
+PAPER_B_LARGEST = dict(m_eff=0.0600809, r_eff=1 / 128, y_eff=1.2e11 / 1.82)
+HOOKE_KN_BY_HAND = {1.37: 4.41837e7, 0.88: 3.70141e7}
+
+
+def hertz_max_overlap(m, r, y, v):
+    """Largest overlap of an elastic Hertz impact m x'' = -4/3 Y* sqrt(R*) x^(3/2) at speed v,
+    by numerical integration (turning point: x' = 0)."""
+    def rhs(t, q):
+        return [q[1], -4.0 / 3.0 * y * math.sqrt(r) * max(q[0], 0.0) ** 1.5 / m]
+
+    def turn(t, q):
+        return q[1]
+    turn.terminal, turn.direction = True, -1
+    t_scale = (m / (y * math.sqrt(r) * (m * v * v / (y * math.sqrt(r))) ** 0.2)) ** 0.5
+    sol = solve_ivp(rhs, (0, 100 * t_scale), [0.0, v], events=turn, rtol=1e-11, atol=1e-18,
+                    max_step=0.01 * t_scale)
+    return sol.y_events[0][0][0]
+
+
+@pytest.mark.parametrize("v", [1.37, 0.88, 3.0])
+def test_hooke_kn_gives_hertz_maximum_overlap_at_the_characteristic_velocity(v):
+    """Eq. 10's meaning, checked without its algebra: the linear spring kn stops a grain arriving
+    at V within the same overlap as the Hertz contact does, V sqrt(m*/kn) = delta_max (Hertz,
+    integrated numerically)."""
+    m, r, y = PAPER_B_LARGEST.values()
+    delta = hertz_max_overlap(m, r, y, v)
+    assert cp.hooke_kn(m, r, y, v) == pytest.approx(m * v * v / delta ** 2, rel=1e-6)
+    if v in HOOKE_KN_BY_HAND:                   # and the worked numbers above
+        assert cp.hooke_kn(m, r, y, v) == pytest.approx(HOOKE_KN_BY_HAND[v], rel=2e-5)
+
+
+@pytest.mark.parametrize("deck,v,young", [("paper_b.yaml", 1.37, 1.2e11), ("paper_b_quick.yaml", 0.88, 1.2e8)])
+def test_paper_b_decks_hooke_kn_of_the_largest_pair_by_hand(deck, v, young):
+    """derive() on the paper decks themselves (their V is not 1): the largest pair's kn is the
+    hand-worked Eq. 10 value above (Y 1.2e8 in the quick deck scales it by 1000^(-4/5))."""
+    from conftest import ROOT
+    from siloflow.case import load_case
+    case = load_case(ROOT / "decks" / deck)
+    assert case.materials.characteristic_velocity == v
+    pair = derive(case).type_pairs[(1, 1)]
+    assert pair.r_eff == pytest.approx(1 / 128) and pair.m_eff == pytest.approx(0.0600809, rel=1e-6)
+    expected = HOOKE_KN_BY_HAND[v] * (young / 1.2e11) ** 0.8
+    assert pair.kn == pytest.approx(expected, rel=2e-5)
+    if deck == "paper_b_quick.yaml":
+        assert pair.kn == pytest.approx(1.47356e5, rel=2e-5)
 
 
 def test_hooke_needs_its_velocity_and_no_springs(quick_dict):

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from postprocess.dumps import read_dump
+from postprocess.dumps import read_dump, read_frames
 from siloflow.cli import app
 
 from test_dumps import compare_with_mdanalysis
@@ -49,10 +49,54 @@ def test_outlet_and_free_surface_flow_rates_agree(small_run):
     assert steady["t_start"] > summary["time_open_s"] and steady["median_rate"] == pytest.approx(wf, rel=0.1)
 
 
-def test_janssen_fit_of_the_settled_profile_is_reported(small_run):
-    fit = small_run[3]["frame_analyses"]["janssen_static"]
+def _janssen_least_squares(depth, pressure, rho_b, D, g):
+    """Independent of postprocess.janssen: Janssen's p_h = rho_b g D / (4 mu) (1 - exp(-4 mu K z / D))
+    written out, fitted by scipy's least_squares from a grid of starts; (cost, K, mu)."""
+    from scipy.optimize import least_squares
+
+    def residual(x):
+        K, mu = x
+        return rho_b * g * D / (4 * mu) * (1 - np.exp(-4 * mu * K * depth / D)) - pressure
+    best = None
+    for K0 in (0.2, 0.5, 1.0, 2.0):
+        for mu0 in (0.05, 0.2, 0.5, 1.0, 3.0):
+            r = least_squares(residual, [K0, mu0], bounds=([1e-3, 1e-3], [20.0, 20.0]), xtol=1e-14, ftol=1e-14)
+            if best is None or r.cost < best[0]:
+                best = (r.cost, *r.x)
+    return best, residual
+
+
+def test_janssen_fit_of_the_settled_profile(small_run):
+    """The run's static band pressures (summary.json's bands, depth below the settled surface):
+    * the reported K and mu_w are the least-squares optimum: an independent refit (the formula
+      written out, another optimiser, 20 starts) finds no lower cost, and the same parameters
+      when the profile saturates (K and mu_w both identified);
+    * K lies between Rankine's active and passive ratios for the grains' friction angle
+      (mu 0.5: phi = atan 0.5 = 26.6 deg, K_a = (1 - sin phi) / (1 + sin phi) = 0.382,
+      K_p = 2.618), within two standard errors;
+    * a saturated profile's effective wall friction does not exceed the wall's Coulomb friction
+      0.5 beyond two standard errors (mobilisation mu_eff / mu_w <= 1: REFERENCES.md, Landry 2003)."""
+    case, folder, record, summary = small_run
+    fa = summary["frame_analyses"]
+    fit = fa["janssen_static"]
     assert "K" in fit, fit
-    assert math.isfinite(fit["K"]) and math.isfinite(fit["mu_w"]) and fit["n_points"] >= 3
+    h = fa["settled_surface_height_m"]
+    bands = pd.DataFrame(summary["bands"])
+    bands = bands[bands.z_mid < h]
+    depth, p = (h - bands.z_mid).to_numpy(float), bands.static_pressure.to_numpy(float)
+    depth, p = depth[np.isfinite(p)], p[np.isfinite(p)]
+    assert fit["n_points"] == len(depth) >= 3
+    rho_b, D = fa["cross_section_bulk_density_kg_m3"], 2 * case.geometry.radius
+    (cost, K, mu), residual = _janssen_least_squares(depth, p, rho_b, D, case.gravity)
+    reported = 0.5 * float((residual([fit["K"], fit["mu_w"]]) ** 2).sum())
+    assert reported <= cost * (1 + 1e-6) + 1e-12 * float((p ** 2).sum()), (reported, cost, fit)
+    if fit["saturated"]:
+        assert fit["K"] == pytest.approx(K, rel=0.02) and fit["mu_w"] == pytest.approx(mu, rel=0.02)
+        assert fit["mu_w"] - 2 * fit["mu_w_stderr"] <= 0.5, fit
+    phi = math.atan(0.5)
+    k_a, k_p = (1 - math.sin(phi)) / (1 + math.sin(phi)), (1 + math.sin(phi)) / (1 - math.sin(phi))
+    assert k_a == pytest.approx(0.382, abs=1e-3) and k_p == pytest.approx(2.618, abs=1e-3)
+    assert fit["K"] + 2 * fit["K_stderr"] >= k_a and fit["K"] - 2 * fit["K_stderr"] <= k_p, fit
 
 
 def test_post_on_the_run_dumps_as_foreign_files(small_run, tmp_path):
@@ -116,23 +160,90 @@ def test_post_on_an_unmodified_tutorial_vtk_packing(tmp_path):
     assert 4.0 < s["coordination_last"]["z_mean"] < 9.0
 
 
+def _settled_frame(folder: Path):
+    """The settled bed's dump frame: the last at or before the outlet opened (as dump_results picks it)."""
+    stages = json.loads((folder / "run_record.json").read_text())["stage_steps"]
+    steps = pd.read_csv(folder / "results" / "porosity_regions.csv").step
+    step = int(steps[steps <= int(stages["open"])].max())
+    return next(read_frames(str(folder / "output" / "dumps" / "dump.*.txt"), steps=[step]))
+
+
+def _sampled_solid_fraction(frame, points) -> float:
+    """Share of ``points`` inside some grain (the union of the spheres), by a KD-tree: an
+    estimate independent of postprocess.overlap_volume."""
+    from scipy.spatial import cKDTree
+    pos, rad = frame.positions(), frame.radii()
+    d, idx = cKDTree(pos).query(points, k=4, distance_upper_bound=rad.max())
+    found = np.isfinite(d)
+    inside = np.zeros(d.shape, bool)
+    inside[found] = d[found] < rad[idx[found]]
+    return float(inside.any(axis=1).mean())
+
+
 def test_case_measurement_regions(small_run):
     """The case's own regions: a sphere in the core and a mid-plane circle (2D area porosity,
-    which by Delesse's principle estimates the volume fraction), converted 2D -> 3D."""
+    which by Delesse's principle estimates the volume fraction), converted 2D -> 3D.
+
+    * Each region's porosity is checked against an independent Monte Carlo estimate on the
+      settled frame: 10^6 random points in the region, inside a grain or not (binomial standard
+      error sqrt(0.24 / 10^6) = 4.9e-4; bound 2.5e-3, 5 standard errors; the soft overlaps the
+      module counts twice are ~1e-5 of the volume here).
+    * Against the bulk porosity, the bound is the regions' own measured spread: the porosity of
+      10 circles like mid_circle (planes x = 0 and y = 0, 5 heights in the bed) and 5 spheres like
+      core_sphere (on the axis; they overlap, so their spread is if anything too small), 3 sample
+      standard deviations, plus 0.01 for the part of each region beyond the bulk core's radius
+      (R - 2 d = 7.5 mm: 8 % of the circle's area, 4 % of the sphere's volume)."""
+    from postprocess.porosity import MeasureRegion, Porosity
     case, folder, record, summary = small_run
     fa = summary["frame_analyses"]
     regions = fa["porosity_regions"]
     bulk_porosity = 1 - fa["bulk_solid_fraction"]
-    assert regions["core_sphere"]["porosity"] == pytest.approx(bulk_porosity, abs=0.06)
-    assert regions["mid_circle"]["porosity"] == pytest.approx(bulk_porosity, abs=0.12)
-    assert "porosity_3d" in regions["mid_circle"]
+    settled = _settled_frame(folder)
+    spec = {r.name: r for r in case.analysis.porosity_regions}
+    sph, cir = spec["core_sphere"], spec["mid_circle"]
+    assert sph.shape == "sphere" and cir.shape == "circle" and cir.axis == "y"
+    rng = np.random.default_rng(13)
+    n = 1_000_000
+    # core_sphere: uniform points in the ball
+    u = rng.normal(size=(n, 3))
+    ball = u / np.linalg.norm(u, axis=1)[:, None] * sph.radius * rng.random(n)[:, None] ** (1 / 3) + sph.center
+    sphere_mc = 1 - _sampled_solid_fraction(settled, ball)
+    assert regions["core_sphere"]["porosity"] == pytest.approx(sphere_mc, abs=2.5e-3)
+    # mid_circle: uniform points in the disc, in its plane y = plane
+    rr, th = cir.radius * np.sqrt(rng.random(n)), rng.uniform(0, 2 * np.pi, n)
+    disc = np.column_stack([cir.center[0] + rr * np.cos(th), np.full(n, cir.plane), cir.center[2] + rr * np.sin(th)])
+    circle_mc = 1 - _sampled_solid_fraction(settled, disc)
+    assert regions["mid_circle"]["porosity"] == pytest.approx(circle_mc, abs=2.5e-3)
+
+    h, d = fa["settled_surface_height_m"], fa["grain_diameter_m"]
+    z_c = np.linspace(cir.radius + 2 * d, h - cir.radius - 2 * d, 5)
+    z_s = np.linspace(sph.radius + 2 * d, h - sph.radius - 2 * d, 5)
+    assert z_c[-1] > z_c[0] and z_s[-1] > z_s[0], h
+    circles = [MeasureRegion(f"c{axis}_{k}", "circle", (0.0, 0.0, z), cir.radius, axis=axis, plane=0.0)
+               for axis in (0, 1) for k, z in enumerate(z_c)]
+    spheres = [MeasureRegion(f"s{k}", "sphere", (0.0, 0.0, z), sph.radius) for k, z in enumerate(z_s)]
+    table = Porosity(circles + spheres).run([settled]).table.set_index("region")
+    spread_c = float(table.loc[[c.name for c in circles], "porosity"].std(ddof=1))
+    spread_s = float(table.loc[[s.name for s in spheres], "porosity"].std(ddof=1))
+    assert regions["mid_circle"]["porosity"] == pytest.approx(bulk_porosity, abs=3 * spread_c + 0.01), spread_c
+    assert regions["core_sphere"]["porosity"] == pytest.approx(bulk_porosity, abs=3 * spread_s + 0.01), spread_s
+    # paper A's Eq. 36-37 as printed, written out: eps3d = 1 - xi (1 - eps2d), xi = a + Dr (a - b)
+    a, b = 2 / math.sqrt(math.pi * math.sqrt(3)), math.sqrt(2) / math.sqrt(math.pi * math.sqrt(3))
+    xi = a + case.analysis.relative_density * (a - b)
+    eps3d = regions["mid_circle"]["porosity_3d"]
+    if math.isfinite(eps3d):
+        assert eps3d == pytest.approx(1 - xi * (1 - regions["mid_circle"]["porosity"]), rel=1e-9)
     table = pd.read_csv(folder / "results" / "porosity_regions.csv")
     assert set(table.region) == {"core_sphere", "mid_circle"} and table.step.nunique() == fa["dump_frames"]
 
 
 def test_measured_pressure_comparison(small_run, tmp_path):
-    """A 'measurement' 10 % above the run's own band pressures gives W = 0.1/1.1 (Eq. 34)."""
-    case, folder, record, summary = small_run
+    """A 'measurement' 10 % above the run's own band pressures gives W = 0.1/1.1 (Eq. 34).
+    `post` rewrites results/, so it runs on a copy: the session's shared run stays as the other
+    tests expect it, whatever order they run in."""
+    case, shared, record, summary = small_run
+    folder = tmp_path / "run"
+    shutil.copytree(shared, folder)
     p = pd.read_csv(folder / "results" / "wall_pressure.csv")
     t_open = summary["time_open_s"]
     after = p[p.time >= t_open]
@@ -171,14 +282,20 @@ def test_coarse_graining_of_the_real_run(small_run, tmp_path):
         assert float(axis.sel(z=0.3 * h, method="nearest")) > float(axis.sel(z=0.7 * h, method="nearest"))
     for name in ("cg_maps.png", "cg_outlet_profiles.png", "cg_axial_pressure.png", "outlet_profiles.csv"):
         assert (out / name).is_file(), name
-    # the fast lattice sums give the same fields on real frames, within their stated error
+    # the fast lattice sums give the same fields on real frames, within their stated error:
+    # max |lattice - exact| / max |exact| per field. Measured on 10-frame averages of synthetic
+    # frames of this run's size and grid (2500 grains, R 12.5 mm, 20 x 60, w = 1.5 radii, with a
+    # converging jet): rho 5.5e-4, contact pressure 2.7e-4, kinetic pressure 1.0e-3. Coarser grids
+    # relative to the kernel (the benchmark's dr / w = 0.45, here 0.33) and sparser sources give
+    # up to 2.3e-3, 2.6e-3 and 3.3e-3. Bounds: rho 2.5e-3 (4.5x the emulation), the pressures
+    # 1e-2 (10-40x the emulation, 3x the worst elsewhere). Not yet measured on this run itself.
     fast = tmp_path / "cg_lattice"
     result = CliRunner().invoke(app, ["cg", str(folder), "--nr", "20", "--nz", "60", "--width", "1.5", "-o", str(fast),
                                       "--method", "lattice"])
     assert result.exit_code == 0, result.output
     assert json.loads((fast / "cg_summary.json").read_text())["method"] == "lattice"
     with xr.open_dataset(out / "fields.nc") as a, xr.open_dataset(fast / "fields.nc") as b:
-        for name, tol in (("rho", 5e-3), ("contact_pressure", 3e-2), ("kinetic_pressure", 3e-2)):
+        for name, tol in (("rho", 2.5e-3), ("contact_pressure", 1e-2), ("kinetic_pressure", 1e-2)):
             err = float(abs(a[name] - b[name]).max() / abs(a[name]).max())
             assert err < tol, (name, err)
 
