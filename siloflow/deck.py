@@ -142,7 +142,21 @@ def particle_templates(case: Case, d: Derived) -> list[dict]:
         weights = d.mass_fractions
     ntry = getattr(case.particles, "monte_carlo_tries", 0)
     return [{"type": sp.type, "seed": d.seeds["templates"][sp.type - 1], "weight": w, "density": sp.density,
-             "radius": sp.radius, "spheres": sp.spheres, "ntry": ntry} for sp, w in zip(grains, weights)]
+             "radius": sp.radius, "spheres": sp.spheres, "ntry": ntry, "volume_limit": volume_limit(sp.radius)}
+            for sp, w in zip(grains, weights)]
+
+
+#: LIGGGHTS' particletemplate/sphere refuses spheres smaller than its volume_limit (default 1e-12 m3,
+#: a radius of 62 um) with "Volume expectancy too small"
+LIGGGHTS_VOLUME_LIMIT = 1e-12
+
+
+def volume_limit(radius: float) -> float | None:
+    """The ``volume_limit`` a sphere template of ``radius`` (m) needs, m3: None (LIGGGHTS'
+    default) unless the sphere is smaller than the default allows, then a tenth of its volume."""
+    from .contact_physics import sphere_volume
+    volume = sphere_volume(radius)
+    return None if volume >= LIGGGHTS_VOLUME_LIMIT else volume / 10
 
 
 def dust_insertion(d: Derived, particle_rate: float) -> dict | None:
@@ -152,7 +166,7 @@ def dust_insertion(d: Derived, particle_rate: float) -> dict | None:
     if dust is None:
         return None
     out = {"type": dust.type, "seed": d.seeds["templates"][dust.type - 1], "density": dust.density,
-           "radius": dust.radius, "count": d.dust_count,
+           "radius": dust.radius, "volume_limit": volume_limit(dust.radius), "count": d.dust_count,
            "rate": particle_rate * d.dust_batch / d.insertion_batch, "region": "insertion", "plane": None}
     if d.has_faces:
         # a slab is a 2D model: the grains keep to its plane (clumps by fflag/tflag, spheres by

@@ -418,6 +418,28 @@ def run_length_fields(case: Case, critical_source: str) -> dict[str, list[str]]:
     return out
 
 
+#: LIGGGHTS counts its neighbour and atom-sorting bins in a C int ("Too many neighbor bins",
+#: "Too many atom sorting bins"); half of INT_MAX leaves room for its ghost bins
+MAX_ENGINE_BINS = 2 ** 30
+
+
+def engine_bins(box: dict, radius: float) -> int:
+    """How many neighbour bins LIGGGHTS makes for ``box`` (m) with grains of largest radius
+    ``radius`` (m): bins of half the neighbour cutoff 2 r + skin (skin 0.5 r), as its default."""
+    size = 0.5 * (2 * radius + 0.5 * radius)
+    return math.prod(math.ceil((box[f"{a}hi"] - box[f"{a}lo"]) / size) for a in "xyz")
+
+
+def check_bins(box: dict, radius: float) -> None:
+    """Refuse a silo too many grains wide and tall for the engine's bins (``CaseError``)."""
+    bins = engine_bins(box, radius)
+    if bins > MAX_ENGINE_BINS:
+        size = max(box[f"{a}hi"] - box[f"{a}lo"] for a in "xyz")
+        raise CaseError([("particles", f"grains of radius {radius:.3g} m in a silo whose box is {size:.3g} m long need "
+                          f"{bins:.3g} neighbour bins, more than LIGGGHTS can count ({MAX_ENGINE_BINS:.3g}): "
+                          "use larger grains or a smaller silo (geometry)")])
+
+
 def check_run_length(derived: Derived, allow_long: bool = False) -> int:
     """The planned steps of the whole run (every stage at its cap); raises ``SetupError`` naming
     the case fields that set the time step and the longest stages when they exceed
@@ -656,6 +678,7 @@ def derive(case: Case) -> Derived:
     box = {"xlo": -g.half_width - margin, "xhi": max(g.half_width, plate_shift + g.outlet_radius) + margin,
            "ylo": -half_y - margin, "yhi": half_y + margin,
            "zlo": outlet_z - plate_travel - margin, "zhi": top + margin}
+    check_bins(box, r)
     static_steps = _steps(s.static_window, dt)
     if static_steps < 2 * sample_freq:      # the time check of the case can miss by a rounded step
         raise CaseError([("fill.settle.static_window", f"{static_steps} steps hold fewer than two samples of "

@@ -53,7 +53,7 @@ class EngineRunError(SiloflowError):
         if returncode is not None:
             parts.append(f"exit code: {returncode}")
         if folder is not None:
-            parts.append(f"run folder (log kept): {folder}")
+            parts.append(f"run folder (kept as it is): {folder}")
         if log_tail:
             parts.append("last lines of the engine log:\n" + log_tail)
         super().__init__("\n".join(parts))

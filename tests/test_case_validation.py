@@ -210,6 +210,9 @@ def test_coarse_timestep_and_air_drag_are_warned_about(quick_dict):
     assert "engine.timestep_fraction" in warning and "unstable" in warning
     quick_dict["engine"]["timestep_fraction"] = 0.15
     quick_dict["particles"]["radius"] = 2e-5          # 40 um powder: air matters, siloflow models none
+    quick_dict["geometry"].update(radius=0.002, height=0.01, orifice_radius=0.0005)   # within the engine's bins
+    quick_dict["fill"]["count"] = 300
+    quick_dict["sensors"] = {"bands": 2}
     warnings = derive(case_from_dict(quick_dict)).warnings
     assert any("air drag" in w and "no gas" in w for w in warnings), warnings
 

@@ -1,16 +1,21 @@
 """A failing engine is explained: message, likely cause, exit code, log kept."""
 from __future__ import annotations
 
+import math
 import os
 import stat
+import subprocess
 
 import pytest
+import yaml
 
+from conftest import ROOT
 from siloflow.case import case_from_dict
+from siloflow.deck import render
 from siloflow.engine import LiggghtsEngine
 from siloflow.engine.base import read_status
 from siloflow.engine.liggghts_log import LogState, diagnose
-from siloflow.errors import EngineRunError, SetupError
+from siloflow.errors import CaseError, EngineRunError, SetupError
 
 
 def _fake_engine(tmp_path, script: str) -> str:
@@ -186,3 +191,110 @@ def test_short_insertion_and_fill_losses_are_told_apart(tmp_path, quick_dict, te
     engine.execute(folder)
     with pytest.raises(EngineRunError, match=expected):
         engine.collect(folder)
+
+
+# ------------------------------------------------------------------ issue 13, item 9: messages
+def test_an_engine_that_prints_nothing_is_not_sent_to_a_missing_log(tmp_path, quick_dict):
+    """/bin/false as the engine: no output and no log.liggghts, so the message may not name it."""
+    quick_dict["engine"]["ranks"] = 1
+    engine = LiggghtsEngine(executable="/bin/false")
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    with pytest.raises(EngineRunError) as info:
+        engine.execute(folder)
+    assert not (folder / "log.liggghts").exists()
+    msg = str(info.value)
+    assert "log.liggghts" not in msg
+    assert "printed nothing" in msg and "SILOFLOW_LIGGGHTS" in msg
+
+
+def test_diagnosis_names_only_the_files_that_exist(tmp_path):
+    _, _, fix = diagnose([], [], 1, ("some engine output",))
+    assert "log.liggghts" not in fix and "screen.txt" not in fix          # no folder: no file named
+    (tmp_path / "screen.txt").write_text("some engine output\n")
+    _, _, fix = diagnose([], [], 1, ("some engine output",), folder=tmp_path)
+    assert "screen.txt" in fix and "log.liggghts" not in fix
+    (tmp_path / "log.liggghts").write_text("some engine output\n")
+    _, _, fix = diagnose([], [], 1, ("some engine output",), folder=tmp_path)
+    assert "log.liggghts" in fix and "screen.txt" in fix
+
+
+@pytest.mark.parametrize("fix_id, field", [("pts_dust", "particles.dust.radius"), ("pts1", "particles.radius")])
+def test_volume_expectancy_too_small_is_explained_in_case_terms(fix_id, field):
+    line = (f"ERROR: Fix particletemplate/sphere (id {fix_id}): Volume expectancy too small. Change "
+            "'volume_limit' if you are sure you know what you're doing (../fix_template_sphere.cpp:218)")
+    message, cause, fix = diagnose([line], [], 1, ("MPI_ABORT was invoked on rank 0",))   # as on 2 ranks
+    assert "Volume expectancy too small" in message
+    assert "volume_limit" in cause and "1e-12 m3" in cause and "62 um" in cause
+    assert field in fix and "6.2e-05 m" in fix
+
+
+def test_bad_mesh_is_explained_and_engine_bytes_never_reach_the_message(tmp_path, quick_dict):
+    """LIGGGHTS' mesh refusal gets a cause and the fields to change; stray binary bytes and
+    terminal escape sequences around it are dropped from the message (the screen file keeps them)."""
+    quick_dict["engine"]["ranks"] = 1
+    exe = _fake_engine(tmp_path, (
+        "printf 'ERROR: Mesh plate: The minumum angle of mesh element 9 (line 58) is lower than the specified "
+        "curvature. Increase mesh quality or decrease curvature (currently 0.256235\\302\\260)\\n'\n"
+        "printf '\\033[31mERROR on proc 0: Fix mesh: Bad mesh, cannot continue.\\033[0m\\n'\n"
+        "printf '\\377\\376\\001\\033]0;t\\007\\n'\n"
+        "exit 1\n"))
+    engine = LiggghtsEngine(executable=exe)
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    with pytest.raises(EngineRunError) as info:
+        engine.execute(folder)
+    msg = str(info.value)
+    assert all(c == "\n" or (c.isprintable() and c != "\ufffd") for c in msg), repr(msg)
+    assert "meshes/plate.stl" in info.value.cause and "geometry.orifice_radius" in info.value.fix
+    assert "Bad mesh, cannot continue." in info.value.log_tail
+    assert b"\xff\xfe\x01\x1b]0;t\x07" in (folder / "screen.txt").read_bytes()
+
+
+def test_printable_drops_escapes_controls_and_undecodable_bytes():
+    from siloflow.engine.liggghts_log import decode, printable
+
+    assert printable("a\x1b[31mred\x1b[0m\x1b]0;title\x07\tx\x00\x9b\ufffd\n") == "ared x\n"
+    assert decode(b"ERROR: x\xff\xfe\x1b[2J done\n") == "ERROR: x done\n"
+
+
+def _tiny_grain_case(quick_dict, radius=3e-5):
+    quick_dict["particles"]["radius"] = radius
+    quick_dict["fill"]["count"] = 300
+    quick_dict["geometry"].update(radius=0.002, height=0.01, orifice_radius=0.0005)
+    quick_dict["sensors"] = {"bands": 2}
+    return case_from_dict(quick_dict)
+
+
+def test_grains_below_liggghts_default_volume_limit_get_their_own(quick_dict):
+    """LIGGGHTS' particletemplate/sphere refuses spheres under 1e-12 m3 (r < 62 um) unless the
+    deck lowers volume_limit; decks of larger grains keep the default (unchanged lines)."""
+    from siloflow.deck import particle_templates
+    from siloflow.derived import derive
+
+    case = _tiny_grain_case(quick_dict)
+    (t,) = particle_templates(case, derive(case))
+    assert t["volume_limit"] == pytest.approx(4 / 3 * math.pi * 3e-5 ** 3 / 10)
+    quick = case_from_dict(yaml.safe_load((ROOT / "decks" / "quick.yaml").read_text()))
+    assert all(t["volume_limit"] is None for t in particle_templates(quick, derive(quick)))
+
+
+def test_a_silo_too_many_grains_across_for_the_engine_bins_is_refused(quick_dict):
+    quick_dict["particles"]["radius"] = 3e-5
+    quick_dict["fill"]["count"] = 300
+    with pytest.raises(CaseError, match="neighbour bins"):
+        from siloflow.derived import derive
+        derive(case_from_dict(quick_dict))
+
+
+@pytest.mark.engine
+def test_engine_accepts_the_templates_of_tiny_grains(tmp_path, quick_dict):
+    """The deck of 30 um grains, cut after its insertion fix, starts in LIGGGHTS (it refused such
+    templates with 'Volume expectancy too small' before the deck set volume_limit)."""
+    folder = render(_tiny_grain_case(quick_dict), tmp_path / "deck")
+    lines = (folder / "in.liggghts").read_text().splitlines()
+    last = max(k for k, ln in enumerate(lines) if ln.startswith("fix             ins "))
+    (folder / "in.cut").write_text("\n".join(lines[:last + 1]) + "\nrun 1\n")
+    proc = subprocess.run(["liggghts", "-in", "in.cut", "-log", "log.cut"], cwd=folder, capture_output=True,
+                          timeout=120, stdin=subprocess.DEVNULL)
+    out = proc.stdout.decode("utf-8", "replace")
+    assert proc.returncode == 0 and "ERROR" not in out, out[-2000:]
+    assert "volume_limit" in (folder / "in.cut").read_text()

@@ -167,7 +167,8 @@ class LiggghtsEngine(Engine):
             write_status(folder, "failed", reason=message)
             raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder, fix=DISK_FIX) from None
         if returncode != 0 or state.errors:
-            message, cause, fix = diagnose(state.errors, state.warnings, returncode, tuple(tail))
+            message, cause, fix = diagnose(state.errors, state.warnings, returncode, tuple(tail),
+                                           folder=folder, files=(log, screen_name))
             write_status(folder, "failed", reason=message)
             raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder,
                                  cause=cause, fix=fix, log_tail="\n".join(tail))

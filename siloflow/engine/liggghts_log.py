@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 import signal
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Optional
 
 _STAGE = re.compile(r"^SILOFLOW_STAGE (\w+) (\d+)\s*$")
@@ -104,12 +105,76 @@ def parse_log_text(text: str) -> LogState:
     return state
 
 
+#: terminal escape sequences (CSI ``ESC [ ... final``, OSC ``ESC ] ... BEL/ST``, two-byte ``ESC x``)
+_ANSI = re.compile(r"\x1b(\[[0-?]*[ -/]*[@-~]|\][^\x07\x1b]*(\x07|\x1b\\)?|[@-Z\\-_])")
+
+
+def printable(text: str) -> str:
+    """``text`` with printable characters only (and line breaks): escape sequences, control characters
+    and undecodable bytes are dropped, tabs become spaces. Engine output passes through this before it
+    reaches a message, a status or a log tail."""
+    if "\ufffd" not in text and text.replace("\n", "").isprintable():
+        return text                                   # the usual line: nothing to drop
+    text = _ANSI.sub("", text).replace("\t", " ")
+    return "".join(c for c in text if c == "\n" or (c.isprintable() and c != "\ufffd"))
+
+
 def decode(raw: bytes) -> str:
-    """Engine output as text: stray binary bytes after ERROR lines are replaced, not fatal."""
-    return raw.decode("utf-8", errors="replace")
+    """Engine output as printable text (:func:`printable`): stray binary bytes after ERROR lines and
+    escape sequences are dropped, not fatal."""
+    return printable(raw.decode("utf-8", errors="replace"))
 
 
 # ----------------------------------------------------------------- diagnosis
+#: LIGGGHTS' default volume_limit of particletemplate/sphere and /multisphere, m3 (fix_template_sphere.cpp)
+VOLUME_LIMIT = 1e-12
+#: radius of a sphere of that volume, m (about 62 um)
+VOLUME_LIMIT_RADIUS = (3 * VOLUME_LIMIT / (4 * 3.141592653589793)) ** (1 / 3)
+_TEMPLATE_ID = re.compile(r"\(id (\S+)\): Volume expectancy too small")
+_MESH_ID = re.compile(r"Mesh (\S+?):")
+
+
+def _volume_diagnosis(text: str) -> tuple[str, str]:
+    m = _TEMPLATE_ID.search(text)
+    fix_id = m.group(1) if m else ""
+    field = ("particles.dust.radius" if fix_id == "pts_dust" else
+             "particles.radius (particles.radii, or a clump's size: particles.length and width)")
+    what = "the dust spheres" if fix_id == "pts_dust" else "the grains"
+    cause = (f"{what} are too small for LIGGGHTS: a particle template's volume is below LIGGGHTS' default "
+             f"'volume_limit' of {VOLUME_LIMIT:g} m3 (a sphere of radius {VOLUME_LIMIT_RADIUS * 1e6:.0f} um), and "
+             "LIGGGHTS refuses to insert it")
+    fix = (f"raise {field} to at least {VOLUME_LIMIT_RADIUS:.2g} m (the case is in SI units: a radius "
+           "given in mm must be written in m)")
+    return cause, fix
+
+
+def _mesh_fields(mesh: str) -> str:
+    """The case fields that shape a wall mesh named by its deck id."""
+    if mesh.startswith("insert_"):
+        name = mesh[len("insert_"):]
+        return f"the STL file of insert '{name}' (inserts[].file): re-mesh it with better-shaped triangles"
+    if mesh.startswith(("face", "hopper", "cone")):
+        return "geometry.half_angle_deg, geometry.outlet_width or geometry.outlet_radius"
+    if mesh.startswith(("bottom", "plate", "outlet")):
+        return "geometry.orifice_radius (or outlet_radius / outlet_width) or geometry.mesh_segments"
+    if mesh.startswith(("band", "wall")):
+        return "sensors.heights or sensors.bands, geometry.height"
+    return "the geometry section"
+
+
+def _mesh_diagnosis(text: str) -> tuple[str, str]:
+    m = _MESH_ID.search(text)
+    mesh = m.group(1) if m else ""
+    where = f"the wall mesh meshes/{mesh}.stl" if mesh else "a wall mesh"
+    cause = (f"LIGGGHTS refused {where} ('Bad mesh'): a triangle with an angle below its curvature limit "
+             "(0.256 deg), or duplicate or degenerate triangles")
+    fix = ("re-render the deck with this siloflow ('siloflow render'), which checks every wall and "
+           "re-triangulates slivers (an older deck may hold them)")
+    if mesh:
+        fix += f"; if it persists, change {_mesh_fields(mesh)}"
+    return cause, fix
+
+
 _KNOWN = [
     (_TIMESTEP,
      "the time step is too large for the contacts this run sees (LIGGGHTS' check/timestep/gran: faster "
@@ -118,6 +183,9 @@ _KNOWN = [
     (re.compile(r"Cannot open mesh file|Cannot open STL|Can not open file", re.I),
      "a mesh file named in the deck is missing or unreadable",
      "re-render the deck with 'siloflow render' and do not move files out of the run folder"),
+    # before MPI_ABORT: on several ranks these errors end in an MPI abort too
+    (re.compile(r"Volume expectancy too small", re.I), _volume_diagnosis, None),
+    (re.compile(r"minimum angle of mesh element|minumum angle of mesh element|Bad mesh", re.I), _mesh_diagnosis, None),
     (re.compile(r"youngsModulus <= 1e9", re.I),
      "a Young's modulus above 1e9 Pa without 'hard_particles yes'",
      "this is a siloflow bug (it writes hard_particles for such cases): report it with the case file"),
@@ -140,8 +208,14 @@ _KNOWN = [
 
 
 def diagnose(errors: list[str], warnings: list[str], returncode: Optional[int],
-             extra: tuple[str, ...] = ()) -> tuple[str, str, str]:
-    """(message, likely cause, fix) for a failed run; ``extra``: other output lines to search."""
+             extra: tuple[str, ...] = (), folder=None,
+             files: tuple[str, ...] = ("log.liggghts", "screen.txt")) -> tuple[str, str, str]:
+    """(message, likely cause, fix) for a failed run, printable text only; ``extra``: other output
+    lines to search (the last lines the engine printed). The fix names a file of the run ``folder``
+    only if it exists there (of ``files``; none without a folder)."""
+    errors = [printable(e) for e in errors]
+    warnings = [printable(w) for w in warnings]
+    extra = tuple(printable(x) for x in extra)
     text = "\n".join(errors + warnings + list(extra))
     if errors:
         message = f"LIGGGHTS stopped with an error: {errors[0]}"
@@ -160,5 +234,14 @@ def diagnose(errors: list[str], warnings: list[str], returncode: Optional[int],
         message = f"LIGGGHTS exited with code {returncode}"
     for pattern, cause, fix in _KNOWN:
         if pattern.search(text):
+            if callable(cause):
+                cause, fix = cause(text)
             return message, cause, fix
-    return message, "", "read the log lines below; the full log is log.liggghts in the run folder"
+    existing = [name for name in files if folder is not None and (Path(folder) / name).is_file()]
+    where = f"; the engine's full output is in {' and '.join(existing)} in the run folder" if existing else ""
+    if not text.strip():
+        return (message, "the engine printed nothing: the program siloflow ran may not be LIGGGHTS, or it "
+                "failed before its first line",
+                "check that --liggghts or SILOFLOW_LIGGGHTS names the LIGGGHTS 3.8 binary ('liggghts -h' prints "
+                f"its help){where}")
+    return message, "", f"read the engine's last lines below{where}"
