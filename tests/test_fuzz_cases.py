@@ -81,16 +81,7 @@ def test_mutated_cases_validate_or_are_refused_by_field(mutations):
             data = mutate(data, path, action, value)
         except (KeyError, IndexError, TypeError):
             continue   # an earlier mutation removed or replaced the parent
-    try:
-        case = case_from_dict(data)
-    except CaseError as exc:
-        assert_refusal_is_clean(exc)
-        return
-    # accepted: every number, at any depth, is finite
-    for where, value in numbers_in(case.model_dump()):
-        assert math.isfinite(value), where
-    # and it derives and renders a checked deck, or is refused with a SiloflowError
-    assert_derives_and_renders(case)
+    assert_refused_or_sound(data)
 
 
 def numbers_in(data, where="case"):
@@ -116,6 +107,19 @@ def assert_derives_and_renders(case):
         return
     check_deck(deck)
     assert not FORBIDDEN_WORDS.search(deck)
+
+
+def assert_refused_or_sound(data) -> None:
+    """A case dict is refused cleanly, or accepted with every number (at any depth) finite, and
+    then derives and renders a checked deck or is refused with a SiloflowError."""
+    try:
+        case = case_from_dict(data)
+    except CaseError as exc:
+        assert_refusal_is_clean(exc)
+        return
+    for where, value in numbers_in(case.model_dump()):
+        assert math.isfinite(value), where
+    assert_derives_and_renders(case)
 
 
 def _derive_and_render(case):
@@ -150,14 +154,7 @@ def test_scaled_cases_derive_and_render_or_are_refused(data):
         value = _get(case_data, path)
         new = value * data.draw(st.sampled_from(FACTORS))
         case_data = mutate(case_data, path, "set", round(new) if isinstance(value, int) else new)
-    try:
-        case = case_from_dict(case_data)
-    except CaseError as exc:
-        assert_refusal_is_clean(exc)
-        return
-    for where, value in numbers_in(case.model_dump()):
-        assert math.isfinite(value), where
-    assert_derives_and_renders(case)
+    assert_refused_or_sound(case_data)
 
 
 def _get(data, path):
