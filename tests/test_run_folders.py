@@ -331,6 +331,22 @@ def test_splice_keeps_the_first_parts_average_at_the_restart_step(tmp_path):
     assert after.read_text() == "# h\n13120 1\n13440 2\n13760 3\n14080 4\n"
 
 
+def test_splice_keeps_the_first_parts_rows_up_to_the_resumed_parts_first(tmp_path):
+    """A restart between two averages (step 150 of a 100-step table): the first part's row at 200
+    is kept (the resumed part's first average is at 300); a last line cut short is dropped."""
+    from siloflow.engine.liggghts import _splice_table
+
+    before, after = tmp_path / "wall_forces.txt.before_resume", tmp_path / "wall_forces.txt"
+    before.write_text("# h\n0 1\n100 2\n200 3\n300 4\n40")
+    after.write_text("# h\n300 5\n400 6\n")
+    _splice_table(before, after, 150)
+    assert after.read_text() == "# h\n0 1\n100 2\n200 3\n300 5\n400 6\n"
+    before.write_text("# h\n0 1\n100 2\n200 3\n30")
+    after.write_text("# h\n")                                   # the resumed part wrote nothing yet
+    _splice_table(before, after, 150)
+    assert after.read_text() == "# h\n0 1\n100 2\n"
+
+
 def test_printed_messages_are_sanitised():
     assert printable("a\x1b[31mred\x1b[0m\x1b]0;title\x07 \x00\x9b end\n") == "ared \\x00\\x9b end\n"
 

@@ -346,13 +346,18 @@ def _log_text(folder: Path) -> str:
 
 
 def _splice_table(before: Path, after: Path, step: int) -> None:
-    """One ave/time table from the first part's rows before ``step`` and the resumed part's rows
-    (headers of the first part), written atomically over ``after``. The first part's row at
-    ``step`` itself is kept when the resumed part has none there: an average over several
-    samples (``Nrepeat > 1``, the wall forces) is not written at the step a run starts from."""
+    """One ave/time table from the first part's rows and the resumed part's rows (headers of the
+    first part), written atomically over ``after``. The first part's rows are kept up to the
+    resumed part's first row, not only up to the restart ``step``: an average over several
+    samples (``Nrepeat > 1``, the wall forces) is first written by the resumed part a sampling
+    period or more after the step it starts from, and the first part had written those rows
+    before it was stopped. A last line the first part did not finish is dropped."""
     if not before.is_file():
         return
-    old = before.read_text(errors="replace").splitlines()
+    old_text = before.read_text(errors="replace")
+    old = old_text.splitlines()
+    if old and not old_text.endswith("\n"):
+        old = old[:-1]                         # cut short when the first part was stopped
     new = after.read_text(errors="replace").splitlines() if after.is_file() else []
 
     def step_of(line):
@@ -363,11 +368,10 @@ def _splice_table(before: Path, after: Path, step: int) -> None:
 
     head = [ln for ln in old if ln.startswith("#")]
     resumed = [ln for ln in new if not ln.startswith("#") and step_of(ln) is not None]
-    resumed_steps = {step_of(ln) for ln in resumed}
-    rows = [ln for ln in old if not ln.startswith("#") and step_of(ln) is not None and (
-        step_of(ln) < step or (step_of(ln) == step and step not in resumed_steps))]
-    rows += resumed
-    write_text(after, "\n".join(head + rows) + "\n")
+    # without resumed rows, the first part's rows count up to the restart only
+    keep_below = min(step_of(ln) for ln in resumed) if resumed else step + 1
+    rows = [ln for ln in old if not ln.startswith("#") and step_of(ln) is not None and step_of(ln) < keep_below]
+    write_text(after, "\n".join(head + rows + resumed) + "\n")
     before.unlink()
 
 
