@@ -5,6 +5,7 @@ import errno
 import json
 import os
 import shutil
+import stat
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -25,6 +26,49 @@ def write_text(path, text: str) -> None:
         raise
 
 
+def read_regular_bytes(path, limit: int, what: str = "the file") -> bytes:
+    """The bytes of a regular file, at most ``limit``: a FIFO, a device such as /dev/zero or a
+    directory is refused before it is read; the file is opened non-blocking (a FIFO swapped in
+    after the check cannot hang) and read up to one byte past the limit, never whole. Raises
+    ``ValueError`` with a message naming the file and why."""
+    path = Path(path)
+
+    def kind(mode) -> str:
+        return ("a directory" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode)
+                else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+                else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+
+    try:
+        mode = os.stat(path).st_mode
+        if not stat.S_ISREG(mode):
+            raise ValueError(f"{path} is {kind(mode)}; {what} must be a regular file")
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0))
+    except OSError as exc:
+        raise ValueError(f"cannot read {path}: {exc.strerror or exc}") from None
+    except ValueError as exc:
+        if "must be a regular file" in str(exc):
+            raise
+        raise ValueError(f"cannot read {path!r}: {exc}") from None      # e.g. a NUL byte in the path
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):          # replaced between the stat and the open
+            raise ValueError(f"{path} is {kind(mode)}; {what} must be a regular file")
+        chunks, size = [], 0
+        while size <= limit:
+            chunk = os.read(fd, limit + 1 - size)
+            if not chunk:
+                break
+            chunks.append(chunk)
+            size += len(chunk)
+    except OSError as exc:
+        raise ValueError(f"cannot read {path}: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if size > limit:
+        raise ValueError(f"{path} is larger than {limit} bytes")
+    return b"".join(chunks)
+
+
 def write_json(path, data) -> None:
     """Write ``data`` as indented JSON, atomically (NaN written as null)."""
     write_text(path, json.dumps(_nan_to_none(data), indent=2, sort_keys=False) + "\n")
@@ -43,20 +87,21 @@ def _nan_to_none(x):
 def check_free_folder(folder, force: bool, keep=()) -> None:
     """Refuse an existing ``folder`` that is not an empty folder, unless ``force`` and siloflow
     may replace it (``siloflow.run_folder.check_replaceable``; ``keep``: files being read)."""
-    from .run_folder import check_replaceable
+    from .run_folder import check_not_in_use, check_replaceable
     folder = Path(folder)
-    if folder.exists() and not folder.is_dir():
-        raise SetupError(f"{folder} exists and is not a folder: choose another output folder")
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise SetupError(f"{folder} exists and is not a folder (or is a symbolic link): choose another output folder")
     for parent in folder.absolute().parents:
         if parent.exists() and not parent.is_dir():
             raise SetupError(f"cannot make {folder}: {parent} is a file, not a folder")
-    if folder.is_dir() and any(folder.iterdir()):
+    if not folder.is_dir():
+        return
+    check_not_in_use(folder, keep)            # the current directory, a mount point, a file being read
+    if any(folder.iterdir()):
         if not force:
             raise SetupError(f"{folder} already exists and is not empty: choose another folder, "
                              "or pass --force to replace it (only a folder siloflow made, holding only its files)")
         check_replaceable(folder, keep)
-    elif folder.is_dir() and os.path.ismount(folder):
-        raise SetupError(f"{folder} is a mount point and cannot be replaced: write into a new folder inside it")
 
 
 def os_error(exc: OSError, what, verb: str = "write") -> SetupError:
@@ -105,5 +150,6 @@ def new_folder(folder, force: bool = False, keep=()):
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    if old is not None:
-        remove_siloflow_files(old)               # what appeared after the check is kept there
+    if old is not None and remove_siloflow_files(old):
+        # files that appeared after the check are never deleted: the old folder stays, visibly
+        os.replace(old, folder.with_name(f"{folder.name}.kept-{os.getpid()}"))

@@ -9,8 +9,6 @@ raises ``CaseError`` listing every problem with its field path (or its line, for
 from __future__ import annotations
 
 import math
-import os
-import stat
 from pathlib import Path
 from typing import Annotated, Literal, Optional, Union
 
@@ -807,47 +805,13 @@ def check_inserts(case: Case, base: Path, source: str = "case") -> Case:
 
 def read_case_bytes(path) -> bytes:
     """The bytes of a case file, at most ``MAX_CASE_BYTES``: regular files only (a FIFO, a device
-    such as /dev/zero or a directory is refused before it is read), opened non-blocking so a FIFO
-    swapped in after the check cannot hang, and read up to one byte past the limit, never whole.
-    Raises ``CaseError``."""
-    path = Path(path)
-    source = str(path)
-
-    def refuse(message):
-        return CaseError([("(file)", message)], source)
-
-    def kind(mode) -> str:
-        return ("a directory" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode)
-                else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
-                else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
-
+    such as /dev/zero or a directory is refused before it is read, never hangs, never read whole;
+    ``siloflow.atomic_files.read_regular_bytes``). Raises ``CaseError``."""
+    from .atomic_files import read_regular_bytes
     try:
-        mode = os.stat(path).st_mode
-        if not stat.S_ISREG(mode):
-            raise refuse(f"{path} is {kind(mode)}; a case must be a regular file")
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0))
-    except OSError as exc:
-        raise refuse(f"cannot read {path}: {exc.strerror or exc}") from None
-    except ValueError as exc:               # e.g. a NUL byte in the path
-        raise refuse(f"cannot read {path!r}: {exc}") from None
-    try:
-        mode = os.fstat(fd).st_mode
-        if not stat.S_ISREG(mode):          # replaced between the stat and the open
-            raise refuse(f"{path} is {kind(mode)}; a case must be a regular file")
-        chunks, size = [], 0
-        while size <= MAX_CASE_BYTES:
-            chunk = os.read(fd, MAX_CASE_BYTES + 1 - size)
-            if not chunk:
-                break
-            chunks.append(chunk)
-            size += len(chunk)
-    except OSError as exc:
-        raise refuse(f"cannot read {path}: {exc.strerror or exc}") from None
-    finally:
-        os.close(fd)
-    if size > MAX_CASE_BYTES:
-        raise refuse(f"larger than {MAX_CASE_BYTES} bytes")
-    return b"".join(chunks)
+        return read_regular_bytes(path, MAX_CASE_BYTES, "a case")
+    except ValueError as exc:
+        raise CaseError([("(file)", str(exc))], str(path)) from None
 
 
 def parse_case_yaml(raw: bytes, source: str = "case"):

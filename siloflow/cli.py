@@ -9,6 +9,7 @@ import json
 import re
 import signal
 import sys
+import time
 from pathlib import Path
 from typing import List, Optional
 
@@ -215,10 +216,14 @@ def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
 
 def _post(folder: Path, measured: Path | None = None) -> None:
     from postprocess.first_results import analyse
+    from .run_folder import record_products
+    since = time.time()
     try:
         summary = analyse(folder, measured)
     except SiloflowError as exc:
         _fail(exc)
+    finally:                # what post wrote is siloflow's: --force may replace it later
+        record_products(folder, Path(folder) / "results", since)
     fb, fr = summary["force_balance"], summary["flow_rate"]
     out.print(f"force balance of the settled bed: walls+bottom carry {fb['ratio']:.4f} x the weight "
               f"({fb['wall_friction_share']:.2f} of it by wall friction)")
@@ -312,6 +317,7 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
        steps: Optional[str] = typer.Option(None, help="time window FIRST:LAST in timesteps (dump source)")) -> None:
     """Coarse-grain particles and contacts into continuum fields (paper B): fields.nc, profiles, figures."""
     from postprocess.cg_run import CgSetup, run_cg, setup_from_run
+    from .run_folder import record_products
     from .engine_output import local_columns
     path = Path(source)
     try:
@@ -340,8 +346,13 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
                             dump_files(wall_contacts) if wall_contacts else None,
                             local_columns(wall_contact_keywords.split(","), wall=True) if wall_contacts else None)
             target = output or Path("cg_results")
-        summary = run_cg(setup, target, kernel, width, unit, nr, nz, None if species == "none" else species,
-                         per_frame, grid, every, method, refine)
+        since = time.time()
+        try:
+            summary = run_cg(setup, target, kernel, width, unit, nr, nz, None if species == "none" else species,
+                             per_frame, grid, every, method, refine)
+        finally:
+            if path.is_dir() and (path / "derived.json").is_file():
+                record_products(path, target, since)
     except SiloflowError as exc:
         _fail(exc)
     except ValueError as exc:

@@ -8,7 +8,6 @@ contain the commands siloflow itself writes.
 """
 from __future__ import annotations
 
-import hashlib
 import math
 import re
 from importlib import resources
@@ -23,7 +22,7 @@ from .derived import Derived, _modulus_of, derive
 from .engine_output import CONTACT_KEYWORDS, WALL_CONTACT_KEYWORDS, local_columns
 from .errors import SetupError, SiloflowError
 from .meshes import silo_meshes, write_stl
-from .run_folder import MANIFEST_NAME
+from .run_folder import MANIFEST_NAME, check_plain_tree, sha256
 
 DECK_NAME = "in.liggghts"
 RESUME_DECK_NAME = "in.resume.liggghts"
@@ -302,16 +301,12 @@ def write_resume_deck(folder) -> Path:
     return folder / RESUME_DECK_NAME
 
 
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def write_manifest(folder: Path) -> None:
     """List every file of a freshly written deck folder, with its SHA-256, in the manifest
     (siloflow's marker: ``--force`` and ``--resume`` read it)."""
     files = sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
     write_json(folder / MANIFEST_NAME, {"siloflow_version": __version__,
-                                        "files": {f: _sha256(folder / f) for f in files}})
+                                        "files": {f: sha256(folder / f) for f in files}})
 
 
 def verify_deck(folder) -> None:
@@ -323,6 +318,7 @@ def verify_deck(folder) -> None:
     import tempfile
     from .case import load_case
     folder = Path(folder)
+    check_plain_tree(folder)        # no link or FIFO: the engine's writes stay inside, the reads end
     deck = folder / DECK_NAME
     try:
         check_deck(deck.read_text(encoding="utf-8", errors="replace"))

@@ -17,6 +17,7 @@ geometry fields that shape the wall.
 """
 from __future__ import annotations
 
+import io
 import math
 import os
 from dataclasses import dataclass, field
@@ -786,15 +787,14 @@ MAX_USER_MESH_BYTES = 50_000_000
 def read_user_mesh(path, scale: float = 1.0) -> np.ndarray:
     """Triangles (n, 3, 3), m, of a user's ASCII or binary STL file, checked: finite vertices and
     no degenerate (zero-area) triangle. Raises ``MeshError`` saying what is wrong."""
+    from .atomic_files import read_regular_bytes
     path = Path(path)
     try:
-        size = path.stat().st_size
-    except OSError as exc:
-        raise MeshError(f"cannot read {path}: {exc.strerror}") from None
-    if size > MAX_USER_MESH_BYTES:
-        raise MeshError(f"{path} is larger than {MAX_USER_MESH_BYTES} bytes")
+        raw = read_regular_bytes(path, MAX_USER_MESH_BYTES, "a mesh")
+    except ValueError as exc:
+        raise MeshError(str(exc)) from None
     try:
-        tris = np.array(stl_mesh.Mesh.from_file(str(path)).vectors, dtype=float)
+        tris = np.array(stl_mesh.Mesh.from_file(str(path), fh=io.BytesIO(raw)).vectors, dtype=float)
     except Exception as exc:        # numpy-stl raises many kinds on foreign bytes
         raise MeshError(f"{path} is not an STL file ({type(exc).__name__}: {str(exc)[:120]})") from None
     if tris.ndim != 3 or len(tris) == 0:

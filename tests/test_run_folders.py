@@ -20,7 +20,7 @@ from siloflow.deck import render
 from siloflow.engine import LiggghtsEngine
 from siloflow.engine.base import process_start, read_status, run_state, write_status
 from siloflow.errors import EngineRunError, ReadError, SetupError
-from siloflow.run_folder import MANIFEST_NAME, foreign_entries
+from siloflow.run_folder import MANIFEST_NAME, foreign_entries, record_products
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()
@@ -77,7 +77,9 @@ def test_force_refuses_a_folder_siloflow_did_not_make(tmp_path, quick_dict):
     assert (folder / "results.csv").read_text() == "1,2\n"
 
 
-@pytest.mark.parametrize("foreign", ["thesis.tex", "results/my_notes.odt", "output/keep/x.dat", "meshes/mine.obj"])
+@pytest.mark.parametrize("foreign", ["thesis.tex", "results/my_notes.odt", "output/keep/x.dat", "meshes/mine.obj",
+                                     "results/my_analysis/chapter.md", "results/notes.txt", "meshes/my_hopper.stl",
+                                     ".backup.tmp", "output/dumps/dump.final.txt", "output/restart/mine.restart"])
 def test_force_refuses_a_siloflow_folder_holding_a_foreign_file(tmp_path, quick_dict, foreign):
     case = case_from_dict(quick_dict)
     folder = render(case, tmp_path / "run")
@@ -93,14 +95,70 @@ def test_force_replaces_a_folder_holding_only_siloflow_files(tmp_path, quick_dic
     case = case_from_dict(quick_dict)
     folder = render(case, tmp_path / "run")
     write_status(folder, "failed", reason="test")
-    (folder / "results").mkdir()
-    (folder / "results" / "summary.json").write_text("{}")
+    since = time.time()
+    (folder / "results" / "cg").mkdir(parents=True)
+    (folder / "results" / "summary.json").write_text("{}")              # as post writes them,
+    (folder / "results" / "cg" / "fields.nc").write_bytes(b"x")
+    record_products(folder, folder / "results", since)                    # and records them
     (folder / "output" / "flow.txt").write_text("# old\n")
+    (folder / "output" / "dumps").mkdir(exist_ok=True)
+    (folder / "output" / "dumps" / "dump.1000.txt").write_text("x")
     quick_dict["fill"]["count"] -= 10
     render(case_from_dict(quick_dict), folder, force=True)
     assert not (folder / "results").exists() and not (folder / "output" / "flow.txt").exists()
     assert (folder / MANIFEST_NAME).is_file() and foreign_entries(folder) == []
     assert [p.name for p in tmp_path.iterdir()] == ["run"]          # nothing left aside
+
+
+@pytest.mark.parametrize("name", ["case.yaml", "in.liggghts"])
+def test_force_refuses_a_folder_whose_files_were_edited(tmp_path, quick_dict, name):
+    case = case_from_dict(quick_dict)
+    folder = render(case, tmp_path / "run")
+    with open(folder / name, "a") as fh:
+        fh.write("# my edit\n")
+    before = _tree(folder)
+    with pytest.raises(SetupError, match="edited since siloflow wrote it"):
+        render(case, folder, force=True)
+    assert _tree(folder) == before
+
+
+def test_force_refuses_a_folder_with_a_live_run(tmp_path, quick_dict):
+    case = case_from_dict(quick_dict)
+    folder = render(case, tmp_path / "run")
+    write_status(folder, "running")                                   # this process: alive
+    with pytest.raises(SetupError, match="still running"):
+        render(case, folder, force=True)
+
+
+def test_a_symlinked_target_is_refused_and_its_folder_kept(tmp_path, quick_dict):
+    case = case_from_dict(quick_dict)
+    real = render(case, tmp_path / "real")
+    (tmp_path / "link").symlink_to(real)
+    before = _tree(real)
+    for force in (False, True):
+        with pytest.raises(SetupError, match="symbolic link"):
+            render(case, tmp_path / "link", force=force)
+    assert _tree(real) == before and (tmp_path / "link").is_symlink()
+
+
+def test_an_empty_current_directory_is_not_replaced(tmp_path, case_file):
+    work = tmp_path / "e" / "sub"
+    work.mkdir(parents=True)
+    done = _cli("render", case_file, "-o", ".", cwd=work)
+    assert done.returncode == 1 and "current directory" in done.stderr
+    assert work.is_dir() and list(work.iterdir()) == []
+
+
+def test_resume_refuses_a_folder_with_a_symlink_out(tmp_path, case_file, fake_liggghts):
+    folder = tmp_path / "t"
+    assert _cli("render", case_file, "-o", folder).returncode == 0
+    (folder / "status.json").write_text('{"state": "interrupted"}')
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    (folder / "screen.txt").symlink_to(victim)
+    done = _cli("run", "--resume", folder, env={"SILOFLOW_LIGGGHTS": str(fake_liggghts)})
+    assert done.returncode == 1 and "symbolic link" in done.stderr
+    assert victim.read_text() == "precious"
 
 
 def test_force_refuses_a_symlink_inside(tmp_path, quick_dict):

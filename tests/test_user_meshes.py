@@ -93,6 +93,14 @@ def test_bad_insert_files_are_refused_naming_the_insert(tmp_path):
         load_case(slab_case_with(tmp_path, "missing.stl"))
 
 
+def test_an_insert_that_is_a_fifo_is_refused_not_read(tmp_path):
+    """A FIFO named as an insert hung siloflow validate (it waited for a writer)."""
+    import os
+    os.mkfifo(tmp_path / "pipe.stl")
+    with pytest.raises(CaseError, match="FIFO"):
+        load_case(slab_case_with(tmp_path, "pipe.stl"))
+
+
 @pytest.mark.engine
 @pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS not installed (make install-engine); "
                     "CI installs it, so CI never skips this")

@@ -17,6 +17,7 @@ from ..deck import (DECK_NAME, DERIVED_NAME, RESTART_FILE, RESUME_DECK_NAME, Dec
 from ..engine_output import FLOW_COLUMNS, read_ave_time
 from ..atomic_files import os_error, write_text
 from ..errors import EngineRunError, ReadError, SetupError, SiloflowError
+from ..run_folder import check_plain_tree
 from .base import Engine, ProgressCallback, RunRecord, read_status, run_state, write_status
 from .liggghts_log import LogState, decode, diagnose, parse_log_text
 
@@ -107,6 +108,7 @@ class LiggghtsEngine(Engine):
         if missing or not (folder / deck).is_file():
             raise SetupError(f"{folder} is incomplete: missing {', '.join(missing) or deck}; "
                              "re-render it with 'siloflow render'")
+        check_plain_tree(folder)             # the engine writes by name: no link may lead it outside
         try:                                 # defence in depth: only siloflow's commands reach the engine
             check_deck((folder / deck).read_text(encoding="utf-8", errors="replace"))
         except DeckError as exc:
@@ -121,7 +123,8 @@ class LiggghtsEngine(Engine):
         write_status(folder, "running", command=cmd, engine_pid=proc.pid, siloflow_pid=os.getpid())
         disk_full = None
         try:
-            with open(folder / screen_name, "wb") as screen:
+            screen_fd = os.open(folder / screen_name, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o644)
+            with open(screen_fd, "wb") as screen:
                 checked = time.monotonic()
                 for raw in proc.stdout:
                     screen.write(raw)
@@ -306,9 +309,11 @@ def _record_failure(folder: Path, reason: str) -> None:
 def _disk_full(folder: Path) -> str:
     """A description of the disk's state if it is (nearly) full, else ''."""
     try:
-        free = shutil.disk_usage(folder).free
+        fs = os.statvfs(folder)
     except OSError:
         return ""
+    # root may write into the blocks reserved for it, others only into the available ones
+    free = (fs.f_bfree if os.geteuid() == 0 else fs.f_bavail) * fs.f_frsize
     return f"{free} bytes free" if free < DISK_RESERVE else ""
 
 #: atoms that may leave the box during the fill (recorded) before the run counts as failed
@@ -319,7 +324,10 @@ def _restart_mark(lines: list[str]) -> Optional[tuple[int, int]]:
     """(line index, step) of the log's restart marker (the settled bed written), or None."""
     for k, line in enumerate(lines):
         if line.startswith(_RESTART_MARK):
-            return k, int(float(line.split()[1]))
+            try:
+                return k, int(float(line.split()[1]))
+            except (IndexError, ValueError, OverflowError):
+                return None                  # a marker cut short or not siloflow's: no restart point
     return None
 
 
