@@ -116,8 +116,9 @@ def test_resume_finishes_an_interrupted_run_like_an_uninterrupted_one(tmp_path, 
     assert (folder / "in.resume.liggghts").is_file() and (folder / "log.resume.liggghts").is_file()
     for table in (read_ave_time(folder / "output" / "flow.txt", FLOW_COLUMNS),
                   read_ave_time(folder / "output" / "wall_forces.txt")):
-        assert table.step.is_monotonic_increasing and table.step.is_unique        # spliced, no overlap
-        gaps = np.diff(table.step.to_numpy())
+        steps = table.iloc[:, 0]                              # the step column (named by the file)
+        assert steps.is_monotonic_increasing and steps.is_unique                  # spliced, no overlap
+        gaps = np.diff(steps.to_numpy())
         assert gaps.max() == np.median(gaps)           # and no hole (the wall forces lost one at the join)
     summary = json.loads((folder / "results" / "summary.json").read_text())
     reference = small_run[3]

@@ -341,6 +341,15 @@ def test_a_pid_that_is_not_the_run_is_abandoned(tmp_path, pid):
     assert run_state(tmp_path)["state"] == "abandoned"
 
 
+def test_a_run_on_another_host_stays_running(tmp_path):
+    """A shared file system: the PID belongs to another machine and cannot be checked here, so
+    the run is not called abandoned (resume would start a second engine in the folder)."""
+    (tmp_path / "status.json").write_text(json.dumps({"state": "running", "siloflow_pid": 1, "siloflow_start": 1,
+                                                      "host": "another-node-of-the-cluster"}))
+    state = run_state(tmp_path)
+    assert state["state"] == "running" and "another-node" in state["reason"]
+
+
 def test_a_live_run_is_running(tmp_path):
     write_status(tmp_path, "running")
     assert read_status(tmp_path)["siloflow_start"] == process_start(os.getpid())

@@ -9,6 +9,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import socket
 import time
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, field
@@ -56,7 +57,8 @@ def write_status(folder: Path, state: str, **extra) -> None:
     another process is not taken for the run. On a full disk the status is rewritten in place
     (its blocks are already allocated), so a failure can still be recorded."""
     if state == "running":
-        extra = {"siloflow_pid": os.getpid(), "siloflow_start": process_start(os.getpid()), **extra}
+        extra = {"siloflow_pid": os.getpid(), "siloflow_start": process_start(os.getpid()),
+                 "host": socket.gethostname(), **extra}
     path = Path(folder) / STATUS_NAME
     data = {"state": state, "time": time.time(), **extra}
     try:
@@ -108,6 +110,9 @@ def run_state(folder: Path) -> dict:
     if not (folder / STATUS_NAME).exists() and is_siloflow_folder(folder) and not (folder / "log.liggghts").exists():
         return {"state": "rendered"}
     status = read_status(folder)
+    host = status.get("host")
+    if status["state"] == "running" and host not in (None, socket.gethostname()):
+        return {**status, "reason": f"on host {host}: its process cannot be checked from here"}
     if status["state"] == "running" and not _alive(status.get("siloflow_pid"), status.get("siloflow_start")):
         status = {**status, "state": "abandoned",
                   "reason": "siloflow stopped without recording it (killed?); the engine was stopped with it"}
