@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust paper-a-quick paper-b-quick paper-a paper-b clean
+.PHONY: demo test test-fast install install-engine bench bench-dust golden paper-a-quick paper-b-quick paper-a paper-b clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -63,6 +63,11 @@ bench: install
 # the dust time-step remedy alone (two real runs, about 10 minutes)
 bench-dust: install
 	$(PY) benchmarks/dust_density_scaling.py
+
+# rewrite tests/golden/ (the decks every shipped case renders) after a change that alters decks on
+# purpose; commit them with the change (tests/test_golden_decks.py compares)
+golden: $(VENV)/.installed
+	$(PY) tests/golden.py
 
 clean:
 	rm -rf runs .pytest_cache
