@@ -1,2 +1,17 @@
-"""siloflow: silo discharge simulations with LIGGGHTS/LAMMPS, from a YAML case file to results."""
+"""siloflow: silo discharge simulations with LIGGGHTS/LAMMPS, from a YAML case file to results.
+
+``siloflow.open_run(folder)`` and ``siloflow.run(case, folder)`` return a ``Run`` (state,
+summary, flow and wall-pressure tables, dump frames): see ``siloflow.runs``. Cases are read with
+``siloflow.case.load_case(path)`` or validated from a dict with ``Case.model_validate(data)``.
+"""
 __version__ = "0.1.0"
+
+__all__ = ["Run", "open_run", "run", "__version__"]
+
+
+def __getattr__(name):
+    """``Run``, ``open_run`` and ``run`` load on first use (pandas is not imported with siloflow)."""
+    if name in ("Run", "open_run", "run"):
+        from . import runs
+        return getattr(runs, name)
+    raise AttributeError(f"module 'siloflow' has no attribute {name!r}")

@@ -16,15 +16,12 @@ SMALL = ROOT / "tests" / "data" / "small_silo.yaml"
 def small_run(tmp_path_factory):
     """One real LIGGGHTS run of tests/data/small_silo.yaml (about a minute), shared by the
     engine and post-processing tests: (case, folder, run record, results summary)."""
-    from postprocess.first_results import analyse
+    import siloflow
     from siloflow.case import load_case
-    from siloflow.engine import LiggghtsEngine
 
-    case = load_case(SMALL)
     folder = tmp_path_factory.mktemp("engine") / "small"
-    record = LiggghtsEngine().run(case, folder)
-    summary = analyse(folder)
-    return case, folder, record, summary
+    run = siloflow.run(SMALL, folder)               # the Python entry point, as a notebook uses it
+    return load_case(SMALL), run.folder, run.record, run.summary
 
 
 @pytest.fixture

@@ -307,3 +307,31 @@ def test_disk_estimate_bounds_what_the_run_wrote(small_run):
     written = sum(p.stat().st_size for p in (folder / "output").rglob("*") if p.is_file())
     estimate = estimate_bytes(case, derive(case))["total"]
     assert written <= estimate <= 3 * written, (written, estimate)
+
+
+@pytest.mark.engine
+def test_open_run_gives_the_summarys_flow_rate_and_band_pressures(small_run, tmp_path):
+    """The Python entry point: siloflow.open_run reads a finished run folder; its tables give back
+    the summary's numbers (the steady flow rate refitted from Run.flow, the static band pressures
+    from Run.wall_pressure over the static window)."""
+    import shutil
+
+    import siloflow
+    from postprocess.discharge import steady_flow_rate
+
+    folder = tmp_path / "run"
+    shutil.copytree(small_run[1], folder)
+    r = siloflow.open_run(folder)
+    assert r.state == "complete" and "complete" in repr(r)
+    t_open = r.summary["time_open_s"]
+    after = r.flow[r.flow.time >= t_open]
+    initial = float(r.flow.loc[r.flow.time <= t_open, "mass_total"].iloc[-1])
+    rate = steady_flow_rate(after.time, after.outlet_mass, t_open, mass_in_silo=after.mass_in_silo,
+                            initial_mass=initial)
+    assert rate.rate == pytest.approx(r.summary["flow_rate"]["rate"], rel=1e-9)
+    static = {b["band"]: b["static_pressure"] for b in r.summary["bands"]}
+    assert dict(zip(r.bands.band, r.bands.static_pressure)) == pytest.approx(static, rel=1e-9)
+    assert set(r.wall_pressure.band) == set(static)
+    frames = list(r.frames(every=5))
+    steps = [f.timestep for f in frames]
+    assert len(frames) > 2 and steps == sorted(steps) and max(len(f.data) for f in frames) > 0
