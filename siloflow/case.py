@@ -648,7 +648,7 @@ def _sampling_problems(case: "Case") -> list[str]:
 
 
 def _particle_problems(case: "Case") -> list[str]:
-    """Cross-section checks of the particles: dust contact laws, multisphere limits."""
+    """Cross-section checks of the particles: dust contact laws and sizes."""
     p, model = case.particles, case.materials.model
     problems = []
     dust = getattr(p, "dust", None)
@@ -660,10 +660,7 @@ def _particle_problems(case: "Case") -> list[str]:
         if dust.radius >= p.min_radius:
             problems.append(f"particles.dust.radius ({dust.radius} m) must be smaller than the grains "
                             f"({p.min_radius} m)")
-    if p.kind == "clumps" and case.engine.ranks != 1:
-        problems.append(f"engine.ranks: clumps (LIGGGHTS-PUBLIC multisphere) run on one rank only, "
-                        f"not {case.engine.ranks}")
-    return problems
+    return problems                 # what an engine cannot do is its own check: Engine.check
 
 
 # --------------------------------------------------------------------------- loading

@@ -47,8 +47,11 @@ def _fail(exc: SiloflowError) -> None:
 def validate(case_file: Path = typer.Argument(..., help="YAML case file")) -> None:
     """Check a case file; report every problem with its field path, and the physics warnings."""
     from .derived import derive
+    from .engine import get_engine
+    from .engine.base import check_case
     try:
         case = load_case(case_file)
+        check_case(case, get_engine(case.engine.name))
         d = derive(case)
     except SiloflowError as exc:
         _fail(exc)
@@ -81,8 +84,11 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
     """Write a self-contained LIGGGHTS deck folder (deck, meshes, case copy, derived parameters)."""
     from .deck import render as render_deck
     from .derived import check_run_length, derive
+    from .engine import get_engine
+    from .engine.base import check_case
     try:
         case = load_case(case_file)
+        check_case(case, get_engine(case.engine.name))
         d = derive(case)
         check_run_length(d, allow_long)
         folder = render_deck(case, output, force=force, keep=[case_file])
@@ -145,6 +151,7 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     from .derived import check_run_length, derive
     from .disk_estimate import check_disk_space
     from .engine import get_engine
+    from .engine.base import check_case
     if resume is not None:
         if case_file is not None or output is not None:
             _fail(SiloflowError("--resume DIR takes no case file and no --output: the folder has both"))
@@ -155,6 +162,7 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     try:
         case = load_case(case_file)
         engine = get_engine(case.engine.name, executable=liggghts)
+        check_case(case, engine)           # what this engine cannot do, before anything is written
         engine.command(case.engine.ranks)  # binary and launcher present before anything is written
         derived = derive(case)
         check_run_length(derived, allow_long)

@@ -118,8 +118,29 @@ def linear_paper_a_contacts(data: dict) -> dict:
     return dust
 
 
+def test_liggghts_runs_clumps_on_one_rank_only(tmp_path, write_case):
+    """What an engine cannot do is its own check (Engine.check), told by validate, render and run
+    before anything is written, naming the field; the case itself is valid."""
+    from typer.testing import CliRunner
+
+    from siloflow.cli import app
+    from siloflow.engine import LiggghtsEngine
+    data = clump_dict()
+    data["engine"]["ranks"] = 2
+    case = case_from_dict(data)
+    assert [f for f, _ in LiggghtsEngine().check(case)] == ["engine.ranks"]
+    path = write_case(data)
+    for args in (["validate", str(path)], ["render", str(path), "-o", str(tmp_path / "deck")]):
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 1 and "engine.ranks" in result.output and "one rank" in result.output
+    assert not (tmp_path / "deck").exists()
+    with pytest.raises(CaseError, match="engine.ranks"):
+        LiggghtsEngine().prepare(case, tmp_path / "deck")
+    data["engine"]["ranks"] = 1
+    assert LiggghtsEngine().check(case_from_dict(data)) == []
+
+
 @pytest.mark.parametrize("path,value,field", [
-    ("engine.ranks", 2, "engine.ranks"),
     ("particles.dust.radius", 0.003, "particles.dust.radius"),
     ("particles.dust.dust_dust", {"friction": 0.3, "kn": 1e5, "kt": 5e4}, "particles.dust.dust_dust"),
     ("particles.dust.youngs_modulus", None, "particles.dust.youngs_modulus"),

@@ -132,10 +132,23 @@ def read_status(folder: Path) -> dict:
     return data
 
 
+def check_case(case: Case, engine: "Engine") -> None:
+    """Raise ``CaseError`` listing what ``engine`` cannot do of ``case`` (``Engine.check``)."""
+    from ..errors import CaseError
+    problems = engine.check(case)
+    if problems:
+        raise CaseError(problems, f"case (engine {engine.name})")
+
+
 class Engine(ABC):
     """A DEM engine siloflow can drive."""
 
     name: str = "abstract"
+
+    def check(self, case: Case) -> list[tuple[str, str]]:
+        """What this engine cannot do of ``case``: ``(field path, message)`` pairs, empty when it
+        can run it. ``siloflow validate``, ``render`` and ``run`` refuse a case with problems."""
+        return []
 
     @abstractmethod
     def prepare(self, case: Case, folder: Path, force: bool = False) -> Path:

@@ -18,7 +18,7 @@ from ..engine_output import FLOW_COLUMNS, read_ave_time
 from ..atomic_files import os_error, write_text
 from ..errors import EngineRunError, ReadError, SetupError, SiloflowError
 from ..run_folder import check_plain_tree
-from .base import Engine, ProgressCallback, RunRecord, read_status, run_state, write_status
+from .base import Engine, ProgressCallback, RunRecord, check_case, read_status, run_state, write_status
 from .liggghts_log import LogState, decode, diagnose, parse_log_text
 
 LOG_NAME = "log.liggghts"
@@ -73,7 +73,16 @@ class LiggghtsEngine(Engine):
                 return line.strip()
         return "LIGGGHTS (version not reported)"
 
+    def check(self, case: Case) -> list[tuple[str, str]]:
+        """LIGGGHTS-PUBLIC's limits: its multisphere (clumps) runs on one MPI rank."""
+        problems = []
+        if case.particles.kind == "clumps" and case.engine.ranks != 1:
+            problems.append(("engine.ranks", f"clumps (LIGGGHTS-PUBLIC multisphere) run on one rank only, "
+                                             f"not {case.engine.ranks}: set engine.ranks: 1"))
+        return problems
+
     def prepare(self, case: Case, folder: Path, force: bool = False, keep=()) -> Path:
+        check_case(case, self)
         folder = render(case, folder, force=force, keep=keep)
         write_status(folder, "rendered")
         return folder
