@@ -38,17 +38,18 @@ def read_regular_bytes(path, limit: int, what: str = "the file") -> bytes:
                 else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
                 else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
 
-    try:
-        mode = os.stat(path).st_mode
-        if not stat.S_ISREG(mode):
-            raise ValueError(f"{path} is {kind(mode)}; {what} must be a regular file")
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0))
-    except OSError as exc:
-        raise ValueError(f"cannot read {path}: {exc.strerror or exc}") from None
-    except ValueError as exc:
-        if "must be a regular file" in str(exc):
-            raise
-        raise ValueError(f"cannot read {path!r}: {exc}") from None      # e.g. a NUL byte in the path
+    def opened() -> int:
+        try:
+            mode = os.stat(path).st_mode
+            if stat.S_ISREG(mode):
+                return os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0))
+        except OSError as exc:
+            raise ValueError(f"cannot read {path}: {exc.strerror or exc}") from None
+        except ValueError as exc:                  # e.g. a NUL byte in the path
+            raise ValueError(f"cannot read {path!r}: {exc}") from None
+        raise ValueError(f"{path} is {kind(mode)}; {what} must be a regular file")
+
+    fd = opened()
     try:
         mode = os.fstat(fd).st_mode
         if not stat.S_ISREG(mode):          # replaced between the stat and the open
@@ -101,7 +102,7 @@ def check_free_folder(folder, force: bool, keep=()) -> None:
         if not force:
             raise SetupError(f"{folder} already exists and is not empty: choose another folder, "
                              "or pass --force to replace it (only a folder siloflow made, holding only its files)")
-        check_replaceable(folder, keep)
+        check_replaceable(folder)
 
 
 def os_error(exc: OSError, what, verb: str = "write") -> SetupError:

@@ -6,7 +6,6 @@ siloflow's named errors, mapped here to a message and exit code 1.
 from __future__ import annotations
 
 import json
-import re
 import signal
 import sys
 import time
@@ -18,7 +17,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from .case import Case, load_case
-from .errors import CaseError, ReadError, SiloflowError
+from .errors import ANSI_ESCAPES, CaseError, ReadError, SiloflowError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Silo discharge DEM simulations: case file -> LIGGGHTS deck -> run -> results.")
@@ -26,13 +25,10 @@ err = Console(stderr=True)
 out = Console()
 
 
-_ANSI = re.compile(r"\x1b(\[[0-?]*[ -/]*[@-~]|\][^\x07\x1b]*(\x07|\x1b\\)?|[@-Z\\-_])")
-
-
 def printable(text: str) -> str:
     """``text`` safe for a terminal: escape sequences removed, other control characters and
     undecodable bytes shown as escapes (engine output and case keys can hold anything)."""
-    text = _ANSI.sub("", str(text))
+    text = ANSI_ESCAPES.sub("", str(text))
     return "".join(c if c in "\n\t" or c.isprintable() else repr(c)[1:-1] for c in text)
 
 
@@ -151,7 +147,6 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     from .derived import check_run_length, derive
     from .disk_estimate import check_disk_space
     from .engine import get_engine
-    from .engine.base import check_case
     if resume is not None:
         if case_file is not None or output is not None:
             _fail(SiloflowError("--resume DIR takes no case file and no --output: the folder has both"))
@@ -162,7 +157,6 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     try:
         case = load_case(case_file)
         engine = get_engine(case.engine.name, executable=liggghts)
-        check_case(case, engine)           # what this engine cannot do, before anything is written
         engine.command(case.engine.ranks)  # binary and launcher present before anything is written
         derived = derive(case)
         check_run_length(derived, allow_long)
@@ -205,7 +199,6 @@ def _drive(folder: Path, work, post_process: bool) -> None:
 
 
 def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
-    from .deck import verify_deck
     from .engine import get_engine
     from .engine.base import run_state
     try:
@@ -213,8 +206,6 @@ def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
         engine = get_engine(case.engine.name, executable=liggghts)
         engine.command(case.engine.ranks)
         state = run_state(folder).get("state")
-        if state not in ("running", "complete"):
-            verify_deck(folder)         # before the progress bar: a foreign or edited deck never starts
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)

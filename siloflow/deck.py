@@ -85,6 +85,17 @@ def check_deck(text: str) -> None:
             raise DeckError(f"rendered deck line {lineno} is not allowed: {stripped[:120]!r}")
 
 
+def check_deck_file(path: Path) -> None:
+    """Refuse (``SetupError``) a deck file about to reach an engine that holds a command siloflow
+    does not write, or cannot be read."""
+    try:
+        check_deck(Path(path).read_text(encoding="utf-8", errors="replace"))
+    except OSError as exc:
+        raise SetupError(f"no readable deck {path}: {exc.strerror}") from None
+    except DeckError as exc:
+        raise SetupError(f"{path} is not a deck siloflow wrote ({exc}): refusing to run it") from None
+
+
 def _matrix(d: Derived, attr: str, particle_pairs: float | None = None) -> list[float]:
     """A peratomtypepair matrix (row-major, n_types^2) of ``attr`` from the per-type-pair
     parameters; ``particle_pairs`` overrides the particle-particle entries (frictionless fill).
@@ -319,13 +330,7 @@ def verify_deck(folder) -> None:
     from .case import load_case
     folder = Path(folder)
     check_plain_tree(folder)        # no link or FIFO: the engine's writes stay inside, the reads end
-    deck = folder / DECK_NAME
-    try:
-        check_deck(deck.read_text(encoding="utf-8", errors="replace"))
-    except OSError as exc:
-        raise SetupError(f"{folder} has no readable {DECK_NAME}: {exc.strerror}") from None
-    except DeckError as exc:
-        raise SetupError(f"{deck} is not a deck siloflow wrote ({exc}): refusing to run it") from None
+    check_deck_file(folder / DECK_NAME)
     case = load_case(folder / CASE_NAME)
     with tempfile.TemporaryDirectory(prefix="siloflow-verify-") as scratch:
         fresh = Path(scratch)

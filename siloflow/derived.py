@@ -423,16 +423,16 @@ def run_length_fields(case: Case, critical_source: str) -> dict[str, list[str]]:
 MAX_ENGINE_BINS = 2 ** 30
 
 
-def engine_bins(box: dict, radius: float) -> int:
+def engine_bins(box: dict, radius: float, skin: float) -> int:
     """How many neighbour bins LIGGGHTS makes for ``box`` (m) with grains of largest radius
-    ``radius`` (m): bins of half the neighbour cutoff 2 r + skin (skin 0.5 r), as its default."""
-    size = 0.5 * (2 * radius + 0.5 * radius)
+    ``radius`` and neighbour ``skin`` (m): bins of half the cutoff 2 r + skin, as its default."""
+    size = 0.5 * (2 * radius + skin)
     return math.prod(math.ceil((box[f"{a}hi"] - box[f"{a}lo"]) / size) for a in "xyz")
 
 
-def check_bins(box: dict, radius: float) -> None:
+def check_bins(box: dict, radius: float, skin: float) -> None:
     """Refuse a silo too many grains wide and tall for the engine's bins (``CaseError``)."""
-    bins = engine_bins(box, radius)
+    bins = engine_bins(box, radius, skin)
     if bins > MAX_ENGINE_BINS:
         size = max(box[f"{a}hi"] - box[f"{a}lo"] for a in "xyz")
         raise CaseError([("particles", f"grains of radius {radius:.3g} m in a silo whose box is {size:.3g} m long need "
@@ -678,7 +678,8 @@ def derive(case: Case) -> Derived:
     box = {"xlo": -g.half_width - margin, "xhi": max(g.half_width, plate_shift + g.outlet_radius) + margin,
            "ylo": -half_y - margin, "yhi": half_y + margin,
            "zlo": outlet_z - plate_travel - margin, "zhi": top + margin}
-    check_bins(box, r)
+    skin = 0.5 * r
+    check_bins(box, r, skin)
     static_steps = _steps(s.static_window, dt)
     if static_steps < 2 * sample_freq:      # the time check of the case can miss by a rounded step
         raise CaseError([("fill.settle.static_window", f"{static_steps} steps hold fewer than two samples of "
@@ -697,7 +698,7 @@ def derive(case: Case) -> Derived:
         sample_freq=sample_freq, dump_every=dump_every,
         outlet_z=outlet_z, outlet_disc_radius=g.outlet_radius + 2 * d, plate_travel=plate_travel, plate_shift=plate_shift,
         opening_speed=v_open,
-        box=box, skin=0.5 * r,
+        box=box, skin=skin,
         seeds={"insertion": prime_seed(case.seed, 1), "distribution": prime_seed(case.seed, 3),
                "templates": [prime_seed(case.seed, 10 + k) for k in range(len(species))],
                "dust_insertion": prime_seed(case.seed, 5), "dust_distribution": prime_seed(case.seed, 7),

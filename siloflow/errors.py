@@ -7,6 +7,12 @@ prints or exits.
 """
 from __future__ import annotations
 
+import re
+
+#: terminal escape sequences (CSI ``ESC [ ... final``, OSC ``ESC ] ... BEL/ST``, two-byte ``ESC x``),
+#: removed from engine output and case text before either reaches the terminal
+ANSI_ESCAPES = re.compile(r"\x1b(\[[0-?]*[ -/]*[@-~]|\][^\x07\x1b]*(\x07|\x1b\\)?|[@-Z\\-_])")
+
 
 class SiloflowError(Exception):
     """Base class of every error siloflow raises on purpose."""

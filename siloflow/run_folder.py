@@ -157,21 +157,20 @@ def check_not_in_use(folder, keep=()) -> None:
             raise SetupError(f"{folder} holds {path}, a file this command reads: choose another output folder")
 
 
-def check_replaceable(folder, keep=()) -> None:
-    """Refuse to replace ``folder`` unless siloflow made it, no run is live in it, and everything
-    in it is siloflow's and unchanged (see :func:`foreign_entries`). Raises ``SetupError``."""
+def check_replaceable(folder) -> None:
+    """Refuse to replace ``folder`` (already past :func:`check_not_in_use`) unless siloflow made
+    it, no run is live in it, and everything in it is siloflow's and unchanged (see
+    :func:`foreign_entries`). Raises ``SetupError``."""
     from .engine.base import run_state
+    from .errors import ReadError
     folder = Path(folder).absolute()
-    check_not_in_use(folder, keep)
     real = folder.resolve()
     if not (real / MANIFEST_NAME).is_file():
         raise SetupError(f"{folder} is not a folder siloflow made (no {MANIFEST_NAME}): --force only replaces "
                          "siloflow's own run folders; choose another output folder or empty it yourself")
     try:
         live = (real / "status.json").exists() and run_state(real)["state"] == "running"
-    except SetupError:
-        raise
-    except Exception:                   # an unreadable status is not a live run
+    except ReadError:                   # an unreadable status is not a live run
         live = False
     if live:
         raise SetupError(f"{folder} holds a run that is still running: stop it first (Ctrl-C in its terminal)")

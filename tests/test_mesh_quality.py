@@ -50,7 +50,7 @@ def _grains_only_make_the_case_valid(monkeypatch, request):
     test_engine_failures.py). The meshes are what is measured here: the bin check is lifted,
     except in the engine test, which runs only cases siloflow accepts."""
     if request.node.get_closest_marker("engine") is None:
-        monkeypatch.setattr("siloflow.derived.check_bins", lambda box, radius: None)
+        monkeypatch.setattr("siloflow.derived.check_bins", lambda box, radius, skin: None)
 
 
 def extreme_case(geometry: dict, sensors: dict | None = None, **over):

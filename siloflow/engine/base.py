@@ -94,10 +94,10 @@ def _alive(pid, start=None) -> bool:
         pass
     if start is None:                    # a status written before start times were recorded
         try:
-            return b"python" in Path(f"/proc/{pid}/cmdline").read_bytes() or b"siloflow" in Path(
-                f"/proc/{pid}/cmdline").read_bytes()
+            command = Path(f"/proc/{pid}/cmdline").read_bytes()
         except OSError:
             return True
+        return b"python" in command or b"siloflow" in command
     return process_start(pid) == start
 
 

@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Optional
 
 from ..case import Case
-from ..deck import (DECK_NAME, DERIVED_NAME, RESTART_FILE, RESUME_DECK_NAME, DeckError, check_deck, render,
-                    verify_deck, write_resume_deck)
+from ..deck import (DECK_NAME, DERIVED_NAME, RESTART_FILE, RESUME_DECK_NAME, check_deck_file, render, verify_deck,
+                    write_resume_deck)
 from ..engine_output import FLOW_COLUMNS, read_ave_time
 from ..atomic_files import os_error, write_text
 from ..errors import EngineRunError, ReadError, SetupError, SiloflowError
@@ -118,10 +118,7 @@ class LiggghtsEngine(Engine):
             raise SetupError(f"{folder} is incomplete: missing {', '.join(missing) or deck}; "
                              "re-render it with 'siloflow render'")
         check_plain_tree(folder)             # the engine writes by name: no link may lead it outside
-        try:                                 # defence in depth: only siloflow's commands reach the engine
-            check_deck((folder / deck).read_text(encoding="utf-8", errors="replace"))
-        except DeckError as exc:
-            raise SetupError(f"{folder / deck} is not a deck siloflow wrote ({exc}): refusing to run it") from None
+        check_deck_file(folder / deck)       # defence in depth: only siloflow's commands reach the engine
         cmd = self.command(int(derived["engine_ranks"]), deck, log)
         planned = {k: int(v) for k, v in derived["planned_steps"].items()}
         state = LogState()
@@ -129,7 +126,7 @@ class LiggghtsEngine(Engine):
         start = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, start_new_session=True, preexec_fn=_die_with_parent)
-        write_status(folder, "running", command=cmd, engine_pid=proc.pid, siloflow_pid=os.getpid())
+        write_status(folder, "running", command=cmd, engine_pid=proc.pid)     # siloflow's own pid: added there
         disk_full = None
         try:
             screen_fd = os.open(folder / screen_name, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o644)
@@ -237,9 +234,7 @@ class LiggghtsEngine(Engine):
             text = _log_text(folder)
             record = RunRecord(**json.loads((folder / RECORD_NAME).read_text()))
         except (OSError, ValueError, TypeError) as exc:
-            message = f"{folder} holds no finished LIGGGHTS run ({exc})"
-            write_status(folder, "failed", reason=message)
-            raise ReadError(message) from None
+            raise ReadError(f"{folder} holds no finished LIGGGHTS run ({exc})") from None   # recorded by collect
         state = parse_log_text(text)
         record.stage_steps, record.inserted, record.completed = state.stage_steps, state.inserted, state.done
         record.settled_ke_pe = state.settled_ke_pe

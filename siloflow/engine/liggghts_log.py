@@ -8,6 +8,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
+from ..deck import LIGGGHTS_VOLUME_LIMIT
+from ..errors import ANSI_ESCAPES
+
 _STAGE = re.compile(r"^SILOFLOW_STAGE (\w+) (\d+)\s*$")
 _MARK = re.compile(r"^SILOFLOW_(INSERTED|SETTLED|NOT_SETTLED|DONE)\s*(\S*)\s*$")
 _THERMO = re.compile(r"^\s*(\d+)\s+([-+0-9.eE]+)\s+(\d+)(\s+[-+0-9.eEnaif]+)*\s*$")
@@ -105,17 +108,13 @@ def parse_log_text(text: str) -> LogState:
     return state
 
 
-#: terminal escape sequences (CSI ``ESC [ ... final``, OSC ``ESC ] ... BEL/ST``, two-byte ``ESC x``)
-_ANSI = re.compile(r"\x1b(\[[0-?]*[ -/]*[@-~]|\][^\x07\x1b]*(\x07|\x1b\\)?|[@-Z\\-_])")
-
-
 def printable(text: str) -> str:
     """``text`` with printable characters only (and line breaks): escape sequences, control characters
     and undecodable bytes are dropped, tabs become spaces. Engine output passes through this before it
     reaches a message, a status or a log tail."""
     if "\ufffd" not in text and text.replace("\n", "").isprintable():
         return text                                   # the usual line: nothing to drop
-    text = _ANSI.sub("", text).replace("\t", " ")
+    text = ANSI_ESCAPES.sub("", text).replace("\t", " ")
     return "".join(c for c in text if c == "\n" or (c.isprintable() and c != "\ufffd"))
 
 
@@ -126,8 +125,9 @@ def decode(raw: bytes) -> str:
 
 
 # ----------------------------------------------------------------- diagnosis
-#: LIGGGHTS' default volume_limit of particletemplate/sphere and /multisphere, m3 (fix_template_sphere.cpp)
-VOLUME_LIMIT = 1e-12
+#: LIGGGHTS' default volume_limit of particletemplate/sphere and /multisphere, m3 (fix_template_sphere.cpp);
+#: the deck lowers it for small spheres, so the refusal is left to clumps
+VOLUME_LIMIT = LIGGGHTS_VOLUME_LIMIT
 #: radius of a sphere of that volume, m (about 62 um)
 VOLUME_LIMIT_RADIUS = (3 * VOLUME_LIMIT / (4 * 3.141592653589793)) ** (1 / 3)
 _TEMPLATE_ID = re.compile(r"\(id (\S+)\): Volume expectancy too small")
