@@ -25,8 +25,9 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from cg_frame import synthetic_frame  # noqa: E402
+from postprocess.cg_grids import AxisymmetricGrid, CartesianGrid  # noqa: E402
 from postprocess.cg_kernels import gaussian  # noqa: E402
-from postprocess.coarse_grain import AxisymmetricGrid, CartesianGrid, coarse_grain_frame, fields_from_sums  # noqa: E402
+from postprocess.coarse_grain import coarse_grain_frame, fields_from_sums  # noqa: E402
 
 GL_X, GL_W = np.polynomial.legendre.leggauss(16)
 

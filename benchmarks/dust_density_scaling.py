@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from postprocess.first_results import analyse  # noqa: E402
-from siloflow.case import case_from_dict  # noqa: E402
+from siloflow.case_file import case_from_dict  # noqa: E402
 from siloflow.derived import derive  # noqa: E402
 from siloflow.engine import LiggghtsEngine  # noqa: E402
 from siloflow.errors import EngineRunError  # noqa: E402

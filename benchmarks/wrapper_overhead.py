@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from postprocess.first_results import analyse  # noqa: E402
-from siloflow.case import load_case  # noqa: E402
+from siloflow.case_file import load_case  # noqa: E402
 from siloflow.engine import LiggghtsEngine  # noqa: E402
 
 

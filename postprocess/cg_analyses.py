@@ -110,7 +110,7 @@ def species_kinetic_table(ds, z_outlet: float, height: float | None = None) -> p
 def cg_figures(ds, folder, z_outlet: float, outlet_radius: float) -> list[Path]:
     """Maps of solid fraction and v_z (paper B Figs. 3-4), outlet profiles (Figs. 5-6), axial
     pressure profiles (Figs. 8-10) and kinetic pressure by size (Figs. 11-12)."""
-    from .figures import _save, plt
+    from .figures import plt, save_figure
 
     folder = Path(folder)
     written = []
@@ -125,7 +125,7 @@ def cg_figures(ds, folder, z_outlet: float, outlet_radius: float) -> list[Path]:
         ax.set(title=title, xlabel="r (m)")
     axes[0].set_ylabel("z (m)")
     fig.tight_layout()
-    _save(fig, folder / "cg_maps.png")
+    save_figure(fig, folder / "cg_maps.png")
     written.append(folder / "cg_maps.png")
 
     prof = outlet_profiles(ds, z_outlet, outlet_radius)
@@ -136,7 +136,7 @@ def cg_figures(ds, folder, z_outlet: float, outlet_radius: float) -> list[Path]:
     ax.set(xlabel="r / R", ylabel="normalised", title=f"outlet profiles at z = {prof.z.iloc[0]:.4g} m")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    _save(fig, folder / "cg_outlet_profiles.png")
+    save_figure(fig, folder / "cg_outlet_profiles.png")
     written.append(folder / "cg_outlet_profiles.png")
 
     axial = axial_profiles(ds, z_outlet)
@@ -148,7 +148,7 @@ def cg_figures(ds, folder, z_outlet: float, outlet_radius: float) -> list[Path]:
     ax.set(xlabel="z / R (above the outlet)", ylabel="pressure on the axis (Pa)", title="axial pressure profiles")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    _save(fig, folder / "cg_axial_pressure.png")
+    save_figure(fig, folder / "cg_axial_pressure.png")
     written.append(folder / "cg_axial_pressure.png")
 
     if "kinetic_pressure_species" in ds:
@@ -162,6 +162,6 @@ def cg_figures(ds, folder, z_outlet: float, outlet_radius: float) -> list[Path]:
         a2.set(xlabel="particle radius (mm)", ylabel="(p_k^a / phi^a) / (p_k / phi)",
                title="kinetic pressure per solid fraction, by size")
         fig.tight_layout()
-        _save(fig, folder / "cg_kinetic_by_size.png")
+        save_figure(fig, folder / "cg_kinetic_by_size.png")
         written.append(folder / "cg_kinetic_by_size.png")
     return written

@@ -1,6 +1,6 @@
 """Fast axisymmetric coarse-graining: sources spread onto a fine (rho, z) lattice, ring moments tabulated.
 
-The exact (r, z) sum (:class:`coarse_grain.AxisymmetricGrid` with ``method="exact"``) evaluates
+The exact (r, z) sum (:class:`cg_grids.AxisymmetricGrid` with ``method="exact"``) evaluates
 the kernel's azimuthal moments by quadrature for every (source, node) pair: for paper B-sized
 frames, most of the time goes there, and contacts (several line-integral points each) are
 most of the sources. Here instead:
@@ -31,6 +31,8 @@ import math
 
 import numpy as np
 from numba import njit, prange
+
+from .cg_cores import GL_A_W, GL_A_X, GL_U, moment_table
 
 # lattice nodes beyond the cutoff that a source's 4-point stencil can reach
 _STENCIL = 2
@@ -81,8 +83,6 @@ class RingMomentLattice:
     nodes per grid cell and direction. Build once, :meth:`accumulate` any number of frames."""
 
     def __init__(self, grid, kernel, refine: int = 2, block: int = 16):
-        from .coarse_grain import _GL_A_W, _GL_A_X, _GL_U, _moment_table
-
         if refine < 2 or refine % 2:
             raise ValueError("lattice refinement must be an even number >= 2")
         self.grid, self.kernel, self.k, self.block = grid, kernel, int(refine), int(block)
@@ -98,8 +98,8 @@ class RingMomentLattice:
         rho_lat = (np.arange(self.nlr) - 1.0) * self.hr
         dz_vals = np.arange(self.Q + 1) * self.hz
         self.table = np.zeros((3, self.Q + 1, grid.nr, self.nlr))
-        _moment_table(kernel.kind, kernel.norm, c, kernel.width, r_nodes, rho_lat, dz_vals,
-                      _GL_A_X, _GL_A_W, *_GL_U[kernel.kind], self.table)
+        moment_table(kernel.kind, kernel.norm, c, kernel.width, r_nodes, rho_lat, dz_vals,
+                     GL_A_X, GL_A_W, *GL_U[kernel.kind], self.table)
         # per (|offset|, block of grid radii): the band of lattice radii with a non-zero moment
         self.bands = {}
         for q in range(self.Q + 1):

@@ -11,10 +11,12 @@ import numpy as np
 
 from siloflow.atomic_files import write_json, write_text
 from siloflow.errors import ReadError
+from siloflow.run_folder import CG_SUMMARY_NAME, RunFolder
 
 from .cg_analyses import axial_profiles, cg_figures, janda_fit, kinetic_peak_height, outlet_profiles, species_kinetic_table
 from .cg_kernels import make_kernel
-from .coarse_grain import AxisymmetricGrid, CartesianGrid, CoarseGraining
+from .cg_grids import AxisymmetricGrid, CartesianGrid
+from .coarse_grain import CoarseGraining
 from .dumps import dump_files, read_frames
 
 
@@ -39,40 +41,32 @@ class CgSetup:
     note: str | None = None                  # said in cg_summary.json
 
 
-def setup_from_run(folder: Path) -> CgSetup:
+def setup_from_run(folder) -> CgSetup:
     """Grid and window of a siloflow run: the silo radius, the outlet region to the settled
     surface, and the steady-flow window of its results."""
-    from siloflow.case import load_case
-
-    case = load_case(folder / "case.yaml")
-    derived = json.loads((folder / "derived.json").read_text())
-    try:
-        summary = json.loads((folder / "results" / "summary.json").read_text())
-    except (OSError, ValueError):
-        raise ReadError(f"{folder}: run `siloflow post {folder}` first (the steady window comes from its results)") from None
-    dt = float(derived["timestep"])
+    run = folder if isinstance(folder, RunFolder) else RunFolder(folder)
+    plan = run.plan
+    summary = run.read_summary()
+    dt = plan.dt
     rate = summary["flow_rate"]
-    dumps = folder / "output" / "dumps"
-    atoms = dump_files(str(dumps / "dump.*.txt"))
-    try:
-        contacts = dump_files(str(dumps / "contacts.*.txt"))
-    except ReadError:
-        contacts = None
-    try:
-        walls = dump_files(str(dumps / "wall_contacts.*.txt")) if derived.get("wall_contact_columns") else None
-    except ReadError:
-        walls = None
-    g = case.geometry
-    top = summary.get("frame_analyses", {}).get("settled_surface_height_m") or (g.hopper_height + g.height)
-    densities = {float(sp["density"]) for sp in derived.get("species", [])}
+    atoms = run.dump_files("particles")
+    if atoms is None:
+        raise ReadError(f"{run.path}: no particle dumps (outputs.dump_interval was not set)")
+    layout = run.dump_layout
+    contacts = run.dump_files("contacts")
+    walls = run.dump_files("wall_contacts") if layout.wall_contact_columns else None
+    g = plan.geometry
+    top = summary.get("frame_analyses", {}).get("settled_surface_height_m") or g.top
+    densities = {sp.density for sp in plan.species}
+    rho_p = plan.grains[0].density
     note = None
     if len(densities) > 1:
         note = (f"species of different densities ({', '.join(f'{v:g}' for v in sorted(densities))} kg/m3): "
-                f"without partial fields (--species none), solid_fraction = rho / {case.materials.particle.density:g} "
+                f"without partial fields (--species none), solid_fraction = rho / {rho_p:g} "
                 "counts the others by their mass")
-    return CgSetup(atoms, contacts, derived.get("contact_columns") or None, g.half_width, float(derived["outlet_z"]),
-                   float(top), 0.0, g.outlet_radius, case.materials.particle.density,
-                   int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, derived.get("wall_contact_columns"),
+    return CgSetup(atoms, contacts, layout.contact_columns or None, g.half_width, plan.outlet.z,
+                   float(top), 0.0, g.outlet_radius, rho_p,
+                   int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, layout.wall_contact_columns or None,
                    slab_thickness=g.thickness if g.kind == "planar" else None, note=note)
 
 
@@ -135,7 +129,7 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
             table = species_kinetic_table(ds, setup.z_outlet)
             write_text(out / "species_kinetic.csv", table.to_csv(index=False))
         summary["figures"] = [p.name for p in cg_figures(ds, out, setup.z_outlet, setup.outlet_radius)]
-    write_json(out / "cg_summary.json", summary)
+    write_json(out / CG_SUMMARY_NAME, summary)
     return summary
 
 
@@ -150,9 +144,9 @@ def scaling_across_runs(folders) -> dict:
     rows = []
     for folder in folders:
         try:
-            s = json.loads((Path(folder) / "cg_summary.json").read_text())
+            s = json.loads((Path(folder) / CG_SUMMARY_NAME).read_text())
         except (OSError, ValueError):
-            raise ReadError(f"{folder}: no cg_summary.json (run `siloflow cg` first)") from None
+            raise ReadError(f"{folder}: no {CG_SUMMARY_NAME} (run `siloflow cg` first)") from None
         if "v_z_centre_outlet" not in s:
             raise ReadError(f"{folder}: not an axisymmetric coarse-graining")
         rows.append({"folder": str(folder), "R": s["outlet_radius_m"], "v_z0": abs(s["v_z_centre_outlet"]),

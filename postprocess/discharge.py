@@ -1,10 +1,65 @@
-"""Discharged mass vs time and the steady mass flow rate."""
+"""Discharged mass vs time, the steady mass flow rate, and the one straight-line fit
+(``straight_line_fit``) that every rate in postprocess is measured with."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+
+
+@dataclass
+class LineFit:
+    """Least-squares straight line ``values = intercept + slope * time`` (time in s).
+
+    slope: units of ``values`` per s (kg/s for a discharged mass in kg); stderr: standard
+    error of the slope, same units, from the residual variance with n - 2 degrees of freedom;
+    intercept: units of ``values`` at t = 0 s; r2: coefficient of determination (NaN when
+    the values are constant); t_start, t_end: first and last sample time, s.
+    """
+
+    slope: float
+    stderr: float
+    intercept: float
+    r2: float
+    t_start: float
+    t_end: float
+    n_samples: int
+
+
+def straight_line_fit(time, values) -> LineFit:
+    """Ordinary least-squares line through (``time`` (s), ``values``).
+
+    Closed form about the mean time (well conditioned even far from t = 0):
+    slope = sum(dt dv) / sum(dt^2), stderr = sqrt(ss_res / (n - 2) / sum(dt^2)), with
+    dt = t - mean(t), dv = v - mean(v), ss_res the sum of squared residuals. This is the
+    stderr of np.polyfit(deg=1, cov=True) and of scipy.stats.linregress. Fewer than 3
+    samples, or all at the same time: NaN slope, stderr, intercept and r2. NaN in the
+    data gives NaN results.
+    """
+    t = np.asarray(time, float)
+    v = np.asarray(values, float)
+    if t.shape != v.shape or t.ndim != 1:
+        raise ValueError(f"time and values must be 1-d and of the same length, not {t.shape} and {v.shape}")
+    n = len(t)
+    nan = float("nan")
+    t_start, t_end = (float(t[0]), float(t[-1])) if n else (nan, nan)
+    t_mean = float(t.mean()) if n else nan
+    dt = t - t_mean
+    stt = float(dt @ dt)
+    if n < 3 or stt == 0.0:
+        return LineFit(nan, nan, nan, nan, t_start, t_end, n)
+    v_mean = float(v.mean())
+    dv = v - v_mean
+    slope = float(dt @ dv) / stt
+    res = dv - slope * dt
+    ss_res = float(res @ res)
+    ss_tot = float(dv @ dv)
+    return LineFit(slope=slope, stderr=math.sqrt(ss_res / (n - 2) / stt),
+                   intercept=v_mean - slope * t_mean,
+                   r2=1.0 - ss_res / ss_tot if ss_tot > 0 else nan,
+                   t_start=t_start, t_end=t_end, n_samples=n)
 
 
 @dataclass
@@ -28,7 +83,8 @@ def steady_flow_rate(time, mass, t_open: float, skip: float = 0.2, min_remaining
 
     The window starts ``skip`` s after ``t_open`` (or after a fifth of the discharge, if
     shorter) and ends when less than ``min_remaining`` of ``initial_mass`` is left in the
-    silo (the flow slows as the silo empties). Returns NaN rate if fewer than 5 samples fit.
+    silo (the flow slows as the silo empties). The fit is ``straight_line_fit``; rate and
+    stderr in kg/s (for mass in kg). Returns NaN rate if fewer than 5 samples fit.
     """
     time = np.asarray(time, float)
     mass = np.asarray(mass, float)
@@ -40,20 +96,14 @@ def steady_flow_rate(time, mass, t_open: float, skip: float = 0.2, min_remaining
     t, m = time[keep], mass[keep]
     if len(t) < 5:
         return FlowRate(float("nan"), float("nan"), start, t_end_data, int(len(t)), float("nan"))
-    A = np.vstack([t, np.ones_like(t)]).T
-    coef, res, *_ = np.linalg.lstsq(A, m, rcond=None)
-    fit = A @ coef
-    ss_res = float(((m - fit) ** 2).sum())
-    ss_tot = float(((m - m.mean()) ** 2).sum())
-    stderr = np.sqrt(ss_res / (len(t) - 2) / ((t - t.mean()) ** 2).sum())
-    return FlowRate(float(coef[0]), float(stderr), float(t[0]), float(t[-1]), int(len(t)),
-                    1.0 - ss_res / ss_tot if ss_tot > 0 else float("nan"))
+    fit = straight_line_fit(t, m)
+    return FlowRate(fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples, fit.r2)
 
 
 def discharge_table(flow: pd.DataFrame, timestep: float, t_open: float) -> pd.DataFrame:
-    """Time series of the discharge: time (s), time since opening, mass through the outlet,
+    """From a run folder's ``flow`` table (``siloflow.run_folder.FLOW_SCHEMA``), time series of the discharge: time (s), time since opening, mass through the outlet,
     mass above the outlet, particles present."""
     t = flow["step"] * timestep
     return pd.DataFrame({"step": flow["step"], "time": t, "time_since_open": t - t_open,
-                         "outlet_mass": flow["outlet_mass"], "mass_in_silo": flow["mass_silo"],
+                         "outlet_mass": flow["discharged_mass"], "mass_in_silo": flow["mass_silo"],
                          "mass_total": flow["mass_total"], "particles": flow["atoms"].astype(int)})

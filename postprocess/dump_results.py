@@ -2,7 +2,7 @@
 force chains, free surface and Wr vs Wf, and the Janssen fit of the settled wall-pressure
 profile. Called by :func:`postprocess.first_results.analyse` when the run wrote dumps.
 
-Everything is read from the folder (case.yaml, derived.json, output/dumps); the geometry only
+Everything is read from the folder (its run plan and dumps, through ``RunFolder``); the geometry only
 places the measurement regions (the bulk core: two grain diameters from the wall, three
 from the bottom and the free surface).
 """
@@ -14,7 +14,6 @@ import numpy as np
 import pandas as pd
 
 from siloflow.atomic_files import write_text
-from siloflow.case import load_case
 from siloflow.errors import ReadError
 
 from .coordination import Coordination
@@ -25,35 +24,14 @@ from .janssen import fit_janssen
 from .porosity import MeasureRegion, Porosity
 
 
-def _dump_sources(folder):
-    dumps = folder / "output" / "dumps"
-    try:
-        atoms = dump_files(str(dumps / "dump.*.txt"))
-    except ReadError:
-        return None, None
-    try:
-        contacts = dump_files(str(dumps / "contacts.*.txt"))
-    except ReadError:
-        contacts = None
-    return atoms, contacts
-
-
-def species_densities(derived: dict) -> dict[int, float] | None:
-    """Particle density (kg/m3) per atom type from a run's derived.json (None for old folders)."""
-    species = derived.get("species")
-    if not species:
-        return None
-    return {int(s["type"]): float(s["density"]) for s in species}
-
-
-def bed_regions(case, surface: float, d: float) -> list[MeasureRegion]:
+def bed_regions(g, surface: float, d: float) -> list[MeasureRegion]:
     """Measurement cylinders about the silo axis in the settled bed, three grain diameters
     from the bottom and the free surface: ``bulk_core`` (two diameters from the wall: the
     bulk solid fraction) and ``cross_section`` (the whole radius, wall layers included: the
     solid fraction that converts a free-surface speed into a mass flow rate). A slab silo
     gets discs through its thickness at mid-bed, the cross-section one reaching the side
-    walls only when the bed is at least as deep as the silo is wide."""
-    g = case.geometry
+    walls only when the bed is at least as deep as the silo is wide. ``g``: the plan's geometry
+    (``siloflow.plan.Silo``)."""
     z0 = g.hopper_height + 3.0 * d
     z1 = surface - 3.0 * d
     if z1 - z0 < 2.0 * d:
@@ -78,20 +56,20 @@ def janssen_diameter(g) -> float:
     return 4.0 * g.width * g.thickness / perimeter
 
 
-def case_regions(case) -> list[MeasureRegion]:
-    """The case's own measurement regions (``analysis.porosity_regions``)."""
+def case_regions(analysis) -> list[MeasureRegion]:
+    """The case's own measurement regions (``analysis.porosity_regions`` of the plan)."""
     axes = {"x": 0, "y": 1, "z": 2}
     return [MeasureRegion(r.name, r.shape, tuple(r.center), r.radius, axes[r.axis], r.t0, r.t1, r.plane)
-            for r in case.analysis.porosity_regions]
+            for r in analysis.porosity_regions]
 
 
-def case_regions_porosity(case, atoms_files, settled: Frame, out) -> dict:
+def case_regions_porosity(analysis, atoms_files, settled: Frame, out) -> dict:
     """Porosity in the case's regions over all frames (porosity_regions.csv); the settled values."""
-    a = case.analysis
+    a = analysis
     conversion = None
     if a.relative_density is not None:
         conversion = {"relative_density": a.relative_density, "reading": a.porosity_conversion}
-    analysis = Porosity(case_regions(case), conversion)
+    analysis = Porosity(case_regions(a), conversion)
     analysis.name = "porosity_regions"
     analysis.run(read_frames(atoms_files))
     analysis.save(out)
@@ -102,20 +80,21 @@ def case_regions_porosity(case, atoms_files, settled: Frame, out) -> dict:
 
 def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_rate) -> dict:
     """Run the frame analyses of a run folder; write tables and figures to ``out``; return a summary."""
-    atoms_files, contact_files = _dump_sources(run.folder)
+    atoms_files = run.run.dump_files("particles")
+    contact_files = run.run.dump_files("contacts")
     if atoms_files is None:
         return {"dumps": "none written (outputs.dump_interval unset): frame analyses skipped"}
-    case = load_case(run.folder / "case.yaml")
+    plan = run.plan
     dt = run.dt
     open_step = run.stage_steps["open"]
-    columns = run.derived.get("contact_columns") or None
+    columns = run.run.dump_layout.contact_columns or None
     has_contacts = bool(contact_files) and bool(columns)
 
     def contact_frames(wanted=None):
         """Contact frames streamed from disk (a long run's do not fit in memory together)."""
         return read_frames(contact_files, columns=columns, steps=wanted)
 
-    g = case.geometry
+    g = plan.geometry
     R = g.half_width
     planar = g.kind == "planar"
 
@@ -132,16 +111,16 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     h_settled = float(surface.table.loc[surface.table.step == settled.timestep, "surface_height"].iloc[0])
 
     # bulk solid fraction of the settled bed
-    rho_p = case.materials.particle.density
+    rho_p = plan.grains[0].density
     summary["settled_surface_height_m"] = h_settled
     try:
-        regions = bed_regions(case, h_settled, d)
+        regions = bed_regions(g, h_settled, d)
     except ReadError as exc:     # a shallow bed: say so and skip what needs its solid fraction
         regions = None
         summary["bulk_solid_fraction"] = {"error": str(exc)}
     if regions is not None:
         try:
-            por = Porosity(regions, densities=species_densities(run.derived)).run([settled])
+            por = Porosity(regions, densities=run.run.species_densities()).run([settled])
         except ValueError as exc:      # a type the run's species do not list: the grain density only
             summary["bulk_density_note"] = f"{exc}; bulk density = particle density x solid fraction"
             por = Porosity(regions).run([settled])
@@ -156,8 +135,8 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
         summary["bulk_density_kg_m3"] = rho_bulk
         summary["cross_section_solid_fraction"] = phi_section
         summary["cross_section_bulk_density_kg_m3"] = rho_section
-    if case.analysis.porosity_regions:
-        summary["porosity_regions"] = case_regions_porosity(case, atoms_files, settled, out)
+    if plan.analysis.porosity_regions:
+        summary["porosity_regions"] = case_regions_porosity(plan.analysis, atoms_files, settled, out)
 
     # coordination number in the core, every contact frame
     def core(frame: Frame) -> np.ndarray:
@@ -204,7 +183,7 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     static = bands_table[bands_table.z_mid < h_settled]
     try:
         fit = fit_janssen(h_settled - static.z_mid, static.static_pressure, rho_section,
-                          janssen_diameter(g), float(run.derived["gravity"]))
+                          janssen_diameter(g), plan.gravity)
         summary["janssen_static"] = asdict(fit)
     except ValueError as exc:
         summary["janssen_static"] = {"error": str(exc)}

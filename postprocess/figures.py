@@ -10,7 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 
-def _save(fig, path) -> None:
+def save_figure(fig, path) -> None:
+    """Write ``fig`` to ``path`` at 130 dpi (format from the suffix) atomically, through a temporary file, and close it."""
     path = Path(path)
     tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
     fig.savefig(tmp, dpi=130)
@@ -39,7 +40,7 @@ def first_results_figure(bands, discharge, band_table, t_open: float, path) -> N
     ax3.set(xlabel="time (s)", ylabel="mass (g)", title="discharge")
     ax3.legend(fontsize=8)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def line_figure(table, x: str, y, path, hue: str | None = None, xlabel: str = "", ylabel: str = "",
@@ -57,5 +58,5 @@ def line_figure(table, x: str, y, path, hue: str | None = None, xlabel: str = ""
     ax.set(xlabel=xlabel or x, ylabel=ylabel or str(y), title=title)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
     return Path(path)

@@ -2,57 +2,49 @@
 dynamic), force balance of the settled bed; written as CSV/Parquet tables, summary.json
 and one figure.
 
-Reads only what the run left (derived.json, run_record.json, output/*.txt), so it runs
-on any finished siloflow run folder.
+Reads only what the run left, through ``siloflow.run_folder.RunFolder`` (its plan, record and
+the engine-neutral flow and wall-force tables), so it runs on any finished siloflow run folder,
+whichever engine wrote it.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import asdict
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from siloflow.atomic_files import write_json, write_text
-from siloflow.engine_output import FLOW_COLUMNS, read_ave_time
 from siloflow.errors import ReadError
+from siloflow.run_folder import SUMMARY_NAME, RunFolder
 
 from .discharge import discharge_table, steady_flow_rate
 from .dump_results import analyse_dumps
 from .flow_rate import rate_series, steady_window
 from .janssen import compare_with_measurement
-from .wall_pressure import band_mean, band_pressures, vertical_load, wall_force_columns
-
-#: LIGGGHTS' f_<mesh>[1..3] of mesh/surface/stress is the force the grains exert on the mesh
-FORCE_SIGN = 1.0
-RESULTS = "results"
-
-
-def _load_json(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise ReadError(f"cannot read {path}: {exc}") from None
+from .wall_pressure import band_mean, band_pressures, vertical_load, wide_forces
 
 
 class RunOutputs:
     """The tables of one run folder, with the stage boundaries in time (s)."""
 
     def __init__(self, folder):
-        self.folder = Path(folder)
-        self.derived = _load_json(self.folder / "derived.json")
-        self.record = _load_json(self.folder / "run_record.json")
-        self.dt = float(self.derived["timestep"])
-        self.walls = self.derived["walls"]
-        self.flow = read_ave_time(self.folder / "output" / "flow.txt", FLOW_COLUMNS)
-        self.forces = read_ave_time(self.folder / "output" / "wall_forces.txt", wall_force_columns(self.walls))
-        steps = self.record["stage_steps"]
+        self.run = folder if isinstance(folder, RunFolder) else RunFolder(folder)
+        self.folder = self.run.path
+        self.plan = self.run.plan
+        self.record = self.run.record
+        self.dt = self.plan.dt
+        self.walls = self.plan.walls
+        self.flow = self.run.flow()
+        try:
+            self.forces = wide_forces(self.run.wall_forces(), self.walls)
+        except ValueError as exc:
+            raise ReadError(f"{self.folder}: {exc}") from None
+        steps = self.record.stage_steps
         missing = [s for s in ("static", "open", "discharge") if s not in steps]
         if missing:
             raise ReadError(f"{folder}: the run never reached stage(s) {', '.join(missing)}")
         self.stage_steps = {k: int(v) for k, v in steps.items()}
-        self.sample_steps = int(self.derived["sample_freq"])
+        self.sample_steps = self.plan.outputs.sample_steps
 
     def stage_time(self, stage: str) -> float:
         return self.stage_steps[stage] * self.dt
@@ -72,9 +64,9 @@ def analyse(folder, measured_pressure=None) -> dict:
     band by band with the run (paper A's Table 3 and Eq. 34), written to pressure_comparison.csv.
     """
     run = RunOutputs(folder)
-    out = run.folder / RESULTS
+    out = run.run.results
     out.mkdir(exist_ok=True)
-    g = float(run.derived["gravity"])
+    g = run.plan.gravity
     t_open = run.stage_time("open")
 
     # discharge
@@ -90,7 +82,7 @@ def analyse(folder, measured_pressure=None) -> dict:
               "median_rate": float(np.nanmedian(w[i0:i1])), "tolerance": 0.2} if i1 > i0 else None
 
     # wall pressure
-    sectors = band_pressures(run.forces, run.walls, FORCE_SIGN)
+    sectors = band_pressures(run.forces, run.walls)
     bands = band_mean(sectors)
     bands.insert(1, "time", bands.step * run.dt)
     static_mask = static_window(bands, run)
@@ -107,13 +99,13 @@ def analyse(folder, measured_pressure=None) -> dict:
     table = table.reset_index()
 
     # force balance of the settled bed
-    load = vertical_load(run.forces, run.walls, FORCE_SIGN)
+    load = vertical_load(run.forces, run.walls)
     fmask = static_window(run.forces, run)
     fstatic = run.flow[(run.flow.step > run.stage_steps["static"]) & (run.flow.step <= run.stage_steps["open"])]
     weight = float(fstatic.mass_total.mean()) * g
     wall_load = float(load[fmask].mean())
-    band_cols = [w["name"] for w in run.walls if w["role"] in ("band", "wall")]
-    wall_shear = float(sum(-FORCE_SIGN * run.forces.loc[fmask, f"{n}_fz"].mean() for n in band_cols))
+    band_cols = [w.name for w in run.walls if w.role in ("band", "wall")]
+    wall_shear = float(sum(-run.forces.loc[fmask, f"{n}_fz"].mean() for n in band_cols))
 
     # tables
     write_text(out / "discharge.csv", dis.to_csv(index=False))
@@ -126,10 +118,10 @@ def analyse(folder, measured_pressure=None) -> dict:
         pass
 
     summary = {
-        "particles_inserted": run.record.get("inserted"),
-        "fill_losses": run.record.get("fill_losses", 0),
+        "particles_inserted": run.record.inserted,
+        "fill_losses": run.record.fill_losses,
         "initial_mass_kg": initial_mass,
-        "settled_ke_pe": run.record.get("settled_ke_pe"),
+        "settled_ke_pe": run.record.settled_ke_pe,
         "time_open_s": t_open,
         "force_balance": {"weight_N": weight, "wall_and_bottom_load_N": wall_load,
                           "ratio": wall_load / weight if weight > 0 else float("nan"),
@@ -139,8 +131,8 @@ def analyse(folder, measured_pressure=None) -> dict:
         "discharged_mass_kg": float(dis.outlet_mass.iloc[-1]),
         "mass_in_silo_end_kg": float(dis.mass_in_silo.iloc[-1]),
         "bands": table.to_dict(orient="records"),
-        "engine_wall_time_s": run.record.get("wall_time"),
-        "engine_warnings": run.record.get("warnings", []),
+        "engine_wall_time_s": run.record.wall_time,
+        "engine_warnings": run.record.warnings,
     }
     summary["frame_analyses"] = analyse_dumps(run, out, table, dis, rate)
     if measured_pressure is not None:
@@ -154,7 +146,7 @@ def analyse(folder, measured_pressure=None) -> dict:
             raise ReadError(f"{measured_pressure}: {exc}") from None
         write_text(out / "pressure_comparison.csv", comparison.to_csv(index=False))
         summary["pressure_comparison"] = comparison.to_dict(orient="records")
-    write_json(out / "summary.json", summary)
+    write_json(out / SUMMARY_NAME, summary)
     write_text(out / "report.md", report_text(summary, run))
     from .figures import first_results_figure  # matplotlib only when figures are drawn
     first_results_figure(bands, dis, table, t_open, out / "first_results.png")

@@ -17,10 +17,11 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import curve_fit
 
-from siloflow.case import load_case
+from siloflow.run_folder import RunFolder
 from siloflow.errors import ReadError
 
 from .analysis_base import FrameAnalysis
+from .discharge import straight_line_fit
 
 
 def rate_series(time, cumulative, window: int = 5) -> np.ndarray:
@@ -69,12 +70,14 @@ class LinearRate:
 
 
 def linear_rate(time, values) -> LinearRate:
+    """Slope (units of ``values`` per s) of ``values`` against ``time`` (s) and its standard
+    error, by ``discharge.straight_line_fit``; all NaN but n_samples if fewer than 3 samples."""
     t = np.asarray(time, float)
     v = np.asarray(values, float)
     if len(t) < 3:
         return LinearRate(float("nan"), float("nan"), float("nan"), float("nan"), len(t))
-    (slope, icpt), cov = np.polyfit(t, v, 1, cov=True)
-    return LinearRate(float(slope), float(np.sqrt(cov[0, 0])), float(t[0]), float(t[-1]), len(t))
+    fit = straight_line_fit(t, v)
+    return LinearRate(fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples)
 
 
 class FreeSurface(FrameAnalysis):
@@ -212,20 +215,18 @@ def beverloo_table(folders) -> pd.DataFrame:
     steady flow rate W and its standard error (kg/s), gravity (m/s2)."""
     rows = []
     for folder in folders:
-        folder = Path(folder)
-        try:
-            summary = json.loads((folder / "results" / "summary.json").read_text())
-        except (OSError, ValueError):
-            raise ReadError(f"{folder}: no results/summary.json (run `siloflow post {folder}` first)") from None
-        case = load_case(folder / "case.yaml")
-        if case.particles.kind != "spheres":
+        run = RunFolder(folder)
+        summary = run.read_summary()
+        plan = run.plan
+        grains = plan.grains
+        if len(grains) != 1 or grains[0].kind != "sphere":
             raise ReadError(f"{folder}: Beverloo's d needs monodisperse spheres")
         fa = summary.get("frame_analyses", {})
-        rho_b = fa.get("bulk_density_kg_m3") or case.fill.packing_fraction * case.materials.particle.density
+        rho_b = fa.get("bulk_density_kg_m3") or plan.fill.packing_fraction * grains[0].density
         rate = summary["flow_rate"]
         if not (rate["rate"] and np.isfinite(rate["rate"])):
             raise ReadError(f"{folder}: no steady flow rate in its results")
-        rows.append({"run": str(folder), "D0": 2 * case.geometry.outlet_radius, "d": 2 * case.particles.radius,
-                     "rho_b": float(rho_b), "W": rate["rate"], "W_stderr": rate["stderr"], "g": case.gravity,
+        rows.append({"run": str(folder), "D0": 2 * plan.geometry.outlet_radius, "d": 2 * grains[0].radius,
+                     "rho_b": float(rho_b), "W": rate["rate"], "W_stderr": rate["stderr"], "g": plan.gravity,
                      "rho_b_source": "measured" if fa.get("bulk_density_kg_m3") else "case packing fraction"})
     return pd.DataFrame(rows)

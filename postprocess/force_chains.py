@@ -49,7 +49,7 @@ def force_chain_figure(atoms: Frame, contacts: Frame, path, axis: int = 1, cente
     """Draw the contact network of a slice to ``path`` (PNG); width = max_width * Fn / max Fn."""
     from matplotlib.collections import LineCollection
 
-    from .figures import _save, plt
+    from .figures import plt, save_figure
 
     seg, fn, (center, thickness) = chain_segments(atoms, contacts, axis, center, thickness)
     fig, ax = plt.subplots(figsize=(5.5, 8))
@@ -67,5 +67,5 @@ def force_chain_figure(atoms: Frame, contacts: Frame, path, axis: int = 1, cente
                  f"(max {fn.max() if len(fn) else 0:.3g} N)")
     ax.title.set_fontsize(8)
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
     return Path(path)

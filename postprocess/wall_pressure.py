@@ -30,23 +30,34 @@ def sector_pressure(fx, fy, radius: float, height: float, theta0: float, theta1:
     return radial / sector_projected_area(radius, height, theta0, theta1)
 
 
-def wall_force_columns(walls: list[dict]) -> list[str]:
-    """Column names of output/wall_forces.txt: step, then fx fy fz of each wall in deck order."""
-    names = ["step"]
-    for w in walls:
-        if w["role"] != "outlet":
-            names += [f"{w['name']}_fx", f"{w['name']}_fy", f"{w['name']}_fz"]
-    return names
+def wide_forces(forces: pd.DataFrame, walls) -> pd.DataFrame:
+    """The long ``wall_forces`` table of a run folder (step, time, wall, fx, fy, fz: N, the force
+    the grains exert on each wall) as one row per sample: ``step`` and ``<wall>_fx/fy/fz``
+    columns in the order of ``walls`` (the plan's ``Wall`` records)."""
+    names = [w.name for w in walls if w.is_wall]
+    by_wall = {name: part for name, part in forces.groupby("wall", sort=False)}
+    missing = [n for n in names if n not in by_wall]
+    if missing:
+        raise ValueError(f"the wall-force table has no rows for wall(s) {', '.join(missing)}")
+    step = by_wall[names[0]].step.to_numpy() if names else forces.step.unique()
+    columns = {"step": step}
+    for n in names:
+        part = by_wall[n]
+        if len(part) != len(step) or (part.step.to_numpy() != step).any():
+            raise ValueError(f"the wall-force table's rows of wall {n} are not at the same steps as the others'")
+        for k in ("fx", "fy", "fz"):
+            columns[f"{n}_{k}"] = part[k].to_numpy()
+    return pd.DataFrame(columns)
 
 
-def band_pressures(forces: pd.DataFrame, walls: list[dict], force_sign: float = 1.0) -> pd.DataFrame:
+def band_pressures(forces: pd.DataFrame, walls) -> pd.DataFrame:
     """Tidy table of band pressure vs time.
 
     Parameters
     ----------
-    forces : table with ``step`` and ``<wall>_fx/fy/fz`` columns (N, force on the wall).
-    walls : the wall manifest of derived.json.
-    force_sign : +1 if the engine reports the force the grains exert on the wall.
+    forces : table with ``step`` and ``<wall>_fx/fy/fz`` columns (N, force on the wall; see
+        :func:`wide_forces`).
+    walls : the plan's walls (``siloflow.plan.Wall``); the sensors have role ``band``.
 
     Returns
     -------
@@ -55,17 +66,17 @@ def band_pressures(forces: pd.DataFrame, walls: list[dict], force_sign: float = 
     """
     rows = []
     for w in walls:
-        if w["role"] != "band":
+        if w.role != "band":
             continue
-        fx, fy = force_sign * forces[f"{w['name']}_fx"], force_sign * forces[f"{w['name']}_fy"]
-        if w.get("normal") is not None:        # the manifest says where the sensor faces
-            nx, ny = w["normal"]
-            p = (np.asarray(fx) * nx + np.asarray(fy) * ny) / w["projected_area"]
-        else:                                  # run folders written before the manifest had normals
-            p = sector_pressure(fx, fy, w["radius"], w["z1"] - w["z0"], w["theta0"], w["theta1"])
-        rows.append(pd.DataFrame({"step": forces["step"].to_numpy(), "band": w["band"], "sector": w["sector"],
-                                  "z_mid": 0.5 * (w["z0"] + w["z1"]), "pressure": np.asarray(p),
-                                  "shear_force": -force_sign * forces[f"{w['name']}_fz"].to_numpy()}))
+        fx, fy = forces[f"{w.name}_fx"], forces[f"{w.name}_fy"]
+        if w.normal is not None:        # the plan says where the sensor faces
+            nx, ny = w.normal
+            p = (np.asarray(fx) * nx + np.asarray(fy) * ny) / w.projected_area
+        else:
+            p = sector_pressure(fx, fy, w.radius, w.z1 - w.z0, w.theta0, w.theta1)
+        rows.append(pd.DataFrame({"step": forces["step"].to_numpy(), "band": w.band, "sector": w.sector,
+                                  "z_mid": 0.5 * (w.z0 + w.z1), "pressure": np.asarray(p),
+                                  "shear_force": -forces[f"{w.name}_fz"].to_numpy()}))
     sectors = pd.concat(rows, ignore_index=True)
     return sectors
 
@@ -77,7 +88,7 @@ def band_mean(sectors: pd.DataFrame) -> pd.DataFrame:
                  shear_force=("shear_force", "sum")))
 
 
-def vertical_load(forces: pd.DataFrame, walls: list[dict], force_sign: float = 1.0) -> pd.Series:
+def vertical_load(forces: pd.DataFrame, walls) -> pd.Series:
     """Total downward force (N) the grains exert on all walls, per sample."""
-    cols = [f"{w['name']}_fz" for w in walls if w["role"] != "outlet"]
-    return -force_sign * forces[cols].sum(axis=1)
+    cols = [f"{w.name}_fz" for w in walls if w.is_wall]
+    return -forces[cols].sum(axis=1)

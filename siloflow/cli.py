@@ -16,8 +16,10 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from .case import Case, load_case
+from .case import Case
+from .case_file import load_case
 from .errors import ANSI_ESCAPES, CaseError, ReadError, SiloflowError
+from .run_folder import RunFolder
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="Silo discharge DEM simulations: case file -> LIGGGHTS deck -> run -> results.")
@@ -47,8 +49,10 @@ def validate(case_file: Path = typer.Argument(..., help="YAML case file")) -> No
     from .engine.base import check_case
     try:
         case = load_case(case_file)
-        check_case(case, get_engine(case.engine.name))
-        d = derive(case)
+        engine = get_engine(case.engine.name)
+        check_case(case, engine)                 # what the engine cannot do, before the plan
+        d = derive(case)                         # reads and checks the inserts' meshes too
+        check_case(case, engine, d)
     except SiloflowError as exc:
         _fail(exc)
     out.print(printable(f"{case_file}: valid case '{case.name}' ({case.geometry.kind}, {case.materials.model})"),
@@ -77,22 +81,23 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
            output: Path = typer.Option(..., "-o", "--output", help="deck folder to create"),
            force: bool = typer.Option(False, "--force", help=FORCE_HELP),
            allow_long: bool = typer.Option(False, help=ALLOW_LONG_HELP)) -> None:
-    """Write a self-contained LIGGGHTS deck folder (deck, meshes, case copy, derived parameters)."""
-    from .deck import render as render_deck
+    """Write a self-contained run folder (the engine's deck and meshes, case copy, run plan)."""
     from .derived import check_run_length, derive
     from .engine import get_engine
     from .engine.base import check_case
     try:
         case = load_case(case_file)
-        check_case(case, get_engine(case.engine.name))
+        engine = get_engine(case.engine.name)
+        check_case(case, engine)
         d = derive(case)
         check_run_length(d, allow_long)
-        folder = render_deck(case, output, force=force, keep=[case_file])
+        folder = engine.prepare(case, output, force=force, keep=[case_file], plan=d)
     except SiloflowError as exc:
         _fail(exc)
     _warn(d)
-    out.print(f"deck written to {folder}: {d.particle_count} particles, dt = {d.timestep:.3g} s "
-              f"({case.engine.timestep_fraction} x {d.critical_time_source} {d.critical_time:.3g} s)")
+    t = d.timestep
+    out.print(f"deck written to {folder}: {d.fill.count} particles, dt = {t.dt:.3g} s "
+              f"({t.fraction} x {t.critical_time_source} {t.critical_time:.3g} s)")
     for line in (clump_note(d), dust_note(d)):
         if line:
             out.print(line)
@@ -111,13 +116,14 @@ def clump_note(d) -> str:
 
 def dust_note(d) -> str:
     """How much the dust shortens the time step, and the remedy (empty without dust)."""
-    if d.timestep_without_dust is None:
+    t = d.timestep
+    if t.without_dust is None:
         return ""
-    factor = d.timestep_without_dust / d.timestep
+    factor = t.without_dust / t.dt
     if factor <= 1.0 + 1e-9:
-        return f"dust: {d.dust_count} spheres; they do not set the time step"
-    return (f"dust: {d.dust_count} spheres shorten the time step {factor:.3g}x (without them "
-            f"{d.timestep_without_dust:.3g} s); particles.dust.density_scale s lengthens dust contacts "
+        return f"dust: {d.fill.dust_count} spheres; they do not set the time step"
+    return (f"dust: {d.fill.dust_count} spheres shorten the time step {factor:.3g}x (without them "
+            f"{t.without_dust:.3g} s); particles.dust.density_scale s lengthens dust contacts "
             f"sqrt(s)x (benchmarks/dust_density_scaling.py measures what it changes)")
 
 
@@ -147,6 +153,7 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     from .derived import check_run_length, derive
     from .disk_estimate import check_disk_space
     from .engine import get_engine
+    from .engine.base import check_case
     if resume is not None:
         if case_file is not None or output is not None:
             _fail(SiloflowError("--resume DIR takes no case file and no --output: the folder has both"))
@@ -157,11 +164,12 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     try:
         case = load_case(case_file)
         engine = get_engine(case.engine.name, executable=liggghts)
+        check_case(case, engine)
         engine.command(case.engine.ranks)  # binary and launcher present before anything is written
-        derived = derive(case)
+        derived = derive(case)             # the run plan: computed once, handed on
         check_run_length(derived, allow_long)
         sizes = check_disk_space(case, derived, output, allow_large_output)
-        folder = engine.prepare(case, output, force=force, keep=[case_file])
+        folder = engine.prepare(case, output, force=force, keep=[case_file], plan=derived)
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
@@ -200,9 +208,9 @@ def _drive(folder: Path, work, post_process: bool) -> None:
 
 def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
     from .engine import get_engine
-    from .engine.base import run_state
+    from .run_folder import RunFolder, run_state
     try:
-        case = load_case(folder / "case.yaml")
+        case = load_case(RunFolder(folder).case_file)
         engine = get_engine(case.engine.name, executable=liggghts)
         engine.command(case.engine.ranks)
         state = run_state(folder).get("state")
@@ -215,14 +223,14 @@ def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
 
 def _post(folder: Path, measured: Path | None = None) -> None:
     from postprocess.first_results import analyse
-    from .run_folder import record_products
+    from .run_folder import RunFolder, record_products
     since = time.time()
     try:
         summary = analyse(folder, measured)
     except SiloflowError as exc:
         _fail(exc)
     finally:                # what post wrote is siloflow's: --force may replace it later
-        record_products(folder, Path(folder) / "results", since)
+        record_products(folder, RunFolder(folder).results, since)
     fb, fr = summary["force_balance"], summary["flow_rate"]
     out.print(f"force balance of the settled bed: walls+bottom carry {fb['ratio']:.4f} x the weight "
               f"({fb['wall_friction_share']:.2f} of it by wall friction)")
@@ -236,7 +244,7 @@ def _post(folder: Path, measured: Path | None = None) -> None:
         out.print(line + f"; free-surface flow rate / outlet flow rate = {fa['flow_rate_surface_over_outlet']:.3f}")
     elif "bulk_solid_fraction" in fa:
         out.print(f"no bulk solid fraction: {fa['bulk_solid_fraction']['error']}")
-    out.print(f"results: {Path(folder) / 'results'} (summary.json, *.csv, *.parquet, *.png)")
+    out.print(f"results: {RunFolder(folder).results} (summary.json, *.csv, *.parquet, *.png)")
 
 
 @app.command()
@@ -253,11 +261,11 @@ def post(source: str = typer.Argument(..., help="a finished run folder, or dump 
                                                help="results folder for a dump source (default: <dumps>/siloflow_post)")) -> None:
     """(Re)compute the results of a run folder, or analyse dump files written by any LIGGGHTS/LAMMPS run."""
     path = Path(source)
-    if path.is_dir() and (path / "derived.json").is_file():
+    if path.is_dir() and RunFolder(path).is_run_folder():
         _post(path, measured)
         return
     from postprocess.any_dump import analyse_any, parse_sphere
-    from siloflow.engine_output import local_columns
+    from .engine.liggghts.tables import local_columns
     try:
         columns = local_columns(contact_keywords.split(",")) if contact_keywords else None
         regions = [parse_sphere(s, k + 1) for k, s in enumerate(sphere)] or None
@@ -278,7 +286,7 @@ def post(source: str = typer.Argument(..., help="a finished run folder, or dump 
 @app.command()
 def status(folder: Path = typer.Argument(..., help="a run folder")) -> None:
     """The state of a run: rendered, running, complete, failed, interrupted or abandoned."""
-    from .engine.base import run_state
+    from .run_folder import run_state
     try:
         st = run_state(folder)
     except SiloflowError as exc:
@@ -317,14 +325,14 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
     """Coarse-grain particles and contacts into continuum fields (paper B): fields.nc, profiles, figures."""
     from postprocess.cg_run import CgSetup, run_cg, setup_from_run
     from .run_folder import record_products
-    from .engine_output import local_columns
+    from .engine.liggghts.tables import local_columns
     path = Path(source)
     try:
         if grid not in ("rz", "cartesian"):
             raise ReadError("--grid must be rz or cartesian")
         if method not in ("exact", "lattice") or (method == "lattice" and grid != "rz"):
             raise ReadError("--method must be exact or lattice, and lattice needs --grid rz")
-        if path.is_dir() and (path / "derived.json").is_file():
+        if path.is_dir() and RunFolder(path).is_run_folder():
             setup = setup_from_run(path)
             target = output or path / "results" / "cg"
         else:
@@ -350,7 +358,7 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
             summary = run_cg(setup, target, kernel, width, unit, nr, nz, None if species == "none" else species,
                              per_frame, grid, every, method, refine)
         finally:
-            if path.is_dir() and (path / "derived.json").is_file():
+            if path.is_dir() and RunFolder(path).is_run_folder():
                 record_products(path, target, since)
     except SiloflowError as exc:
         _fail(exc)

@@ -1,17 +1,18 @@
-"""Everything the deck needs that is computed from the case: masses, contact parameters,
-time step, stage lengths, insertion batches, output intervals, seeds, box.
+"""Everything a run needs that is computed from the case: species and masses, contact
+parameters, time step, stage lengths, insertion batches, output intervals, wall geometry.
 
-``derive(case)`` returns a ``Derived`` record; it is unit-tested and written to
-``derived.json`` beside the deck. All values SI.
+``derive(case)`` returns the engine-neutral :class:`~siloflow.plan.RunPlan`, once per run; it is
+unit-tested and written to ``plan.json`` beside the deck. All values SI.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
-
+from . import __version__
 from . import contact_physics as cp
 from .case import Case, HopperGeometry, PlanarGeometry
 from .errors import CaseError, SetupError
+from .plan import (FACES, WALL, Discharge, EngineChoice, Fill, InsertionRegion, Material, Opening, Outlet,
+                   Outputs, PairParameters, RunPlan, Sensors, Settle, Silo, Species, TimeStep, Wall)
 
 #: speed at which grains are inserted downwards, m/s (keeps batches clear of the region)
 INSERTION_SPEED = 1.5
@@ -38,230 +39,30 @@ AIR_DENSITY, AIR_VISCOSITY = 1.2, 1.8e-5
 DRAG_WARNING = 0.1
 
 
-@dataclass
-class PairParameters:
-    """Contact parameters and contact time of one material pair (``particle_particle`` or ``particle_wall``)."""
-
-    name: str
-    m_eff: float          # kg
-    r_eff: float          # m
-    friction: float
-    restitution: float
-    rolling_friction: float
-    contact_time: float   # s
-    y_eff: float | None = None    # Pa (hertz)
-    kn: float | None = None       # N/m (linear)
-    kt: float | None = None       # N/m (linear)
-    gamman: float | None = None   # 1/s (linear, LIGGGHTS hooke/stiffness)
-    gammat: float | None = None   # 1/s
-
-
-@dataclass
-class Species:
-    """One atom type of grains (SI): size classes, a clump shape, or dust.
-
-    ``stream`` is ``grains`` (the case's particles) or ``dust`` (inserted beside them at
-    a number ratio); ``number_fraction`` is within the stream. A clump's ``volume`` is the
-    union volume of its spheres and ``radius`` its largest sphere (contacts)."""
-
-    name: str
-    type: int
-    kind: str                 # "sphere" or "clump"
-    stream: str               # "grains" or "dust"
-    radius: float             # m
-    bounding_radius: float    # m
-    volume: float             # m3
-    density: float            # kg/m3, as simulated
-    number_fraction: float
-    material: str             # "particle" or "dust": which contact parameters apply
-    spheres: list = field(default_factory=list)   # clumps: [x, y, z, r] per sphere, m
-
-    @property
-    def mass(self) -> float:
-        return self.density * self.volume
-
-    @property
-    def n_spheres(self) -> int:
-        return max(1, len(self.spheres))
-
-
 def species_of(case: Case) -> list[Species]:
-    """The atom types of a case's grains: size class k is type k + 1 (in the order of the case's
-    radii), a clump shape type 1, dust the type after the grains; the walls come last."""
+    """The species of a case's grains, in the plan's order: the size classes (in the order of the
+    case's radii) or the clump shape, then the dust."""
     p = case.particles
     rho = case.materials.particle.density
     out = []
     if p.kind == "clumps":
         clump = p.clump
-        out.append(Species(name="clump", type=1, kind="clump", stream="grains", radius=max(clump.radii),
+        out.append(Species(name="clump", kind="clump", stream="grains", radius=max(clump.radii),
                            bounding_radius=clump.bounding_radius, volume=clump.volume, density=rho,
                            number_fraction=1.0, material="particle",
                            spheres=[[*c, r] for c, r in zip(clump.centers, clump.radii)]))
     else:
         many = len(p.radii) > 1
         for k, (r, n) in enumerate(zip(p.radii, p.number_fractions)):
-            out.append(Species(name=f"size{k + 1}" if many else "grain", type=k + 1, kind="sphere",
+            out.append(Species(name=f"size{k + 1}" if many else "grain", kind="sphere",
                                stream="grains", radius=r, bounding_radius=r, volume=cp.sphere_volume(r),
                                density=rho, number_fraction=n, material="particle"))
     dust = getattr(p, "dust", None)
     if dust is not None:
-        out.append(Species(name="dust", type=len(out) + 1, kind="sphere", stream="dust", radius=dust.radius,
+        out.append(Species(name="dust", kind="sphere", stream="dust", radius=dust.radius,
                            bounding_radius=dust.radius, volume=cp.sphere_volume(dust.radius),
                            density=dust.run_density, number_fraction=1.0, material="dust"))
     return out
-
-
-@dataclass
-class Derived:
-    """Derived parameters of a case (SI units)."""
-
-    particle_radius: float     # the largest radius, m
-    particle_volume: float     # mean volume per grain (after shrinking, if any), m3
-    particle_mass: float       # mean mass per grain (after shrinking, if any), kg
-    particle_count: int
-    total_mass: float
-    bed_height_estimate: float
-    impact_velocity: float
-    pairs: dict[str, PairParameters]
-    rayleigh_time: float | None
-    critical_time: float
-    critical_time_source: str
-    timestep: float
-    # insertion
-    insertion_region: dict
-    insertion_batch: int
-    insert_every: int
-    insertion_speed: float
-    # stages, in steps
-    fill_steps: int
-    settle_chunk_steps: int
-    settle_max_chunks: int
-    static_steps: int
-    open_steps: int
-    discharge_chunk_steps: int
-    discharge_max_chunks: int
-    # outputs, in steps
-    thermo_every: int
-    sample_every: int
-    sample_repeat: int
-    sample_freq: int
-    dump_every: int | None
-    # geometry of the run
-    outlet_z: float
-    outlet_disc_radius: float
-    plate_travel: float
-    box: dict
-    skin: float
-    seeds: dict = field(default_factory=dict)
-    radii: list = field(default_factory=list)             # m
-    number_fractions: list = field(default_factory=list)
-    mass_fractions: list = field(default_factory=list)    # what LIGGGHTS' distribution takes
-    shrink_classes: list = field(default_factory=list)    # [(radius, conditional fraction)], paper B
-    type_pairs: dict = field(default_factory=dict)        # (type i, type j) -> PairParameters
-    plate_shift: float = 0.0                              # m, sideways travel of the opening plate
-    opening_speed: float = 1.0                            # m/s along the plate's path
-    species: list = field(default_factory=list)           # [Species], one per atom type
-    has_faces: bool = False                               # slab silo: front/back faces, their own type
-    dust_count: int = 0
-    dust_batch: int = 0
-    timestep_without_dust: float | None = None            # s; the dust's cost is this / timestep
-    run_length_fields: dict = field(default_factory=dict)  # stage (and "timestep") -> case fields setting it
-    warnings: list = field(default_factory=list)          # physics warnings (str), each naming its consequence
-
-    @property
-    def wall_type(self) -> int:
-        """Atom type of the walls: after the grain types (size classes, clump, dust)."""
-        return len(self.species) + 1
-
-    @property
-    def grains(self) -> list[Species]:
-        """The species of the case's particles (size classes or the clump shape)."""
-        return [sp for sp in self.species if sp.stream == "grains"]
-
-    @property
-    def dust(self) -> Species | None:
-        """The dust species, if any."""
-        return next((sp for sp in self.species if sp.stream == "dust"), None)
-
-    @property
-    def expected_atoms(self) -> int:
-        """Atoms (spheres) the fill inserts: every sphere of every clump, and the dust."""
-        per_grain = sum(sp.number_fraction * sp.n_spheres for sp in self.grains)
-        return round(self.particle_count * per_grain) + self.dust_count
-
-    @property
-    def face_type(self) -> int | None:
-        """Atom type of a slab silo's front and back faces (after the walls), or None."""
-        return self.wall_type + 1 if self.has_faces else None
-
-    @property
-    def n_types(self) -> int:
-        return self.wall_type + (1 if self.has_faces else 0)
-
-    @property
-    def plate_velocity(self) -> tuple[float, float, float]:
-        """Velocity of the orifice plate while the orifice opens, m/s."""
-        path = math.hypot(self.plate_travel, self.plate_shift)
-        return (self.opening_speed * self.plate_shift / path, 0.0, -self.opening_speed * self.plate_travel / path)
-
-    @property
-    def has_clumps(self) -> bool:
-        return any(s.kind == "clump" for s in self.species)
-
-    @property
-    def mass_weights(self) -> list[float]:
-        """Per atom type, the factor that turns LIGGGHTS' per-atom mass into a share of the grain's
-        mass: multisphere gives every sphere of a clump the whole clump's mass."""
-        return [1.0 / s.n_spheres for s in self.species]
-
-    @property
-    def planned_steps(self) -> dict[str, int]:
-        """Upper bound of the steps each stage can take."""
-        out = {"fill": self.fill_steps,
-               "settle": self.settle_chunk_steps * self.settle_max_chunks}
-        if self.shrink_classes:
-            out["shrink"] = self.settle_chunk_steps * self.settle_max_chunks
-        return {**out,
-                "static": self.static_steps,
-                "open": self.open_steps,
-                "discharge": self.discharge_chunk_steps * self.discharge_max_chunks}
-
-    @property
-    def total_planned_steps(self) -> int:
-        """Upper bound of the steps of the whole run (every stage at its cap)."""
-        return sum(self.planned_steps.values())
-
-    def to_json(self) -> dict:
-        out = asdict(self)
-        out["type_pairs"] = {f"{i}-{j}": asdict(v) for (i, j), v in self.type_pairs.items()}
-        out["species"] = [{**asdict(sp), "mass": sp.mass} for sp in self.species]
-        out["wall_type"] = self.wall_type
-        out["face_type"] = self.face_type
-        out["expected_atoms"] = self.expected_atoms
-        out["mass_weights"] = self.mass_weights
-        out["planned_steps"] = self.planned_steps
-        return out
-
-
-def is_prime(n: int) -> bool:
-    if n < 2:
-        return False
-    if n % 2 == 0:
-        return n == 2
-    k = 3
-    while k * k <= n:
-        if n % k == 0:
-            return False
-        k += 2
-    return True
-
-
-def prime_seed(seed: int, salt: int) -> int:
-    """A prime > 10000 (LIGGGHTS requires it) derived deterministically from the case seed."""
-    n = 10007 + (seed * 7919 + salt * 104729) % 50_000_000
-    while not is_prime(n):
-        n += 1
-    return n
 
 
 def bed_volume(case: Case, height: float) -> float:
@@ -299,11 +100,11 @@ def _steps(duration: float, dt: float) -> int:
     return max(1, math.ceil(duration / dt - 1e-9))
 
 
-def _pair(case: Case, name: str, m_eff: float, r_eff: float, contact, moduli, v_impact: float) -> PairParameters:
-    """Contact parameters of one pair with reduced mass and radius; ``contact`` is the case's
-    PairContact of the pair, ``moduli`` the (Young's modulus, Poisson ratio) of both sides."""
+def _pair(case: Case, a: str, b: str, m_eff: float, r_eff: float, contact, moduli, v_impact: float) -> PairParameters:
+    """Contact parameters of the pair ``a``-``b`` with reduced mass and radius; ``contact`` is the
+    case's PairContact of the pair, ``moduli`` the (Young's modulus, Poisson ratio) of both sides."""
     m = case.materials
-    common = dict(name=name, m_eff=m_eff, r_eff=r_eff, friction=contact.friction,
+    common = dict(name=f"{a}-{b}", a=a, b=b, m_eff=m_eff, r_eff=r_eff, friction=contact.friction,
                   restitution=contact.restitution, rolling_friction=contact.rolling_friction)
     y_eff = None
     if m.model in ("hertz", "hooke"):
@@ -343,28 +144,31 @@ def _modulus_of(case: Case, material: str | None) -> tuple:
     return m.particle.youngs_modulus, m.particle.poisson_ratio
 
 
-def type_pair_parameters(case: Case, species: list[Species], v_impact: float) -> dict[tuple[int, int], PairParameters]:
-    """Contact parameters of every pair of atom types (see :func:`species_of`); the walls are the
-    last type and act as infinite mass and radius. Radii are those of the touching spheres;
-    masses those of the whole grains (a clump moves as one body)."""
-    wall = len(species) + 1
-    out = {}
-    for a in species:
-        for b in species:
-            if b.type >= a.type:
-                out[(a.type, b.type)] = _pair(
-                    case, f"{a.name}-{b.name}", cp.reduced(a.mass, b.mass), cp.reduced(a.radius, b.radius),
-                    _contact_of(case, a.material, b.material),
-                    (_modulus_of(case, a.material), _modulus_of(case, b.material)), v_impact)
-        out[(a.type, wall)] = _pair(case, f"{a.name}-wall", a.mass, a.radius, _contact_of(case, a.material, None),
-                                    (_modulus_of(case, a.material), _modulus_of(case, None)), v_impact)
+def contact_pairs(case: Case, species: list[Species], v_impact: float) -> list[PairParameters]:
+    """Contact parameters of every pair of species and of each species with the walls, which act
+    as infinite mass and radius (and, for a slab, with its faces: the walls' law with the faces'
+    friction). Radii are those of the touching spheres; masses those of the whole grains (a clump
+    moves as one body)."""
+    out = []
+    for i, a in enumerate(species):
+        for b in species[i:]:
+            out.append(_pair(case, a.name, b.name, cp.reduced(a.mass, b.mass), cp.reduced(a.radius, b.radius),
+                             _contact_of(case, a.material, b.material),
+                             (_modulus_of(case, a.material), _modulus_of(case, b.material)), v_impact))
+        out.append(_pair(case, a.name, WALL, a.mass, a.radius, _contact_of(case, a.material, None),
+                         (_modulus_of(case, a.material), _modulus_of(case, None)), v_impact))
+    g = case.geometry
+    if isinstance(g, PlanarGeometry):
+        walls = {p.a: p for p in out if p.b == WALL}
+        out += [walls[sp.name].model_copy(update={"name": f"{sp.name}-{FACES}", "b": FACES,
+                                                  "friction": g.face_friction}) for sp in species]
     return out
 
 
-def critical_time(case: Case, species: list[Species], type_pairs: dict) -> tuple[float, str]:
-    """The shortest contact time of any type pair (and, for Hertz, Rayleigh time of any
-    species), s, with what set it."""
-    candidates = {f"contact time {pp.name}": pp.contact_time for pp in type_pairs.values()}
+def critical_time(case: Case, species: list[Species], pairs: list[PairParameters]) -> tuple[float, str]:
+    """The shortest contact time of any pair (and, for Hertz, Rayleigh time of any species), s,
+    with what set it."""
+    candidates = {f"contact time {pp.name}": pp.contact_time for pp in pairs}
     if case.materials.model == "hertz":
         for sp in species:
             e, nu = _modulus_of(case, sp.material)
@@ -418,29 +222,7 @@ def run_length_fields(case: Case, critical_source: str) -> dict[str, list[str]]:
     return out
 
 
-#: LIGGGHTS counts its neighbour and atom-sorting bins in a C int ("Too many neighbor bins",
-#: "Too many atom sorting bins"); half of INT_MAX leaves room for its ghost bins
-MAX_ENGINE_BINS = 2 ** 30
-
-
-def engine_bins(box: dict, radius: float, skin: float) -> int:
-    """How many neighbour bins LIGGGHTS makes for ``box`` (m) with grains of largest radius
-    ``radius`` and neighbour ``skin`` (m): bins of half the cutoff 2 r + skin, as its default."""
-    size = 0.5 * (2 * radius + skin)
-    return math.prod(math.ceil((box[f"{a}hi"] - box[f"{a}lo"]) / size) for a in "xyz")
-
-
-def check_bins(box: dict, radius: float, skin: float) -> None:
-    """Refuse a silo too many grains wide and tall for the engine's bins (``CaseError``)."""
-    bins = engine_bins(box, radius, skin)
-    if bins > MAX_ENGINE_BINS:
-        size = max(box[f"{a}hi"] - box[f"{a}lo"] for a in "xyz")
-        raise CaseError([("particles", f"grains of radius {radius:.3g} m in a silo whose box is {size:.3g} m long need "
-                          f"{bins:.3g} neighbour bins, more than LIGGGHTS can count ({MAX_ENGINE_BINS:.3g}): "
-                          "use larger grains or a smaller silo (geometry)")])
-
-
-def check_run_length(derived: Derived, allow_long: bool = False) -> int:
+def check_run_length(derived: RunPlan, allow_long: bool = False) -> int:
     """The planned steps of the whole run (every stage at its cap); raises ``SetupError`` naming
     the case fields that set the time step and the longest stages when they exceed
     ``MAX_RUN_STEPS``, unless ``allow_long`` (the CLI's ``--allow-long``)."""
@@ -448,13 +230,13 @@ def check_run_length(derived: Derived, allow_long: bool = False) -> int:
     if total <= MAX_RUN_STEPS or allow_long:
         return total
     fields = derived.run_length_fields
-    dt = derived.timestep
-    stages = sorted(derived.planned_steps.items(), key=lambda kv: -kv[1])
+    dt = derived.dt
+    stages = sorted(derived.planned_steps().items(), key=lambda kv: -kv[1])
     longest = [f"{stage} {n:.3g} steps = {n * dt:.3g} s ({', '.join(fields.get(stage, []))})"
                for stage, n in stages if n >= 0.1 * total]
     raise SetupError(
         f"the planned run takes up to {total:.3g} steps, more than the cap of {MAX_RUN_STEPS:.0e}: the "
-        f"time step is {dt:.3g} s, set by the {derived.critical_time_source} "
+        f"time step is {dt:.3g} s, set by the {derived.timestep.critical_time_source} "
         f"({', '.join(fields.get('timestep', []))}); the longest stages: {'; '.join(longest)}. "
         "Change these fields, or pass --allow-long to run it anyway.")
 
@@ -489,7 +271,7 @@ def air_drag_fraction(radius: float, density: float, gravity: float, speed: floa
     return max(speed / stokes, (speed / newton) ** 2), min(stokes, newton)
 
 
-def physics_warnings(case: Case, d: Derived) -> list[str]:
+def physics_warnings(case: Case, d: RunPlan) -> list[str]:
     """Warnings about values that are valid but have consequences a user should know: overlaps
     under the bed's weight, a coarse time step, air drag the model leaves out. Each names the
     fields and the consequence."""
@@ -499,7 +281,7 @@ def physics_warnings(case: Case, d: Derived) -> list[str]:
     small = min(grains, key=lambda sp: sp.radius)
     # overlap under the bed's weight: mean contact force 4 pi R^2 p / (phi Z) of a packing
     # (Cauchy stress of its contacts), Hertz delta = (3 F / (4 E* sqrt(R*)))^(2/3) or F / kn
-    depth = d.bed_height_estimate
+    depth = d.fill.bed_height_estimate
     volume = bed_volume(case, depth)
     if depth > 0 and volume > 0:
         p = bed_pressure(case, d.total_mass / volume, depth)
@@ -522,7 +304,7 @@ def physics_warnings(case: Case, d: Derived) -> list[str]:
                        f"pressures are shifted by as much; raise {remedy} if that matters")
     if case.engine.timestep_fraction > TIMESTEP_FRACTION_WARNING:
         out.append(f"engine.timestep_fraction {case.engine.timestep_fraction} resolves the shortest contact "
-                   f"({d.critical_time_source}) with only {1 / case.engine.timestep_fraction:.2g} steps: "
+                   f"({d.timestep.critical_time_source}) with only {1 / case.engine.timestep_fraction:.2g} steps: "
                    "velocity Verlet is unstable above 0.64 contact times and Hertz contacts stiffen during "
                    "impact, so contacts may gain energy; 0.1-0.2 is usual")
     # air drag at the outlet speed sqrt(g D_outlet), against the grains' weight (their real density)
@@ -541,8 +323,9 @@ def physics_warnings(case: Case, d: Derived) -> list[str]:
     return out
 
 
-def derive(case: Case) -> Derived:
-    """Compute the derived parameters of a cylinder or hopper case.
+def derive(case: Case) -> RunPlan:
+    """The run plan of a case: every value any engine needs, computed once, with the walls' meshes
+    (generated, and the inserts' read from their files and checked).
 
     Raises
     ------
@@ -610,17 +393,12 @@ def derive(case: Case) -> Derived:
 
     # time step: the shortest contact of any pair of types; dust's cost is reported
     v_impact = cp.free_fall_speed(z_max, case.gravity, INSERTION_SPEED)
-    type_pairs = type_pair_parameters(case, species, v_impact)
-    if planar:        # the slab's front and back faces: the walls' law with the faces' friction
-        faces = len(species) + 2
-        for sp in species:
-            wall_pair = type_pairs[(sp.type, faces - 1)]
-            type_pairs[(sp.type, faces)] = replace(wall_pair, name=f"{sp.name}-faces", friction=g.face_friction)
-    smallest = min(grains, key=lambda sp: sp.radius).type          # its contacts are the shortest
-    wall_type = len(species) + 1
-    pairs = {"particle_particle": replace(type_pairs[(smallest, smallest)], name="particle_particle"),
-             "particle_wall": replace(type_pairs[(smallest, wall_type)], name="particle_wall")}
-    t_crit, source = critical_time(case, species, type_pairs)
+    contacts = contact_pairs(case, species, v_impact)
+    smallest = min(grains, key=lambda sp: sp.radius).name          # its contacts are the shortest
+    by_names = {(c.a, c.b): c for c in contacts}
+    pairs = {"particle_particle": by_names[(smallest, smallest)].model_copy(update={"name": "particle_particle"}),
+             "particle_wall": by_names[(smallest, WALL)].model_copy(update={"name": "particle_wall"})}
+    t_crit, source = critical_time(case, species, contacts)
     rayleigh = None
     if case.materials.model == "hertz":
         pm = case.materials.particle
@@ -628,7 +406,7 @@ def derive(case: Case) -> Derived:
     dt = case.engine.timestep_fraction * t_crit
     dt_without_dust = None
     if dust is not None:
-        no_dust = {k: v for k, v in type_pairs.items() if dust.type not in k}
+        no_dust = [c for c in contacts if dust.name not in (c.a, c.b)]
         dt_without_dust = case.engine.timestep_fraction * critical_time(case, grains, no_dust)[0]
 
     # fill: batches leave the region before the next one comes
@@ -643,20 +421,12 @@ def derive(case: Case) -> Derived:
     settle_chunk = _steps(s.check_interval, dt)
     settle_chunks = max(1, math.ceil(s.max_time / s.check_interval))
 
-    # opening: the plate must outrun the grains to below the counting disc
+    # opening: the plate moves down, below the counting disc, faster than the grains fall after it
     outlet_z = -2.0 * d
     v_open = case.discharge.opening.speed
-    v_needed = math.sqrt(case.gravity * abs(outlet_z) / 2.0)
     plate_travel = 3.0 * abs(outlet_z)
-    # clumps cannot be deleted at the counting disc (multisphere refuses delete_atoms): the plate
-    # also moves aside, so they fall on out of the box, which removes the whole body
-    plate_shift = 2.0 * g.outlet_radius + d if any(sp.kind == "clump" for sp in species) else 0.0
-    path = math.hypot(plate_travel, plate_shift)
-    v_down = v_open * plate_travel / path
-    if v_down <= 1.5 * v_needed:
-        raise CaseError([("discharge.opening.speed", f"{v_open} m/s is too slow: the plate must move "
-                          f"down faster than {1.5 * v_needed:.3g} m/s to leave the grains behind")])
-    open_steps = _steps(path / v_open, dt)
+    check_opening(case.gravity, v_open, outlet_z)
+    open_steps = _steps(plate_travel / v_open, dt)
 
     dis = case.discharge
     if dis.until_empty:
@@ -673,42 +443,65 @@ def derive(case: Case) -> Derived:
     thermo_every = settle_chunk  # settle checks read thermo values, so they must coincide
     dump_every = _steps(out.dump_interval, dt) if out.dump_interval else None
 
-    margin = 2 * d
-    half_y = 0.5 * g.thickness if planar else g.radius
-    box = {"xlo": -g.half_width - margin, "xhi": max(g.half_width, plate_shift + g.outlet_radius) + margin,
-           "ylo": -half_y - margin, "yhi": half_y + margin,
-           "zlo": outlet_z - plate_travel - margin, "zhi": top + margin}
-    skin = 0.5 * r
-    check_bins(box, r, skin)
     static_steps = _steps(s.static_window, dt)
     if static_steps < 2 * sample_freq:      # the time check of the case can miss by a rounded step
         raise CaseError([("fill.settle.static_window", f"{static_steps} steps hold fewer than two samples of "
                           f"{sample_freq} steps (outputs.sample_interval): no static wall-load sample")])
-    derived = Derived(
-        particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass, particle_count=count,
-        total_mass=count * final_mass + (dust_count * dust.mass if dust is not None else 0.0), bed_height_estimate=h_bed, impact_velocity=v_impact,
-        pairs=pairs, rayleigh_time=rayleigh, critical_time=t_crit, critical_time_source=source,
-        timestep=dt,
-        insertion_region=insertion_region,
-        insertion_batch=batch, insert_every=insert_every, insertion_speed=INSERTION_SPEED,
-        fill_steps=fill_steps, settle_chunk_steps=settle_chunk, settle_max_chunks=settle_chunks,
-        static_steps=static_steps, open_steps=open_steps,
-        discharge_chunk_steps=d_chunk, discharge_max_chunks=d_chunks,
-        thermo_every=thermo_every, sample_every=sample_every, sample_repeat=sample_repeat,
-        sample_freq=sample_freq, dump_every=dump_every,
-        outlet_z=outlet_z, outlet_disc_radius=g.outlet_radius + 2 * d, plate_travel=plate_travel, plate_shift=plate_shift,
-        opening_speed=v_open,
-        box=box, skin=skin,
-        seeds={"insertion": prime_seed(case.seed, 1), "distribution": prime_seed(case.seed, 3),
-               "templates": [prime_seed(case.seed, 10 + k) for k in range(len(species))],
-               "dust_insertion": prime_seed(case.seed, 5), "dust_distribution": prime_seed(case.seed, 7),
-               "shrink": [prime_seed(case.seed, 40 + k) for k in range(len(p.radii))]},
-        radii=list(p.radii), number_fractions=list(numbers), mass_fractions=mass_fractions,
-        shrink_classes=shrink_classes(p.radii, numbers) if shrink else [],
-        type_pairs=type_pairs, species=species, dust_count=dust_count, has_faces=planar,
-        dust_batch=math.ceil(batch * dust_ratio) if dust is not None else 0,
-        timestep_without_dust=dt_without_dust,
-        run_length_fields=run_length_fields(case, source),
+    silo = Silo(kind=g.kind, half_width=g.half_width, height=g.height, hopper_height=g.hopper_height,
+                outlet_radius=g.outlet_radius, radius=None if planar else g.radius,
+                width=g.width if planar else None, thickness=g.thickness if planar else None,
+                face_friction=g.face_friction if planar else None)
+    materials = {"particle": Material(youngs_modulus=_modulus_of(case, "particle")[0],
+                                      poisson_ratio=_modulus_of(case, "particle")[1]),
+                 "wall": Material(youngs_modulus=_modulus_of(case, None)[0], poisson_ratio=_modulus_of(case, None)[1])}
+    if dust is not None:
+        materials["dust"] = Material(youngs_modulus=_modulus_of(case, "dust")[0],
+                                     poisson_ratio=_modulus_of(case, "dust")[1])
+    plan = RunPlan(
+        siloflow_version=__version__, name=case.name,
+        engine=EngineChoice(name=case.engine.name, ranks=case.engine.ranks),
+        gravity=case.gravity, seed=case.seed, geometry=silo, species=species, materials=materials,
+        contact_model=case.materials.model, contacts=contacts, pairs=pairs,
+        timestep=TimeStep(dt=dt, fraction=case.engine.timestep_fraction, critical_time=t_crit,
+                          critical_time_source=source, rayleigh_time=rayleigh, without_dust=dt_without_dust),
+        fill=Fill(count=count, dust_count=dust_count, batch=batch,
+                  dust_batch=math.ceil(batch * dust_ratio) if dust is not None else 0,
+                  insert_every=insert_every, insertion_speed=INSERTION_SPEED,
+                  region=InsertionRegion(**insertion_region), steps=fill_steps, frictionless=f.frictionless,
+                  radii=list(p.radii), number_fractions=list(numbers), mass_fractions=mass_fractions,
+                  shrink_classes=shrink_classes(p.radii, numbers) if shrink else [],
+                  packing_fraction=f.packing_fraction, bed_height_estimate=h_bed, impact_velocity=v_impact),
+        settle=Settle(ke_pe_ratio=s.ke_pe_ratio, chunk_steps=settle_chunk, max_chunks=settle_chunks),
+        static_steps=static_steps,
+        opening=Opening(speed=v_open, travel=plate_travel, steps=open_steps),
+        discharge=Discharge(chunk_steps=d_chunk, max_chunks=d_chunks, until_empty=dis.until_empty,
+                            empty_mass=dis.empty_fraction * (count * final_mass + (dust_count * dust.mass if dust
+                                                                                   is not None else 0.0))),
+        outlet=Outlet(z=outlet_z, radius=g.outlet_radius + 2 * d),
+        sensors=Sensors(bands=0, sectors=2 if planar else case.sensors.sectors),
+        outputs=Outputs(thermo_every=thermo_every, sample_steps=sample_freq, samples_per_average=sample_repeat,
+                        dump_every=dump_every, vtk=bool(dump_every and out.vtk),
+                        contacts=bool(dump_every and out.contacts)),
+        total_mass=count * final_mass + (dust_count * dust.mass if dust is not None else 0.0),
+        particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass,
+        analysis=case.analysis, run_length_fields=run_length_fields(case, source),
     )
-    derived.warnings = physics_warnings(case, derived)
-    return derived
+    from .meshes import silo_meshes
+    meshes = silo_meshes(case, plan.outlet.z, plan.outlet.radius)
+    walls = [Wall(**m.info()) for m in meshes]
+    plan = plan.model_copy(update={
+        "walls": walls, "warnings": physics_warnings(case, plan),
+        "sensors": Sensors(bands=len([w for w in walls if w.role == "band"]) // plan.sensors.sectors,
+                           sectors=plan.sensors.sectors)})
+    plan._meshes = meshes
+    return plan
+
+
+def check_opening(gravity: float, speed: float, outlet_z: float, down: float = 1.0) -> None:
+    """Refuse an opening plate too slow to leave the grains behind (``CaseError``): its downward
+    speed (``down`` of ``speed``, m/s, when it also moves aside) must outrun grains falling from
+    rest to the counting disc at ``outlet_z`` (m) by half as much again."""
+    v_needed = math.sqrt(gravity * abs(outlet_z) / 2.0)
+    if speed * down <= 1.5 * v_needed:
+        raise CaseError([("discharge.opening.speed", f"{speed} m/s is too slow: the plate must move "
+                          f"down faster than {1.5 * v_needed:.3g} m/s to leave the grains behind")])

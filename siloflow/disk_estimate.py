@@ -13,7 +13,7 @@ import shutil
 from pathlib import Path
 
 from .case import Case
-from .derived import Derived
+from .plan import RunPlan
 from .errors import SetupError
 
 BYTES_PER_NUMBER = 12.5
@@ -22,26 +22,32 @@ CONTACT_NUMBERS = 15
 VTK_NUMBERS = 21
 CONTACTS_PER_PARTICLE = 2.0
 TABLES_BYTES = 5_000_000      # log, screen, ave/time tables, meshes, results (generous)
+#: a row of the engine-neutral wall-force table (step, time, wall, 3 forces at 17 digits), and
+#: the same wall's three columns in LIGGGHTS' own table
+WALL_FORCE_ROW_BYTES = 110
 
 
-def estimate_bytes(case: Case, d: Derived) -> dict:
+def estimate_bytes(case: Case, d: RunPlan) -> dict:
     """Upper estimate (bytes) of what a run writes, by kind, and the number of dump frames."""
     frames = 0
-    if d.dump_every:
-        frames = sum(d.planned_steps.values()) // d.dump_every + 1
-    n = d.particle_count
+    planned = sum(d.planned_steps().values())
+    out = d.outputs
+    if out.dump_every:
+        frames = planned // out.dump_every + 1
+    n = d.fill.count
     per_frame = {"particle_dumps": n * PARTICLE_NUMBERS * BYTES_PER_NUMBER,
                  "contact_dumps": n * CONTACTS_PER_PARTICLE * CONTACT_NUMBERS * BYTES_PER_NUMBER
-                 if case.outputs.contacts else 0.0,
-                 "vtk": n * VTK_NUMBERS * BYTES_PER_NUMBER if case.outputs.vtk else 0.0}
+                 if out.contacts else 0.0,
+                 "vtk": n * VTK_NUMBERS * BYTES_PER_NUMBER if out.vtk else 0.0}
     sizes = {k: int(v * frames) for k, v in per_frame.items()}
-    sizes["tables"] = TABLES_BYTES
+    walls = len([w for w in d.walls if w.is_wall])
+    sizes["tables"] = TABLES_BYTES + int((planned // out.sample_steps + 1) * walls * WALL_FORCE_ROW_BYTES)
     sizes["total"] = sum(sizes.values())
     sizes["frames"] = frames
     return sizes
 
 
-def check_disk_space(case: Case, d: Derived, folder: Path, allow: bool = False) -> dict:
+def check_disk_space(case: Case, d: RunPlan, folder: Path, allow: bool = False) -> dict:
     """Raise SetupError when the estimate exceeds the free space where ``folder`` will be
     (unless ``allow``); return the estimate."""
     sizes = estimate_bytes(case, d)

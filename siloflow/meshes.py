@@ -833,8 +833,21 @@ def check_inside(case: Case, tris: np.ndarray) -> None:
 
 
 def insert_meshes(case: Case) -> list[WallMesh]:
-    """The case's user walls, read from their files (relative paths from the working folder)."""
-    return [WallMesh(ins.mesh_name, "insert", read_user_mesh(ins.file, ins.scale)) for ins in case.inserts]
+    """The case's user walls, read from their files (relative paths from the working folder) and
+    checked (:func:`read_user_mesh`, :func:`check_inside`). Raises ``CaseError`` naming each
+    insert whose file cannot be used."""
+    problems, meshes = [], []
+    for k, ins in enumerate(case.inserts):
+        try:
+            tris = read_user_mesh(ins.file, ins.scale)
+            check_inside(case, tris)
+        except MeshError as exc:
+            problems.append((f"inserts[{k}].file", str(exc)))
+            continue
+        meshes.append(WallMesh(ins.mesh_name, "insert", tris))
+    if problems:
+        raise CaseError(problems, case.name)
+    return meshes
 
 
 def write_stl(wall: WallMesh, path) -> None:

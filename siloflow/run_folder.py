@@ -1,4 +1,12 @@
-"""What siloflow writes into a run folder, and when it may replace one.
+"""The run folder: one owner of its layout (:class:`RunFolder`), and when siloflow may replace one.
+
+Every file name of a run folder is defined here, with the readers and writers of its plan,
+status, record and the two engine-neutral tables every engine writes:
+
+- ``flow`` (``output/flow.csv``, :data:`FLOW_SCHEMA`): per sample, time, atoms, mass in the box
+  and in the silo, mass and count discharged through the outlet, kinetic and potential energy;
+- ``wall_forces`` (``output/wall_forces.csv``, :data:`WALL_FORCE_SCHEMA`): per sample and wall,
+  the force the grains exert on it (N), averaged over the plan's ``outputs.sample_steps``.
 
 A deck folder carries a manifest (``siloflow_manifest.json``) with the SHA-256 of every file
 ``render`` wrote; post-processing adds what it writes under ``results/`` (``record_products``).
@@ -9,25 +17,51 @@ symlink, a case file being read) is refused, never emptied.
 """
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
 import re
+import socket
 import stat
+import time
+from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from pathlib import Path
+from typing import Optional
 
-from .errors import SetupError
+from .errors import ReadError, SetupError
 
+# ------------------------------------------------------------------ file names
 MANIFEST_NAME = "siloflow_manifest.json"
+CASE_NAME = "case.yaml"
+PLAN_NAME = "plan.json"
+STATUS_NAME = "status.json"
+RECORD_NAME = "run_record.json"
+#: what an engine's dumps hold: atom type -> species, contact dump columns (:class:`DumpLayout`)
+DUMP_LAYOUT_NAME = "dump_layout.json"
+FLOW_TABLE = "output/flow.csv"
+WALL_FORCES_TABLE = "output/wall_forces.csv"
+DUMPS = "output/dumps"
+PARTICLE_DUMPS = "dump.*.txt"
+CONTACT_DUMPS = "contacts.*.txt"
+WALL_CONTACT_DUMPS = "wall_contacts.*.txt"
+#: the settled bed, written once settling (and shrinking) ended; --resume starts there
+RESTART_FILE = "output/restart/settled.restart"
+RESULTS = "results"
+SUMMARY_NAME = "summary.json"
+CG_SUMMARY_NAME = "cg_summary.json"
+#: LIGGGHTS' deck, logs and screens, and the resumed run's (siloflow.engine.liggghts)
+LIGGGHTS_FILES = {"deck": "in.liggghts", "resume_deck": "in.resume.liggghts", "log": "log.liggghts",
+                  "resume_log": "log.resume.liggghts", "screen": "screen.txt", "resume_screen": "screen.resume.txt"}
+#: LIGGGHTS' own tables (fix ave/time), from which the engine-neutral ones are made
+LIGGGHTS_TABLES = ("output/flow.txt", "output/wall_forces.txt")
 
 #: files siloflow (or the engine, running siloflow's deck) writes at the top of a run folder
 #: besides the manifest's: status and records, the engine's logs and screens, the resumed deck
-TOP_LEVEL_FILES = frozenset({
-    MANIFEST_NAME, "status.json", "run_record.json", "log.liggghts", "log.resume.liggghts",
-    "screen.txt", "screen.resume.txt", "in.resume.liggghts",
-})
+TOP_LEVEL_FILES = frozenset({MANIFEST_NAME, STATUS_NAME, RECORD_NAME} | set(LIGGGHTS_FILES.values()) - {"in.liggghts"})
 #: the engine's outputs as the deck names them (template in.liggghts.j2), relative to the folder
-ENGINE_OUTPUTS = re.compile(r"output/(flow|wall_forces)\.txt(\.before_resume)?"
+ENGINE_OUTPUTS = re.compile(r"output/(flow|wall_forces)\.txt(\.before_resume)?|output/(flow|wall_forces)\.csv"
                             r"|output/dumps/(dump|contacts|wall_contacts)\.\d+\.txt"
                             r"|output/vtk/particles_\d+\.vtk|output/restart/settled\.restart")
 #: an atomic write cut short: ``.{name}.{8 random characters}.tmp`` (tempfile.mkstemp)
@@ -129,11 +163,8 @@ def check_plain_tree(folder: Path) -> None:
 
 
 def is_siloflow_folder(folder: Path) -> bool:
-    """Whether ``folder`` carries siloflow's marker (a manifest; before manifests: derived.json
-    beside in.liggghts)."""
-    folder = Path(folder)
-    return (folder / MANIFEST_NAME).is_file() or (
-        (folder / "derived.json").is_file() and (folder / "in.liggghts").is_file())
+    """Whether ``folder`` carries siloflow's marker (a manifest)."""
+    return (Path(folder) / MANIFEST_NAME).is_file()
 
 
 def _inside(path: Path, folder: Path) -> bool:
@@ -161,15 +192,13 @@ def check_replaceable(folder) -> None:
     """Refuse to replace ``folder`` (already past :func:`check_not_in_use`) unless siloflow made
     it, no run is live in it, and everything in it is siloflow's and unchanged (see
     :func:`foreign_entries`). Raises ``SetupError``."""
-    from .engine.base import run_state
-    from .errors import ReadError
     folder = Path(folder).absolute()
     real = folder.resolve()
     if not (real / MANIFEST_NAME).is_file():
         raise SetupError(f"{folder} is not a folder siloflow made (no {MANIFEST_NAME}): --force only replaces "
                          "siloflow's own run folders; choose another output folder or empty it yourself")
     try:
-        live = (real / "status.json").exists() and run_state(real)["state"] == "running"
+        live = (real / STATUS_NAME).exists() and run_state(real)["state"] == "running"
     except ReadError:                   # an unreadable status is not a live run
         live = False
     if live:
@@ -199,3 +228,310 @@ def remove_siloflow_files(folder: Path) -> list[str]:
         except OSError:
             pass
     return foreign_entries(folder) if folder.exists() else []
+
+
+# ------------------------------------------------------------------ status and record
+STATES = ("rendered", "running", "complete", "failed", "interrupted")
+
+
+def write_status(folder: Path, state: str, **extra) -> None:
+    """Record the run state (``rendered``, ``running``, ``complete``, ``failed``, ``interrupted``).
+
+    A ``running`` status names siloflow's process with its start time, so a PID reused by
+    another process is not taken for the run. On a full disk the status is rewritten in place
+    (its blocks are already allocated), so a failure can still be recorded."""
+    from .atomic_files import write_json
+    if state == "running":
+        extra = {"siloflow_pid": os.getpid(), "siloflow_start": process_start(os.getpid()),
+                 "host": socket.gethostname(), **extra}
+    path = Path(folder) / STATUS_NAME
+    data = {"state": state, "time": time.time(), **extra}
+    try:
+        write_json(path, data)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOSPC, errno.EDQUOT) or not path.is_file():
+            raise
+        text = json.dumps(data).encode()
+        with open(path, "r+b") as fh:
+            fh.write(text)
+            fh.truncate(len(text))
+
+
+def process_start(pid) -> Optional[int]:
+    """The start time of process ``pid`` in clock ticks since boot (Linux /proc), or None."""
+    try:
+        stat_line = Path(f"/proc/{int(pid)}/stat").read_text()
+        return int(stat_line.rsplit(")", 1)[1].split()[19])
+    except (OSError, ValueError, IndexError, OverflowError):
+        return None
+
+
+def process_alive(pid, start=None) -> bool:
+    """Whether ``pid`` is a live process, and (when ``start`` is known) the same one that
+    recorded it: a reused PID has another start time."""
+    if isinstance(pid, bool) or not isinstance(pid, int) or not 0 < pid < 2 ** 22:
+        return False
+    try:
+        os.kill(pid, 0)
+    except (ProcessLookupError, OverflowError):
+        return False
+    except PermissionError:
+        pass
+    if start is None:                    # a status written before start times were recorded
+        try:
+            command = Path(f"/proc/{pid}/cmdline").read_bytes()
+        except OSError:
+            return True
+        return b"python" in command or b"siloflow" in command
+    return process_start(pid) == start
+
+
+def read_status(folder: Path) -> dict:
+    """The folder's status.json, checked: a JSON object with a known ``state``."""
+    path = Path(folder) / STATUS_NAME
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ReadError(f"no readable {STATUS_NAME} in {folder}: {getattr(exc, 'strerror', None) or exc}") from None
+    if not isinstance(data, dict) or data.get("state") not in STATES:
+        raise ReadError(f"{path} is not a siloflow status (expected an object with a state of "
+                        f"{', '.join(STATES)}); was the folder made by siloflow?")
+    return data
+
+
+def run_state(folder: Path) -> dict:
+    """The run's status. A ``running`` run whose siloflow process is gone (or whose PID now
+    belongs to another process) is reported as ``abandoned``; a deck folder without a status
+    (``siloflow render``) as ``rendered``."""
+    folder = Path(folder)
+    if not (folder / STATUS_NAME).exists() and is_siloflow_folder(folder) and not (
+            folder / LIGGGHTS_FILES["log"]).exists():
+        return {"state": "rendered"}
+    status = read_status(folder)
+    host = status.get("host")
+    if status["state"] == "running" and host not in (None, socket.gethostname()):
+        return {**status, "reason": f"on host {host}: its process cannot be checked from here"}
+    if status["state"] == "running" and not process_alive(status.get("siloflow_pid"), status.get("siloflow_start")):
+        status = {**status, "state": "abandoned",
+                  "reason": "siloflow stopped without recording it (killed?); the engine was stopped with it"}
+    return status
+
+
+@dataclass
+class RunRecord:
+    """What a finished engine run left behind (``run_record.json``)."""
+
+    folder: str
+    engine: str
+    command: list[str]
+    returncode: Optional[int]
+    wall_time: float                       # s
+    stage_steps: dict[str, int]            # step at which each stage began
+    inserted: Optional[int]
+    settled_ke_pe: Optional[float]
+    completed: bool
+    warnings: list[str] = field(default_factory=list)
+    templates_inserted: Optional[int] = None   # grains + dust spheres the insertion placed
+    fill_losses: int = 0                       # atoms that left the box during the fill (recorded, < 1 %)
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+# ------------------------------------------------------------------ engine-neutral tables
+#: ``flow``: one row per sample; masses kg, energies J, time s
+FLOW_SCHEMA = {"step": "int64", "time": "float64", "atoms": "int64", "mass_total": "float64",
+               "mass_silo": "float64", "discharged_mass": "float64", "discharged_count": "int64",
+               "ke": "float64", "pe": "float64"}
+#: ``wall_forces``: one row per sample and wall (plan order); fx, fy, fz the force the grains
+#: exert on the wall, N, averaged over the sample
+WALL_FORCE_SCHEMA = {"step": "int64", "time": "float64", "wall": "object", "fx": "float64", "fy": "float64",
+                     "fz": "float64"}
+
+
+def check_table(table, schema: dict, what: str):
+    """``table`` with exactly the columns of ``schema``, in its order and types (``ReadError``)."""
+    import pandas as pd
+    missing = [c for c in schema if c not in table.columns]
+    if missing:
+        raise ReadError(f"{what} lacks column(s) {', '.join(missing)} (expected {', '.join(schema)})")
+    out = table[list(schema)].copy()
+    for c, dtype in schema.items():
+        if dtype != "object":
+            try:
+                out[c] = pd.to_numeric(out[c], errors="raise").astype(dtype)
+            except (ValueError, TypeError) as exc:
+                raise ReadError(f"{what}: column {c} is not {dtype} ({exc})") from None
+    return out
+
+
+@dataclass(frozen=True)
+class DumpLayout:
+    """What an engine's dumps hold: the species of each atom type, and the column names of its
+    pair-contact and wall-contact dumps (empty when it writes none)."""
+
+    engine: str
+    types: dict[int, str]
+    contact_columns: list[str]
+    wall_contact_columns: list[str]
+
+    def to_json(self) -> dict:
+        return {**asdict(self), "types": {str(k): v for k, v in self.types.items()}}
+
+    @classmethod
+    def from_json(cls, data: dict, source: str) -> "DumpLayout":
+        try:
+            return cls(engine=str(data["engine"]), types={int(k): str(v) for k, v in data["types"].items()},
+                       contact_columns=[str(c) for c in data["contact_columns"]],
+                       wall_contact_columns=[str(c) for c in data["wall_contact_columns"]])
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise ReadError(f"{source} is not a dump layout ({exc})") from None
+
+
+# ------------------------------------------------------------------ the folder
+class RunFolder:
+    """A siloflow run folder: its file names, and typed readers and writers of what is in it.
+
+    Post-processing reads runs only through this class and the dump reader."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+
+    def __repr__(self) -> str:
+        return f"RunFolder({str(self.path)!r})"
+
+    def __truediv__(self, name: str) -> Path:
+        return self.path / name
+
+    # -------------------------------------------------------------- names
+    @property
+    def case_file(self) -> Path:
+        return self.path / CASE_NAME
+
+    @property
+    def plan_file(self) -> Path:
+        return self.path / PLAN_NAME
+
+    @property
+    def results(self) -> Path:
+        return self.path / RESULTS
+
+    @property
+    def summary_file(self) -> Path:
+        return self.results / SUMMARY_NAME
+
+    @property
+    def dumps(self) -> Path:
+        return self.path / DUMPS
+
+    @property
+    def restart_file(self) -> Path:
+        return self.path / RESTART_FILE
+
+    def is_run_folder(self) -> bool:
+        return self.plan_file.is_file()
+
+    # -------------------------------------------------------------- plan, layout, status, record
+    @cached_property
+    def plan(self):
+        """The run plan (``siloflow.plan.RunPlan``) the folder was rendered from."""
+        from .plan import RunPlan
+        try:
+            text = self.plan_file.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise ReadError(f"{self.path} is not a siloflow run folder (no readable {PLAN_NAME}: "
+                            f"{exc.strerror or exc})") from None
+        return RunPlan.from_json(text, str(self.plan_file))
+
+    def write_plan(self, plan) -> None:
+        from .atomic_files import write_text
+        write_text(self.plan_file, plan.to_json())
+
+    @cached_property
+    def dump_layout(self) -> DumpLayout:
+        path = self.path / DUMP_LAYOUT_NAME
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise ReadError(f"{self.path}: no readable {DUMP_LAYOUT_NAME} ({exc})") from None
+        return DumpLayout.from_json(data, str(path))
+
+    def write_dump_layout(self, layout: DumpLayout) -> None:
+        from .atomic_files import write_json
+        write_json(self.path / DUMP_LAYOUT_NAME, layout.to_json())
+
+    def species_densities(self) -> dict[int, float]:
+        """Particle density (kg/m3) per atom type of the dumps."""
+        density = {sp.name: sp.density for sp in self.plan.species}
+        return {t: density[name] for t, name in self.dump_layout.types.items() if name in density}
+
+    @property
+    def state(self) -> dict:
+        """The run's status (``run_state``): rendered, running, complete, failed, interrupted, abandoned."""
+        return run_state(self.path)
+
+    def write_status(self, state: str, **extra) -> None:
+        write_status(self.path, state, **extra)
+
+    @cached_property
+    def record(self) -> RunRecord:
+        """The engine run's record."""
+        try:
+            return RunRecord(**json.loads((self.path / RECORD_NAME).read_text()))
+        except (OSError, ValueError, TypeError) as exc:
+            raise ReadError(f"{self.path} has no readable {RECORD_NAME}: {exc}") from None
+
+    def write_record(self, record: RunRecord) -> None:
+        from .atomic_files import write_text
+        write_text(self.path / RECORD_NAME, json.dumps(record.to_json(), indent=2))
+
+    # -------------------------------------------------------------- tables
+    def write_flow(self, table) -> None:
+        self._write_table(FLOW_TABLE, check_table(table, FLOW_SCHEMA, "the flow table"))
+
+    def write_wall_forces(self, table) -> None:
+        self._write_table(WALL_FORCES_TABLE, check_table(table, WALL_FORCE_SCHEMA, "the wall-force table"))
+
+    def flow(self):
+        """The ``flow`` table (:data:`FLOW_SCHEMA`), a pandas DataFrame."""
+        return self._read_table(FLOW_TABLE, FLOW_SCHEMA, "flow")
+
+    def wall_forces(self):
+        """The ``wall_forces`` table (:data:`WALL_FORCE_SCHEMA`), long: one row per sample and wall."""
+        return self._read_table(WALL_FORCES_TABLE, WALL_FORCE_SCHEMA, "wall-force")
+
+    def _write_table(self, name: str, table) -> None:
+        from .atomic_files import write_text
+        write_text(self.path / name, table.to_csv(index=False, float_format="%.17g"))
+
+    def _read_table(self, name: str, schema: dict, what: str):
+        import pandas as pd
+        path = self.path / name
+        try:
+            table = pd.read_csv(path, dtype={"wall": str}, float_precision="round_trip")
+        except (OSError, ValueError) as exc:
+            raise ReadError(f"cannot read the {what} table {path}: {exc} (did the engine run finish?)") from None
+        return check_table(table, schema, str(path))
+
+    # -------------------------------------------------------------- dumps and results
+    def dump_files(self, kind: str = "particles") -> Optional[list[str]]:
+        """The dump files of ``kind`` (``particles``, ``contacts``, ``wall_contacts``) in step
+        order, or None when the run wrote none."""
+        from postprocess.dumps import dump_files
+        pattern = {"particles": PARTICLE_DUMPS, "contacts": CONTACT_DUMPS, "wall_contacts": WALL_CONTACT_DUMPS}[kind]
+        try:
+            return dump_files(str(self.dumps / pattern))
+        except ReadError:
+            return None
+
+    def read_summary(self, name: str = SUMMARY_NAME, folder: Optional[Path] = None) -> dict:
+        """A summary JSON of the results (``results/summary.json`` by default)."""
+        path = (folder or self.results) / name
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            raise ReadError(f"{self.path}: no readable {path.relative_to(self.path) if self.path in path.parents else path}"
+                            f" (run `siloflow post {self.path}` first)") from None
+        if not isinstance(data, dict):
+            raise ReadError(f"{path} is not a summary")
+        return data

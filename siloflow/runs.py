@@ -15,7 +15,6 @@ post-processed is analysed on first access.
 """
 from __future__ import annotations
 
-import json
 from functools import cached_property
 from pathlib import Path
 from typing import Iterator, Optional
@@ -23,17 +22,20 @@ from typing import Iterator, Optional
 import pandas as pd
 
 from .errors import ReadError
+from .run_folder import RunFolder
 
-RESULTS = "results"
+#: what ``siloflow post`` writes under results/ and a ``Run`` reads back
+TABLES = {"flow": "discharge.csv", "wall_pressure": "wall_pressure.csv", "bands": "bands.csv"}
 
 
 class Run:
-    """A siloflow run folder, read-only: its state, summary and tables (SI units)."""
+    """A siloflow run folder, read-only: its state, plan, summary and tables (SI units)."""
 
     def __init__(self, folder):
         self.folder = Path(folder)
-        if not (self.folder / "derived.json").is_file():
-            raise ReadError(f"{self.folder} is not a siloflow run folder (no derived.json)")
+        self.run_folder = RunFolder(self.folder)
+        if not self.run_folder.is_run_folder():
+            raise ReadError(f"{self.folder} is not a siloflow run folder (no plan.json)")
 
     def __repr__(self) -> str:
         return f"Run({str(self.folder)!r}, state={self.state!r})"
@@ -41,59 +43,60 @@ class Run:
     @property
     def state(self) -> str:
         """rendered, running, complete, failed, interrupted or abandoned."""
-        from .engine.base import run_state
-        return run_state(self.folder)["state"]
+        return self.run_folder.state["state"]
 
-    @cached_property
+    @property
+    def plan(self):
+        """The run plan (``siloflow.plan.RunPlan``): species, contacts, time step, stages, walls."""
+        return self.run_folder.plan
+
+    @property
     def record(self):
-        """The engine run's record (``siloflow.engine.RunRecord``: wall time s, stage steps, ...)."""
-        from .engine.base import RunRecord
-        try:
-            return RunRecord(**json.loads((self.folder / "run_record.json").read_text()))
-        except (OSError, ValueError, TypeError) as exc:
-            raise ReadError(f"{self.folder} has no readable run_record.json: {exc}") from None
+        """The engine run's record (``siloflow.run_folder.RunRecord``: wall time s, stage steps, ...)."""
+        return self.run_folder.record
 
     def _results(self) -> Path:
-        out = self.folder / RESULTS
-        if not (out / "summary.json").is_file():
+        if not self.run_folder.summary_file.is_file():
             from postprocess.first_results import analyse
             analyse(self.folder)
-        return out
+        return self.run_folder.results
 
     @cached_property
     def summary(self) -> dict:
         """results/summary.json: flow rate (kg/s) with its standard error, bands, force balance, ..."""
-        return json.loads((self._results() / "summary.json").read_text())
+        self._results()
+        return self.run_folder.read_summary()
 
     def _table(self, name: str) -> pd.DataFrame:
+        path = self._results() / TABLES[name]
         try:
-            return pd.read_csv(self._results() / name)
+            return pd.read_csv(path)
         except (OSError, ValueError) as exc:
-            raise ReadError(f"cannot read {self.folder / RESULTS / name}: {exc}") from None
+            raise ReadError(f"cannot read {path}: {exc}") from None
 
     @cached_property
     def flow(self) -> pd.DataFrame:
         """Discharge series: step, time (s), time since opening, outlet mass (kg), mass in the
         silo (kg), total mass (kg), particles."""
-        return self._table("discharge.csv")
+        return self._table("flow")
 
     @cached_property
     def wall_pressure(self) -> pd.DataFrame:
         """Band pressure per sample: band, step, time (s), z_mid (m), pressure (Pa), shear force (N)."""
-        return self._table("wall_pressure.csv")
+        return self._table("wall_pressure")
 
     @cached_property
     def bands(self) -> pd.DataFrame:
         """Per band: static pressure and shear, maximum dynamic pressure, discharge factor."""
-        return self._table("bands.csv")
+        return self._table("bands")
 
     def frames(self, columns: Optional[list[str]] = None, every: int = 1) -> Iterator:
         """The particle dump frames (``postprocess.dumps.Frame``), one at a time."""
         from postprocess.dumps import read_frames
-        dumps = self.folder / "output" / "dumps"
-        if not any(dumps.glob("dump.*.txt")):
+        files = self.run_folder.dump_files("particles")
+        if files is None:
             raise ReadError(f"{self.folder} has no particle dumps (outputs.dump_interval was not set)")
-        return read_frames(str(dumps / "dump.*.txt"), columns=columns, every=every)
+        return read_frames(files, columns=columns, every=every)
 
 
 def open_run(folder) -> Run:
@@ -102,17 +105,23 @@ def open_run(folder) -> Run:
 
 
 def run(case, folder, force: bool = False, progress=None) -> Run:
-    """Render ``case`` (a ``Case`` or a case-file path) into ``folder``, run its engine, check the
-    run and compute the first results, as ``siloflow run`` does; return the ``Run``."""
+    """Render ``case`` (a ``Case``, a dict of case fields or a case-file path) into ``folder``,
+    run its engine, check the run and compute the first results, as ``siloflow run`` does;
+    return the ``Run``."""
     from postprocess.first_results import analyse
-    from .case import Case, load_case
+    from .case import Case
+    from .case_file import case_from_dict, load_case
+    from .derived import derive
     from .engine import get_engine
     keep = []
-    if not isinstance(case, Case):
+    if isinstance(case, dict):
+        case = case_from_dict(case)
+    elif not isinstance(case, Case):
         keep = [case]
         case = load_case(case)
+    plan = derive(case)
     engine = get_engine(case.engine.name)
-    folder = engine.prepare(case, folder, force=force, keep=keep)
+    folder = engine.prepare(case, folder, force=force, keep=keep, plan=plan)
     engine.execute(folder, progress=progress)
     engine.collect(folder)
     analyse(folder)

@@ -17,7 +17,7 @@ def small_run(tmp_path_factory):
     """One real LIGGGHTS run of tests/data/small_silo.yaml (about a minute), shared by the
     engine and post-processing tests: (case, folder, run record, results summary)."""
     import siloflow
-    from siloflow.case import load_case
+    from siloflow.case_file import load_case
 
     folder = tmp_path_factory.mktemp("engine") / "small"
     run = siloflow.run(SMALL, folder)               # the Python entry point, as a notebook uses it

@@ -21,13 +21,17 @@ CASES = sorted([*(ROOT / "decks").glob("*.yaml"), *(ROOT / "tests" / "data").glo
 
 def golden_files(case_file: Path) -> dict[str, bytes]:
     """{file name: bytes} of what ``case_file`` renders: both decks and the meshes' SHA-256."""
-    from siloflow.case import load_case
-    from siloflow.deck import render, write_resume_deck
+    from siloflow.case_file import load_case
+    from siloflow.derived import derive
+    from siloflow.engine import get_engine
+    from siloflow.engine.liggghts.deck import write_resume_deck
     from siloflow.run_folder import sha256
 
     with tempfile.TemporaryDirectory(prefix="siloflow-golden-") as scratch:
-        folder = render(load_case(case_file), Path(scratch) / "deck")
-        write_resume_deck(folder)
+        case = load_case(case_file)
+        plan = derive(case)
+        folder = get_engine(case.engine.name).prepare(case, Path(scratch) / "deck", plan=plan)
+        write_resume_deck(plan, case, folder)
         meshes = "".join(f"{sha256(p)}  {p.name}\n" for p in sorted((folder / "meshes").glob("*.stl")))
         return {"in.liggghts": (folder / "in.liggghts").read_bytes(),
                 "in.resume.liggghts": (folder / "in.resume.liggghts").read_bytes(),

@@ -10,7 +10,7 @@ import stat
 import pytest
 from typer.testing import CliRunner
 
-from siloflow.case import MAX_CASE_BYTES, MAX_CASE_DEPTH, load_case
+from siloflow.case_file import MAX_CASE_BYTES, MAX_CASE_DEPTH, load_case
 from siloflow.cli import app
 from siloflow.errors import CaseError
 

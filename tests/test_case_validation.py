@@ -7,7 +7,7 @@ import math
 import pytest
 from typer.testing import CliRunner
 
-from siloflow.case import case_from_dict, load_case
+from siloflow.case_file import case_from_dict, load_case
 from siloflow.cli import app
 from siloflow.derived import MAX_RUN_STEPS, check_run_length, derive
 from siloflow.errors import CaseError, SetupError

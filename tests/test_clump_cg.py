@@ -11,7 +11,8 @@ import pytest
 from postprocess.cg_kernels import gaussian
 from postprocess.clump_bodies import body_centres, body_frame, centroid_weights
 from siloflow.clumps import union_centroid
-from postprocess.coarse_grain import CartesianGrid, CoarseGraining
+from postprocess.cg_grids import CartesianGrid
+from postprocess.coarse_grain import CoarseGraining
 from postprocess.dumps import Frame
 
 WHEAT = np.array([[-0.001, 0.0, 0.0], [0.0, 0.0, 0.0], [0.001, 0.0, 0.0]]), np.full(3, 0.002)

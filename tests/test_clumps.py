@@ -9,9 +9,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from postprocess.porosity import MeasureRegion, Porosity, grain_weights
-from siloflow.case import case_from_dict, load_case
+from siloflow.case_file import case_from_dict, load_case
 from siloflow.clumps import ClumpShape, union_area, union_volume, wheat_grain
-from siloflow.deck import render_deck_text
+from siloflow.engine.liggghts.deck import render_deck_text
 from siloflow.derived import derive
 from siloflow.errors import CaseError
 from siloflow.meshes import silo_meshes
@@ -189,7 +189,7 @@ def test_dust_density_scaling_lengthens_the_time_step_as_its_square_root():
 def test_clump_deck_uses_multisphere_and_keeps_dust_on_its_own_integrator():
     case = load_case(CLUMPS)
     d = derive(case)
-    text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+    text = render_deck_text(d, case)
     line = next(ln for ln in text.splitlines() if "particletemplate/multisphere" in ln)
     assert "nspheres 3" in line and "ntry 200000" in line and "density constant 1000" in line
     assert "fix             integrate all multisphere" in text

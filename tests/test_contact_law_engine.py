@@ -16,8 +16,8 @@ import pytest
 import yaml
 
 from siloflow import contact_physics as cp
-from siloflow.case import case_from_dict
-from siloflow.deck import render_deck_text
+from siloflow.case_file import case_from_dict
+from siloflow.engine.liggghts.deck import render_deck_text
 from siloflow.derived import derive
 from siloflow.meshes import silo_meshes
 
@@ -37,7 +37,7 @@ def contact_deck(case, radius: float, density: float, v_rel: float, offset: floa
     and its time step (s). Written every step: positions and velocities of both spheres."""
     d = derive(case)
     # the resumed deck has the bed's contact law with friction restored (no frictionless fill)
-    text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius), resume=True)
+    text = render_deck_text(d, case, resume=True)
     lines = [ln for ln in text.splitlines() if ln.startswith(CONTACT_LINES) and not ln.startswith("timestep")]
     dt = d.timestep / REFINE
     lines.append(f"timestep        {dt!r}")
@@ -235,7 +235,7 @@ def test_linear_impact_of_paper_a_has_its_stiffness_restitution_and_friction(tmp
     """Paper A's PFC-style linear law (kn = 1.6e5 N/m, e = 0.855, friction 0.43, restored after
     the frictionless fill): a head-on impact lasts pi / sqrt(kn/m* (1 - zeta^2)) and rebounds
     with e; a grazing one transfers friction x |normal| per step. From the case's numbers."""
-    from siloflow.case import load_case
+    from siloflow.case_file import load_case
     case = load_case(ROOT / "decks" / "paper_a_spheres_quick.yaml")
     r, rho = case.particles.radius, case.materials.particle.density
     pp = case.materials.particle_particle

@@ -9,8 +9,9 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from siloflow import contact_physics as cp
-from siloflow.case import case_from_dict
-from siloflow.derived import bed_height, bed_volume, derive, is_prime
+from siloflow.case_file import case_from_dict
+from siloflow.derived import bed_height, bed_volume, derive
+from siloflow.engine.liggghts.encoding import is_prime
 
 
 def _impact(force, m, v0):
@@ -131,7 +132,7 @@ def test_hopper_volume_is_cone_plus_cylinder(quick_dict):
 
 def test_polydisperse_number_and_mass_fractions_and_time_step(quick_dict):
     from siloflow.case import paper_b_radii
-    from siloflow.deck import render_deck_text
+    from siloflow.engine.liggghts.deck import render_deck_text
     from siloflow.meshes import silo_meshes
     quick_dict["particles"] = {"kind": "polydisperse_spheres", "radii": [0.0015, 0.001, 0.00075],
                                "fractions": [0.2, 0.3, 0.5], "basis": "number"}
@@ -145,7 +146,7 @@ def test_polydisperse_number_and_mass_fractions_and_time_step(quick_dict):
     assert d.particle_radius == 0.0015
     assert d.particle_volume == pytest.approx(sum(n * 4 / 3 * math.pi * r ** 3 for n, r in zip([0.2, 0.3, 0.5],
                                                                                               [0.0015, 0.001, 0.00075])))
-    deck = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+    deck = render_deck_text(d, case)
     assert "particledistribution/discrete" in deck and deck.count("particletemplate/sphere") == 3
     line = next(ln for ln in deck.splitlines() if "particledistribution/discrete" in ln).split()
     assert [float(x) for x in line[7::2]] == pytest.approx(d.mass_fractions, rel=1e-9)
@@ -247,7 +248,7 @@ def test_paper_b_decks_hooke_kn_of_the_largest_pair_by_hand(deck, v, young):
     """derive() on the paper decks themselves (their V is not 1): the largest pair's kn is the
     hand-worked Eq. 10 value above (Y 1.2e8 in the quick deck scales it by 1000^(-4/5))."""
     from conftest import ROOT
-    from siloflow.case import load_case
+    from siloflow.case_file import load_case
     case = load_case(ROOT / "decks" / deck)
     assert case.materials.characteristic_velocity == v
     pair = derive(case).type_pairs[(1, 1)]

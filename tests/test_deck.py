@@ -6,8 +6,9 @@ import math
 
 import pytest
 
-from siloflow.case import case_from_dict
-from siloflow.deck import DeckError, _num, _safe_name, check_deck, render
+from siloflow.case_file import case_from_dict
+from siloflow.deck import DeckError, _num, _safe_name, render
+from siloflow.engine.liggghts.deck import check_deck
 from siloflow.errors import CaseError, SetupError
 
 

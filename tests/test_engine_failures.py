@@ -10,11 +10,11 @@ import pytest
 import yaml
 
 from conftest import ROOT
-from siloflow.case import case_from_dict
+from siloflow.case_file import case_from_dict
 from siloflow.deck import render
 from siloflow.engine import LiggghtsEngine
 from siloflow.engine.base import read_status
-from siloflow.engine.liggghts_log import LogState, diagnose
+from siloflow.engine.liggghts.log import LogState, diagnose
 from siloflow.errors import CaseError, EngineRunError, SetupError
 
 
@@ -250,7 +250,7 @@ def test_bad_mesh_is_explained_and_engine_bytes_never_reach_the_message(tmp_path
 
 
 def test_printable_drops_escapes_controls_and_undecodable_bytes():
-    from siloflow.engine.liggghts_log import decode, printable
+    from siloflow.engine.liggghts.log import decode, printable
 
     assert printable("a\x1b[31mred\x1b[0m\x1b]0;title\x07\tx\x00\x9b\ufffd\n") == "ared x\n"
     assert decode(b"ERROR: x\xff\xfe\x1b[2J done\n") == "ERROR: x done\n"

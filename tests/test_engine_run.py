@@ -7,9 +7,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from siloflow.case import load_case
+from siloflow.case_file import load_case
 from siloflow.engine import LiggghtsEngine
-from siloflow.engine_output import FLOW_COLUMNS, read_ave_time
+from siloflow.engine.liggghts.tables import FLOW_COLUMNS, read_ave_time
 from siloflow.errors import EngineRunError, SetupError
 
 

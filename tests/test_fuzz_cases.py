@@ -12,8 +12,9 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from siloflow.case import case_from_dict, load_case
-from siloflow.deck import FORBIDDEN_WORDS, check_deck, render, render_deck_text
+from siloflow.case_file import case_from_dict, load_case
+from siloflow.deck import FORBIDDEN_WORDS, render
+from siloflow.engine.liggghts.deck import check_deck, render_deck_text
 from siloflow.derived import check_run_length, derive
 from siloflow.errors import CaseError, SiloflowError
 from siloflow.meshes import silo_meshes

@@ -21,7 +21,7 @@ import yaml
 from stl import mesh as stl_mesh
 
 from siloflow import meshes
-from siloflow.case import case_from_dict, load_case
+from siloflow.case_file import case_from_dict, load_case
 from siloflow.deck import render
 from siloflow.derived import derive
 from siloflow.errors import CaseError, SetupError

@@ -9,8 +9,9 @@ import pytest
 from stl import mesh as stl_mesh
 
 from postprocess.discharge import steady_flow_rate
-from postprocess.wall_pressure import band_mean, band_pressures, sector_pressure, wall_force_columns
-from siloflow.case import case_from_dict
+from postprocess.wall_pressure import band_mean, band_pressures, sector_pressure
+from siloflow.engine.liggghts.tables import wall_force_columns
+from siloflow.case_file import case_from_dict
 from siloflow.derived import derive
 from siloflow.meshes import silo_meshes, write_stl
 

@@ -6,8 +6,10 @@ import math
 
 import pytest
 
-from siloflow.case import load_case, paper_b_radii
-from siloflow.deck import render_deck_text
+from siloflow.case import paper_b_radii
+
+from siloflow.case_file import load_case
+from siloflow.engine.liggghts.deck import render_deck_text
 from siloflow.derived import derive
 from siloflow.meshes import silo_meshes
 
@@ -25,7 +27,7 @@ def series(k1: float, k2: float) -> float:
 def test_paper_deck_renders(path):
     case = load_case(path)
     d = derive(case)
-    text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+    text = render_deck_text(d, case)
     assert "run" in text and d.particle_count == case.fill.count
     assert "scale" in path.read_text().splitlines()[0].lower()      # the scale is stated up front
 
@@ -84,5 +86,5 @@ def test_paper_b_decks_carry_its_numbers(name):
         assert case.fill.count == 393216 and m.particle.youngs_modulus == 1.2e11
         assert case.geometry.orifice_radius == pytest.approx(12 / 64)
         d = derive(case)
-        text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+        text = render_deck_text(d, case)
         assert "hard_particles   yes" in text

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from postprocess.dumps import read_frames
-from siloflow.case import load_case
+from siloflow.case_file import load_case
 from siloflow.derived import derive
 from siloflow.engine import LiggghtsEngine
-from siloflow.engine_output import FLOW_COLUMNS, read_ave_time
+from siloflow.engine.liggghts.tables import FLOW_COLUMNS, read_ave_time
 
 from conftest import ROOT, hooke_materials
 
@@ -111,7 +111,7 @@ def test_frictionless_fill_packs_denser_then_friction_is_restored(small_run, tmp
     import yaml
 
     from postprocess.first_results import analyse
-    from siloflow.case import case_from_dict
+    from siloflow.case_file import case_from_dict
     from conftest import SMALL
 
     data = yaml.safe_load(SMALL.read_text())
@@ -141,7 +141,7 @@ def test_hooke_contact_law_runs_per_size_pair(tmp_path):
     import yaml
 
     from postprocess.first_results import analyse
-    from siloflow.case import case_from_dict
+    from siloflow.case_file import case_from_dict
 
     data = yaml.safe_load(POLY.read_text())
     data["materials"] = hooke_materials(2500.0, 5.0e6, 0.5)

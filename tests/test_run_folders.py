@@ -14,11 +14,11 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from siloflow.case import case_from_dict
+from siloflow.case_file import case_from_dict
 from siloflow.cli import app, printable
 from siloflow.deck import render
 from siloflow.engine import LiggghtsEngine
-from siloflow.engine.base import process_start, read_status, run_state, write_status
+from siloflow.run_folder import process_start, read_status, run_state, write_status
 from siloflow.errors import EngineRunError, ReadError, SetupError
 from siloflow.run_folder import MANIFEST_NAME, foreign_entries, record_products
 

@@ -10,8 +10,8 @@ import pandas as pd
 import pytest
 
 from postprocess.dumps import read_frames
-from siloflow.case import case_from_dict, load_case
-from siloflow.deck import render_deck_text
+from siloflow.case_file import case_from_dict, load_case
+from siloflow.engine.liggghts.deck import render_deck_text
 from siloflow.derived import bed_volume, derive
 from siloflow.errors import CaseError
 from siloflow.meshes import silo_meshes
@@ -60,7 +60,7 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
     case = load_case(SLAB)
     d = derive(case)
     assert d.face_type == d.wall_type + 1 == 3 and d.n_types == 3
-    text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+    text = render_deck_text(d, case)
     assert "create_box      3 domain" in text
     assert "face_s00.stl type 3" in text and "band00_s00.stl type 2" in text
     mu = case.materials.particle_particle.friction, case.materials.particle_wall.friction
@@ -73,7 +73,7 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
     data["engine"]["ranks"] = 1
     case = case_from_dict(data)
     d = derive(case)
-    text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+    text = render_deck_text(d, case)
     assert "fflag on off on tflag off on off" in text and "orientation template" in text
     assert d.insertion_region["yhi"] == pytest.approx(0.5 * 0.0022 - 0.001)
     # dust in a slab: poured into the mid-plane and held there; inserted before the grains of
@@ -83,7 +83,7 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
                                  "dust_dust": pair, "dust_particle": pair, "dust_wall": pair}
     case = case_from_dict(data)
     d = derive(case)
-    text = render_deck_text(case, d, silo_meshes(case, d.outlet_z, d.outlet_disc_radius))
+    text = render_deck_text(d, case)
     lines = text.splitlines()
     first = {key: next(k for k, line in enumerate(lines) if line.startswith(key))
              for key in ("fix             ins_dust", "fix             ins all", "region          insertion_dust")}
@@ -147,8 +147,8 @@ def test_slab_run_keeps_grains_in_the_slab_and_senses_both_walls(slab_run):
     assert p[0] > p[1]                                                  # pressure grows with depth
     # horizontal force balance of the resting bed: what pushes the left wall pushes the right
     # (and hopper) back; frictionless faces take no x force
-    from postprocess.wall_pressure import wall_force_columns
-    from siloflow.engine_output import read_ave_time
+    from siloflow.engine.liggghts.tables import wall_force_columns
+    from siloflow.engine.liggghts.tables import read_ave_time
     walls = json.loads((folder / "derived.json").read_text())["walls"]
     forces = read_ave_time(folder / "output" / "wall_forces.txt", wall_force_columns(walls))
     still = forces[(forces.step > record.stage_steps["static"]) & (forces.step <= record.stage_steps["open"])]

@@ -11,7 +11,7 @@ import yaml
 from stl import Mode
 from stl import mesh as stl_mesh
 
-from siloflow.case import load_case
+from siloflow.case_file import load_case
 from siloflow.deck import render
 from siloflow.errors import CaseError
 from siloflow.meshes import rectangle
@@ -106,9 +106,9 @@ def test_an_insert_that_is_a_fifo_is_refused_not_read(tmp_path):
                     "CI installs it, so CI never skips this")
 def test_insert_carries_load_in_a_real_run(tmp_path):
     from postprocess.first_results import analyse
-    from postprocess.wall_pressure import wall_force_columns
+    from siloflow.engine.liggghts.tables import wall_force_columns
     from siloflow.engine import LiggghtsEngine
-    from siloflow.engine_output import read_ave_time
+    from siloflow.engine.liggghts.tables import read_ave_time
 
     write_user_stl(tmp_path / "b.stl", baffle(), Mode.BINARY)
     case = load_case(slab_case_with(tmp_path, "b.stl"))

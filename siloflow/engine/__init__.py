@@ -1,19 +1,39 @@
-"""Engines siloflow can drive, behind one interface (:class:`~siloflow.engine.base.Engine`)."""
+"""Engines siloflow can drive, behind one interface (:class:`~siloflow.engine.base.Engine`).
+
+Engines are registered by name and imported only when asked for (:func:`get_engine`); a new
+engine is a subpackage with an ``Engine`` subclass, its deck writer and templates, and a line
+in :data:`ENGINES`.
+"""
 from __future__ import annotations
 
-from ..errors import SetupError
-from .base import Engine, RunRecord
-from .liggghts import LiggghtsEngine
+from importlib import import_module
 
-ENGINES = {"liggghts": LiggghtsEngine}
+from ..errors import SetupError
+from .base import Engine, LaunchProfile, RunRecord
+
+#: engine name -> "module:class", imported on first use
+ENGINES = {"liggghts": "siloflow.engine.liggghts:LiggghtsEngine"}
+
+
+def engine_class(name: str) -> type[Engine]:
+    """The ``Engine`` subclass called ``name`` (``SetupError`` if there is none)."""
+    try:
+        module, cls = ENGINES[name].split(":")
+    except KeyError:
+        raise SetupError(f"unknown engine {name!r}; known: {', '.join(ENGINES)}") from None
+    return getattr(import_module(module), cls)
 
 
 def get_engine(name: str, **profile) -> Engine:
-    """The engine called ``name``, configured for this machine by ``profile`` (binary, launcher)."""
-    try:
-        return ENGINES[name](**profile)
-    except KeyError:
-        raise SetupError(f"unknown engine {name!r}; known: {', '.join(ENGINES)}") from None
+    """The engine called ``name``, configured for this machine by ``profile`` (executable, mpirun,
+    env, or a ``LaunchProfile`` as ``profile=``)."""
+    return engine_class(name)(**profile)
 
 
-__all__ = ["Engine", "RunRecord", "LiggghtsEngine", "get_engine", "ENGINES"]
+def __getattr__(name):
+    if name == "LiggghtsEngine":          # old import path, without importing it eagerly
+        return engine_class("liggghts")
+    raise AttributeError(f"module 'siloflow.engine' has no attribute {name!r}")
+
+
+__all__ = ["Engine", "LaunchProfile", "RunRecord", "get_engine", "engine_class", "ENGINES"]

@@ -1,16 +1,53 @@
-"""Readers of the tables the engine writes (``fix ave/time`` files), as pandas DataFrames."""
+"""LIGGGHTS' tables: its ``fix ave/time`` files read as pandas DataFrames and turned into the
+engine-neutral ``flow`` and ``wall_forces`` tables (``siloflow.run_folder``), and the column
+layouts of its ``pair/gran/local`` and ``wall/gran/local`` contact dumps."""
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Sequence
 
+import numpy as np
 import pandas as pd
 
-from .errors import ReadError
+from ...errors import ReadError
 
-#: column names of output/flow.txt, in the order the deck writes them
+#: column names of output/flow.txt, in the order the deck writes them (massflow/mesh's counts)
 FLOW_COLUMNS = ["step", "atoms", "mass_total", "mass_silo", "outlet_mass", "outlet_count",
                 "deleted_mass", "deleted_count", "ke", "pe"]
+#: LIGGGHTS' f_<mesh>[1..3] of mesh/surface/stress is the force the grains exert on the mesh
+FORCE_SIGN = 1.0
+
+
+def neutral_flow(flow: pd.DataFrame, dt: float) -> pd.DataFrame:
+    """The engine-neutral ``flow`` table of LIGGGHTS' flow.txt (``FLOW_COLUMNS``); ``dt`` in s."""
+    return pd.DataFrame({"step": flow.step, "time": flow.step * dt, "atoms": flow.atoms,
+                         "mass_total": flow.mass_total, "mass_silo": flow.mass_silo,
+                         "discharged_mass": flow.outlet_mass, "discharged_count": flow.outlet_count,
+                         "ke": flow.ke, "pe": flow.pe})
+
+
+def wall_force_columns(walls) -> list[str]:
+    """Column names of output/wall_forces.txt: step, then fx fy fz of each wall in deck order
+    (``walls``: the plan's, the counting disc excluded)."""
+    names = ["step"]
+    for w in walls:
+        if w.is_wall:
+            names += [f"{w.name}_fx", f"{w.name}_fy", f"{w.name}_fz"]
+    return names
+
+
+def neutral_wall_forces(path, plan) -> pd.DataFrame:
+    """The engine-neutral ``wall_forces`` table (long: one row per sample and wall, in the plan's
+    wall order) of LIGGGHTS' wall_forces.txt."""
+    walls = [w for w in plan.walls if w.is_wall]
+    wide = read_ave_time(path, wall_force_columns(plan.walls))
+    step = wide.step.to_numpy()
+    n = len(step)
+    return pd.DataFrame({
+        "step": np.tile(step, len(walls)), "time": np.tile(step * plan.dt, len(walls)),
+        "wall": np.repeat([w.name for w in walls], n),
+        **{k: np.concatenate([FORCE_SIGN * wide[f"{w.name}_{k}"].to_numpy() for w in walls]) if walls else []
+           for k in ("fx", "fy", "fz")}})
 
 
 def read_ave_time(path, names: list[str] | None = None) -> pd.DataFrame:

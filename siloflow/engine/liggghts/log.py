@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
-from ..deck import LIGGGHTS_VOLUME_LIMIT
-from ..errors import ANSI_ESCAPES
+from .deck import LIGGGHTS_VOLUME_LIMIT
+from ...errors import ANSI_ESCAPES
 
 _STAGE = re.compile(r"^SILOFLOW_STAGE (\w+) (\d+)\s*$")
 _MARK = re.compile(r"^SILOFLOW_(INSERTED|SETTLED|NOT_SETTLED|DONE)\s*(\S*)\s*$")
