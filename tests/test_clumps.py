@@ -12,9 +12,9 @@ from postprocess.porosity import MeasureRegion, Porosity, grain_weights
 from siloflow.case_file import case_from_dict, load_case
 from siloflow.clumps import ClumpShape, union_area, union_volume, wheat_grain
 from siloflow.engine.liggghts.deck import render_deck_text
+from siloflow.engine.liggghts.encoding import encode
 from siloflow.derived import derive
 from siloflow.errors import CaseError
-from siloflow.meshes import silo_meshes
 
 from conftest import ROOT, set_path
 from test_post_analyses import frame_of
@@ -165,15 +165,16 @@ def test_explicit_clump_spheres_and_linear_dust_contacts():
     d = derive(case)
     assert d.species[0].volume == pytest.approx(union_volume([[0, 0, 0], [0.0015, 0, 0]], [0.002, 0.0015]))
     # dust-dust uses its own springs and the dust mass; dust-grain the grain-dust springs
-    dd, dg = d.type_pairs[(2, 2)], d.type_pairs[(1, 2)]
+    enc = encode(d)
+    dd, dg = enc.type_pairs[(2, 2)], enc.type_pairs[(1, 2)]
     m_dust = 2000.0 * 4 / 3 * math.pi * 0.00025 ** 3
     assert dd.kn == 1.6e6 and dd.m_eff == pytest.approx(m_dust / 2)
     assert dg.kn == 2.9e5 and dg.m_eff == pytest.approx(d.species[0].mass * m_dust / (d.species[0].mass + m_dust))
-    assert d.type_pairs[(2, 3)].kn == 1.6e6                               # dust-wall
+    assert enc.type_pairs[(2, 3)].kn == 1.6e6                             # dust-wall
     # the time step comes from the shortest contact, the dust's, and says by how much
-    assert d.critical_time_source == "contact time dust-dust"
-    assert d.timestep == pytest.approx(case.engine.timestep_fraction * math.pi * math.sqrt(m_dust / 2 / 1.6e6))
-    assert d.timestep_without_dust / d.timestep > 10
+    assert d.timestep.critical_time_source == "contact time dust-dust"
+    assert d.dt == pytest.approx(case.engine.timestep_fraction * math.pi * math.sqrt(m_dust / 2 / 1.6e6))
+    assert d.timestep.without_dust / d.dt > 10
 
 
 def test_dust_density_scaling_lengthens_the_time_step_as_its_square_root():
@@ -182,7 +183,7 @@ def test_dust_density_scaling_lengthens_the_time_step_as_its_square_root():
     steps = {}
     for scale in (1.0, 4.0):
         dust["density_scale"] = scale
-        steps[scale] = derive(case_from_dict(data)).timestep
+        steps[scale] = derive(case_from_dict(data)).dt
     assert steps[4.0] / steps[1.0] == pytest.approx(2.0, rel=1e-9)
 
 
@@ -198,9 +199,10 @@ def test_clump_deck_uses_multisphere_and_keeps_dust_on_its_own_integrator():
     assert "delete_atoms" not in text                         # refused by multisphere
     assert "output/dumps/dump.*.txt id type mol x" in text    # body ids for per-body analyses
     assert "(type==1)*0.3333333333+(type==2)*1" in text       # a clump weighed once
-    vx, _, vz = d.plate_velocity
+    enc = encode(d)
+    vx, _, vz = enc.plate_velocity
     assert vx > 0 and vz < 0 and math.hypot(vx, vz) == pytest.approx(case.discharge.opening.speed)
-    assert d.box["xhi"] > d.plate_shift + case.geometry.outlet_radius     # the plate stays in the box
+    assert enc.box["xhi"] > enc.plate_shift + case.geometry.outlet_radius     # the plate stays in the box
 
 
 # ---------------------------------------------------------------- porosity of clumps

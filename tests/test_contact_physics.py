@@ -11,7 +11,7 @@ from scipy.optimize import brentq
 from siloflow import contact_physics as cp
 from siloflow.case_file import case_from_dict
 from siloflow.derived import bed_height, bed_volume, derive
-from siloflow.engine.liggghts.encoding import is_prime
+from siloflow.engine.liggghts.encoding import encode, is_prime
 
 
 def _impact(force, m, v0):
@@ -86,15 +86,16 @@ def test_masses_and_moduli():
 def test_derived_timestep_is_fraction_of_smallest_time(quick_dict):
     case = case_from_dict(quick_dict)
     d = derive(case)
-    times = [p.contact_time for p in d.pairs.values()] + [d.rayleigh_time]
-    assert d.critical_time == min(times)
-    assert d.timestep == pytest.approx(case.engine.timestep_fraction * min(times))
-    assert d.particle_mass * d.particle_count == pytest.approx(d.total_mass)
-    seeds = [s for v in d.seeds.values() for s in (v if isinstance(v, list) else [v])]
+    enc = encode(d)
+    times = [p.contact_time for p in d.pairs.values()] + [d.timestep.rayleigh_time]
+    assert d.timestep.critical_time == min(times)
+    assert d.dt == pytest.approx(case.engine.timestep_fraction * min(times))
+    assert d.particle_mass * d.fill.count == pytest.approx(d.total_mass)
+    seeds = [s for v in enc.seeds.values() for s in (v if isinstance(v, list) else [v])]
     assert all(is_prime(s) and s > 10000 for s in seeds) and len(set(seeds)) == len(seeds)
-    assert d.sample_freq % d.sample_every == 0
+    assert d.outputs.sample_steps % enc.sample_every == 0
     # the insertion region sits above the expected bed
-    assert d.insertion_region["z_min"] > d.bed_height_estimate
+    assert d.fill.region.z_min > d.fill.bed_height_estimate
 
 
 def test_linear_model_derivation(quick_dict):
@@ -105,7 +106,7 @@ def test_linear_model_derivation(quick_dict):
     d = derive(case_from_dict(quick_dict))
     pw = d.pairs["particle_wall"]
     assert pw.contact_time == pytest.approx(math.pi * math.sqrt(d.particle_mass / 3.2e6))
-    assert d.critical_time == pw.contact_time          # the stiff wall limits the step
+    assert d.timestep.critical_time == pw.contact_time          # the stiff wall limits the step
     assert pw.gammat == pytest.approx(0.1 * pw.gamman)
 
 
@@ -115,8 +116,8 @@ def test_fill_height_converts_to_count(quick_dict):
     case = case_from_dict(quick_dict)
     d = derive(case)
     expected = 0.6 * math.pi * 0.015 ** 2 * 0.1 / d.particle_volume
-    assert abs(d.particle_count - expected) <= 1
-    assert d.bed_height_estimate == pytest.approx(0.1, rel=1e-3)
+    assert abs(d.fill.count - expected) <= 1
+    assert d.fill.bed_height_estimate == pytest.approx(0.1, rel=1e-3)
 
 
 def test_hopper_volume_is_cone_plus_cylinder(quick_dict):
@@ -133,25 +134,24 @@ def test_hopper_volume_is_cone_plus_cylinder(quick_dict):
 def test_polydisperse_number_and_mass_fractions_and_time_step(quick_dict):
     from siloflow.case import paper_b_radii
     from siloflow.engine.liggghts.deck import render_deck_text
-    from siloflow.meshes import silo_meshes
     quick_dict["particles"] = {"kind": "polydisperse_spheres", "radii": [0.0015, 0.001, 0.00075],
                                "fractions": [0.2, 0.3, 0.5], "basis": "number"}
     case = case_from_dict(quick_dict)
     mono = dict(quick_dict, particles={"kind": "spheres", "radius": 0.00075})
     d, d_small = derive(case), derive(case_from_dict(mono))
     w = [0.2 * 1.5 ** 3, 0.3 * 1.0, 0.5 * 0.75 ** 3]
-    assert d.mass_fractions == pytest.approx([v / sum(w) for v in w])
+    assert d.fill.mass_fractions == pytest.approx([v / sum(w) for v in w])
     # the smallest grains set the contact times and the time step
-    assert d.timestep == pytest.approx(d_small.timestep)
+    assert d.dt == pytest.approx(d_small.dt)
     assert d.particle_radius == 0.0015
     assert d.particle_volume == pytest.approx(sum(n * 4 / 3 * math.pi * r ** 3 for n, r in zip([0.2, 0.3, 0.5],
                                                                                               [0.0015, 0.001, 0.00075])))
     deck = render_deck_text(d, case)
     assert "particledistribution/discrete" in deck and deck.count("particletemplate/sphere") == 3
     line = next(ln for ln in deck.splitlines() if "particledistribution/discrete" in ln).split()
-    assert [float(x) for x in line[7::2]] == pytest.approx(d.mass_fractions, rel=1e-9)
+    assert [float(x) for x in line[7::2]] == pytest.approx(d.fill.mass_fractions, rel=1e-9)
     # the same distribution given by mass converts back to the number fractions
-    by_mass = dict(quick_dict, particles=dict(quick_dict["particles"], fractions=d.mass_fractions, basis="mass"))
+    by_mass = dict(quick_dict, particles=dict(quick_dict["particles"], fractions=d.fill.mass_fractions, basis="mass"))
     assert case_from_dict(by_mass).particles.number_fractions == pytest.approx([0.2, 0.3, 0.5])
     assert paper_b_radii(1 / 64) == pytest.approx([(16 - k) / 16 / 64 for k in range(7)])
 
@@ -175,15 +175,16 @@ def test_hooke_model_per_size_pair(quick_dict):
     hooke), kt = 2/7 kn, gamma_t = 0.1 gamma_n, computed for every pair of size classes."""
     from siloflow.contact_physics import effective_modulus, hooke_kn, reduced, sphere_mass
     from conftest import hooke_materials
-    from siloflow.deck import _properties
+    from siloflow.engine.liggghts.deck import _properties
     quick_dict["materials"] = hooke_materials(7520.0, 1.2e11, 0.88, characteristic_velocity=1.37)
     quick_dict["particles"] = {"kind": "polydisperse_spheres", "radii": [0.0015, 0.001], "fractions": [0.5, 0.5],
                                "basis": "number"}
     case = case_from_dict(quick_dict)
     d = derive(case)
+    enc = encode(d)
     y = effective_modulus(1.2e11, 0.3, 1.2e11, 0.3)
     m1, m2 = sphere_mass(0.0015, 7520.0), sphere_mass(0.001, 7520.0)
-    p12 = d.type_pairs[(1, 2)]
+    p12 = enc.type_pairs[(1, 2)]
     # Eq. 10 by hand: the linear spring with Hertz's maximum overlap at speed V
     r, m = reduced(0.0015, 0.001), reduced(m1, m2)
     v = 1.37                 # not 1: at V = 1 a V^2 -> V slip in Eq. 10 would be invisible
@@ -193,13 +194,13 @@ def test_hooke_model_per_size_pair(quick_dict):
     assert p12.kn == pytest.approx(m * v * v / hertz_max_overlap(m, r, y, v) ** 2, rel=1e-6)
     assert p12.kt == pytest.approx(2 / 7 * p12.kn) and p12.gammat == pytest.approx(0.1 * p12.gamman)
     # the smallest pair has the shortest contact, and sets the time step
-    times = {k: v.contact_time for k, v in d.type_pairs.items()}
+    times = {k: v.contact_time for k, v in enc.type_pairs.items()}
     assert min(times, key=times.get) in ((2, 2), (2, 3))
-    assert d.critical_time == pytest.approx(min(times.values()))
-    kn = next(p for p in _properties(case, d) if p["name"] == "kn")["numbers"]
+    assert d.timestep.critical_time == pytest.approx(min(times.values()))
+    kn = next(p for p in _properties(d, enc) if p["name"] == "kn")["numbers"]
     matrix = np.array(kn).reshape(3, 3)
     assert np.allclose(matrix, matrix.T) and matrix[0, 1] == pytest.approx(p12.kn)
-    assert matrix[1, 2] == pytest.approx(d.type_pairs[(2, 3)].kn)      # size class 2 with the wall
+    assert matrix[1, 2] == pytest.approx(enc.type_pairs[(2, 3)].kn)      # size class 2 with the wall
 
 
 # Paper B's largest pair (rb = 1/64 m, rho 7520 kg/m3, Y 120 GPa, nu 0.3), worked by hand:
@@ -251,7 +252,7 @@ def test_paper_b_decks_hooke_kn_of_the_largest_pair_by_hand(deck, v, young):
     from siloflow.case_file import load_case
     case = load_case(ROOT / "decks" / deck)
     assert case.materials.characteristic_velocity == v
-    pair = derive(case).type_pairs[(1, 1)]
+    pair = encode(derive(case)).type_pairs[(1, 1)]
     assert pair.r_eff == pytest.approx(1 / 128) and pair.m_eff == pytest.approx(0.0600809, rel=1e-6)
     expected = HOOKE_KN_BY_HAND[v] * (young / 1.2e11) ** 0.8
     assert pair.kn == pytest.approx(expected, rel=2e-5)

@@ -10,16 +10,21 @@ from stl import mesh as stl_mesh
 
 from postprocess.discharge import steady_flow_rate
 from postprocess.wall_pressure import band_mean, band_pressures, sector_pressure
-from siloflow.engine.liggghts.tables import wall_force_columns
 from siloflow.case_file import case_from_dict
 from siloflow.derived import derive
+from siloflow.engine.liggghts.tables import wall_force_columns
 from siloflow.meshes import silo_meshes, write_stl
 
 
-def _walls(quick_dict):
+def _plan(quick_dict):
     case = case_from_dict(quick_dict)
-    d = derive(case)
-    return case, silo_meshes(case, d.outlet_z, d.outlet_disc_radius)
+    return case, derive(case)
+
+
+def _walls(quick_dict):
+    """The case and its wall meshes (triangles), made for the plan's counting disc."""
+    case, d = _plan(quick_dict)
+    return case, silo_meshes(case, d.outlet.z, d.outlet.radius)
 
 
 def _vector_area(tris):
@@ -61,19 +66,19 @@ def test_uniform_pressure_on_faceted_sector_is_recovered(quick_dict):
 
 
 def test_band_table_from_forces(quick_dict):
-    _, walls = _walls(quick_dict)
-    info = [w.info() for w in walls]
-    cols = wall_force_columns(info)
+    _, d = _plan(quick_dict)
+    walls = d.walls                       # the plan's Wall records
+    cols = wall_force_columns(walls)
     forces = pd.DataFrame(np.zeros((2, len(cols))), columns=cols)
     forces["step"] = [100, 200]
-    for w in info:
-        if w["role"] == "band":
-            tc = 0.5 * (w["theta0"] + w["theta1"])
-            area = 2 * w["radius"] * (w["z1"] - w["z0"]) * math.sin(0.5 * (w["theta1"] - w["theta0"]))
-            forces[f"{w['name']}_fx"] = 10.0 * (w["band"] + 1) * area * math.cos(tc)
-            forces[f"{w['name']}_fy"] = 10.0 * (w["band"] + 1) * area * math.sin(tc)
-            forces[f"{w['name']}_fz"] = -0.01
-    bands = band_mean(band_pressures(forces, info))
+    for w in walls:
+        if w.role == "band":
+            tc = 0.5 * (w.theta0 + w.theta1)
+            area = 2 * w.radius * (w.z1 - w.z0) * math.sin(0.5 * (w.theta1 - w.theta0))
+            forces[f"{w.name}_fx"] = 10.0 * (w.band + 1) * area * math.cos(tc)
+            forces[f"{w.name}_fy"] = 10.0 * (w.band + 1) * area * math.sin(tc)
+            forces[f"{w.name}_fz"] = -0.01
+    bands = band_mean(band_pressures(forces, walls))
     assert np.allclose(bands.pressure, 10.0 * (bands.band + 1))
     assert np.allclose(bands.shear_force, 0.04)
 

@@ -7,11 +7,9 @@ import math
 import pytest
 
 from siloflow.case import paper_b_radii
-
 from siloflow.case_file import load_case
-from siloflow.engine.liggghts.deck import render_deck_text
 from siloflow.derived import derive
-from siloflow.meshes import silo_meshes
+from siloflow.engine.liggghts.deck import render_deck_text
 
 from conftest import ROOT
 
@@ -28,7 +26,7 @@ def test_paper_deck_renders(path):
     case = load_case(path)
     d = derive(case)
     text = render_deck_text(d, case)
-    assert "run" in text and d.particle_count == case.fill.count
+    assert "run" in text and d.fill.count == case.fill.count
     assert "scale" in path.read_text().splitlines()[0].lower()      # the scale is stated up front
 
 
@@ -65,11 +63,11 @@ def test_paper_a_decks_carry_tables_1_and_2(name):
     assert full.fill.count == 24676 and full.particles.dust.density_scale == 1.0
     d = derive(case)
     if quick:       # the dust remedy: the dust's cost falls from 67x to about 3x, at 8 % of the mass
-        assert d.timestep_without_dust / d.timestep < 4
-        dust_mass = d.dust_count * d.dust.mass
+        assert d.timestep.without_dust / d.dt < 4
+        dust_mass = d.fill.dust_count * d.dust.mass
         assert dust_mass < 0.1 * d.total_mass
     else:
-        assert d.timestep_without_dust / d.timestep > 50
+        assert d.timestep.without_dust / d.dt > 50
 
 
 @pytest.mark.parametrize("name", ["paper_b", "paper_b_quick"])

@@ -11,10 +11,12 @@ import pytest
 
 from postprocess.dumps import read_frames
 from siloflow.case_file import case_from_dict, load_case
-from siloflow.engine.liggghts.deck import render_deck_text
 from siloflow.derived import bed_volume, derive
+from siloflow.engine.liggghts.deck import render_deck_text
+from siloflow.engine.liggghts.encoding import encode
 from siloflow.errors import CaseError
 from siloflow.meshes import silo_meshes
+from siloflow.run_folder import LIGGGHTS_TABLES, RunFolder
 
 from conftest import ROOT, set_path
 
@@ -34,7 +36,7 @@ def test_slab_meshes_close_the_silo_and_sense_both_side_walls():
     case = load_case(SLAB)
     g = case.geometry
     d = derive(case)
-    walls = {w.name: w for w in silo_meshes(case, d.outlet_z, d.outlet_disc_radius)}
+    walls = {w.name: w for w in silo_meshes(case, d.outlet.z, d.outlet.radius)}
     bands = [w for w in walls.values() if w.role == "band"]
     assert len(bands) == 2 * case.sensors.bands                       # every section on both sides
     for w in bands:
@@ -59,7 +61,8 @@ def test_slab_meshes_close_the_silo_and_sense_both_side_walls():
 def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
     case = load_case(SLAB)
     d = derive(case)
-    assert d.face_type == d.wall_type + 1 == 3 and d.n_types == 3
+    enc = encode(d)
+    assert enc.face_type == enc.wall_type + 1 == 3 and enc.n_types == 3
     text = render_deck_text(d, case)
     assert "create_box      3 domain" in text
     assert "face_s00.stl type 3" in text and "band00_s00.stl type 2" in text
@@ -75,7 +78,7 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
     d = derive(case)
     text = render_deck_text(d, case)
     assert "fflag on off on tflag off on off" in text and "orientation template" in text
-    assert d.insertion_region["yhi"] == pytest.approx(0.5 * 0.0022 - 0.001)
+    assert d.fill.region.yhi == pytest.approx(0.5 * 0.0022 - 0.001)
     # dust in a slab: poured into the mid-plane and held there; inserted before the grains of
     # the same step, whose overlap check (unlike the dust's) sees the other fix's particles
     pair = {"friction": 0.3, "restitution": 0.5}
@@ -128,7 +131,7 @@ def slab_run(tmp_path_factory):
 def test_slab_run_keeps_grains_in_the_slab_and_senses_both_walls(slab_run):
     case, folder, record, summary = slab_run
     g = case.geometry
-    assert record.inserted == derive(case).particle_count
+    assert record.inserted == derive(case).fill.count
     # the walls, hopper, faces and plate carry the settled bed's weight
     assert summary["force_balance"]["ratio"] == pytest.approx(1.0, abs=0.01)
     for frame in read_frames(folder / "output" / "dumps"):
@@ -147,15 +150,14 @@ def test_slab_run_keeps_grains_in_the_slab_and_senses_both_walls(slab_run):
     assert p[0] > p[1]                                                  # pressure grows with depth
     # horizontal force balance of the resting bed: what pushes the left wall pushes the right
     # (and hopper) back; frictionless faces take no x force
-    from siloflow.engine.liggghts.tables import wall_force_columns
-    from siloflow.engine.liggghts.tables import read_ave_time
-    walls = json.loads((folder / "derived.json").read_text())["walls"]
-    forces = read_ave_time(folder / "output" / "wall_forces.txt", wall_force_columns(walls))
+    from siloflow.engine.liggghts.tables import read_ave_time, wall_force_columns
+    walls = RunFolder(folder).plan.walls
+    forces = read_ave_time(folder / LIGGGHTS_TABLES[1], wall_force_columns(walls))   # wall_forces.txt
     still = forces[(forces.step > record.stage_steps["static"]) & (forces.step <= record.stage_steps["open"])]
     fx = still[[c for c in still if c.endswith("_fx")]]
     load = fx.abs().sum(axis=1)                      # every wall's horizontal load, hopper and plate too
     assert np.all(np.abs(fx.sum(axis=1)) < 0.03 * load)   # a bed at rest (KE/PE < 1e-5): sampled 1-2 %
-    faces = still[[f"{w['name']}_fx" for w in walls if w["role"] == "face"]].abs().sum(axis=1)
+    faces = still[[f"{w.name}_fx" for w in walls if w.role == "face"]].abs().sum(axis=1)
     assert np.all(faces < 1e-3 * load)
     # grains left through the slot; Wr (surface speed) agrees with Wf (outlet count)
     assert summary["discharged_mass_kg"] > 0.3 * summary["initial_mass_kg"]
@@ -193,9 +195,9 @@ def test_central_fill_pours_from_a_narrow_region(deck, quick_dict):
     distributed = derive(case_from_dict(data))
     data["fill"]["pour_radius"] = 0.01
     central = derive(case_from_dict(data))
-    r = central.insertion_region
-    assert (r["xhi"] if deck == "slab" else r["radius"]) == pytest.approx(0.01)
-    assert central.insertion_batch < distributed.insertion_batch       # same solid fraction per batch
+    r = central.fill.region
+    assert (r.xhi if deck == "slab" else r.radius) == pytest.approx(0.01)
+    assert central.fill.batch < distributed.fill.batch                 # same solid fraction per batch
     data["fill"]["pour_radius"] = 0.001                                 # narrower than two grains
     with pytest.raises(CaseError, match="fill.pour_radius"):
         case_from_dict(data)
