@@ -9,6 +9,7 @@ import numpy as np
 
 from siloflow.atomic_files import write_json, write_text
 from siloflow.errors import ReadError, SetupError
+from siloflow.run_folder import SUMMARY_NAME
 
 from .analysis_base import FrameAnalysis
 from .coordination import Coordination
@@ -156,9 +157,9 @@ def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, 
         match = list(contact_frames([last.timestep]))
         if match and any(c in match[0].data for c in ("fnx", "fx")):
             force_chain_figure(last, match[0], out / "force_chains_last.png")
-    write_json(out / "summary.json", summary)
+    write_json(out / SUMMARY_NAME, summary)
     write_text(out / "README.txt", "siloflow post on dump files: frames.csv (counts, energy), porosity.csv "
-               "(exact overlap volumes in measurement spheres), coordination.csv, summary.json\n")
+               f"(exact overlap volumes in measurement spheres), coordination.csv, {SUMMARY_NAME}\n")
     return summary
 
 

@@ -210,5 +210,5 @@ def report_text(summary: dict, run: RunOutputs) -> str:
                          f"{_fmt(r['relative_difference'], '+.1%')} | {_fmt(r['W'], '.1%')} |")
     warnings = summary.get("engine_warnings") or []
     if warnings:
-        lines += ["", f"Engine warnings ({len(warnings)}): see summary.json"]
+        lines += ["", f"Engine warnings ({len(warnings)}): see {SUMMARY_NAME}"]
     return "\n".join(lines) + "\n"

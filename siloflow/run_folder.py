@@ -508,7 +508,7 @@ class RunFolder:
         import pandas as pd
         path = self.path / name
         try:
-            table = pd.read_csv(path, dtype={"wall": str}, float_precision="round_trip")
+            table = pd.read_csv(path, dtype={"wall": str})
         except (OSError, ValueError) as exc:
             raise ReadError(f"cannot read the {what} table {path}: {exc} (did the engine run finish?)") from None
         return check_table(table, schema, str(path))

@@ -1,0 +1,191 @@
+"""The seam between what a case means and how an engine writes it (issue 14): the run plan, the
+run folder's owner and its engine-neutral tables, the engine registry and launch profile."""
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from siloflow.case_file import case_from_dict, load_case
+from siloflow.derived import derive
+from siloflow.errors import ReadError
+from siloflow.plan import RunPlan
+from siloflow import run_folder as rf
+from siloflow.run_folder import RunFolder
+
+ROOT = Path(__file__).resolve().parents[1]
+CASES = sorted([*(ROOT / "decks").glob("*.yaml"), *(ROOT / "tests" / "data").glob("*.yaml")])
+
+
+# ---------------------------------------------------------------- the plan
+@pytest.mark.parametrize("case_file", CASES, ids=[c.stem for c in CASES])
+def test_plan_round_trips_through_plan_json(case_file):
+    """Every shipped case's plan reads back from its JSON equal, field for field, typed."""
+    plan = derive(load_case(case_file))
+    back = RunPlan.from_json(plan.to_json())
+    assert back.model_dump() == plan.model_dump()      # (the plan read back has no triangles)
+    assert back.timestep.dt == plan.dt and isinstance(back.fill.region.z_min, float)
+    assert [w.name for w in back.walls] == [w.name for w in plan.walls]
+    assert all(w.normal is not None and w.projected_area > 0 for w in back.walls if w.role == "band")
+
+
+def test_plan_json_of_another_shape_or_version_is_refused(quick_dict):
+    plan = derive(case_from_dict(quick_dict))
+    data = json.loads(plan.to_json())
+    data["fill"]["count"] = "many"
+    with pytest.raises(ReadError, match=r"fill\.count"):
+        RunPlan.from_json(json.dumps(data))
+    data = json.loads(plan.to_json())
+    data["plan_version"] = 99
+    with pytest.raises(ReadError, match="version 99"):
+        RunPlan.from_json(json.dumps(data))
+    data = json.loads(plan.to_json())
+    data["surprise"] = 1
+    with pytest.raises(ReadError, match="surprise"):
+        RunPlan.from_json(json.dumps(data))
+
+
+def test_plan_holds_no_liggghts_encoding(quick_dict):
+    """Atom types, prime seeds, ave/time's Nevery, the box and the plate shift are LIGGGHTS'
+    (siloflow.engine.liggghts.encoding), not the plan's."""
+    data = json.loads(derive(case_from_dict(quick_dict)).to_json())
+    text = json.dumps(data)
+    for word in ("wall_type", "type_pairs", "mass_weights", "plate_shift", "seeds", "sample_every", "box", "skin"):
+        assert f'"{word}"' not in text
+    assert all("type" not in sp for sp in data["species"])
+
+
+def test_siloflow_run_derives_the_plan_once(tmp_path, quick_dict, monkeypatch):
+    """``siloflow run`` computes the plan once and hands it on: rendering, the engine's check
+    and the run itself do not derive again (the engine is stubbed: no run, no post)."""
+    import yaml
+    from typer.testing import CliRunner
+
+    import siloflow.derived
+    from siloflow.cli import app
+    from siloflow.engine.liggghts.engine import LiggghtsEngine
+    from siloflow.run_folder import RunRecord
+
+    calls = []
+    real = siloflow.derived.derive
+    monkeypatch.setattr(siloflow.derived, "derive", lambda case: calls.append(case.name) or real(case))
+
+    def fake_execute(self, folder, progress=None, resume=False):
+        assert RunFolder(folder).plan.fill.count > 0          # the folder's plan is complete
+        return RunRecord(str(folder), "liggghts", [], 0, 0.0, {}, None, None, True)
+
+    monkeypatch.setattr(LiggghtsEngine, "execute", fake_execute)
+    monkeypatch.setattr(LiggghtsEngine, "collect", lambda self, folder: fake_execute(self, folder))
+    monkeypatch.setattr(LiggghtsEngine, "command", lambda self, ranks, *a, **k: ["liggghts"])
+    case_file = tmp_path / "case.yaml"
+    case_file.write_text(yaml.safe_dump(quick_dict))
+    result = CliRunner().invoke(app, ["run", str(case_file), "-o", str(tmp_path / "run"), "--no-post"])
+    assert result.exit_code == 0, result.output
+    assert calls == [quick_dict["name"]]
+
+
+def test_postprocess_never_derives_nor_reads_the_case():
+    """No module of postprocess/ imports the case (schema or loader) or derives a plan, and
+    none spells a run-folder file name: they read runs through RunFolder and the dump reader."""
+    names = {v for k, v in vars(rf).items() if k.isupper() and isinstance(v, str) and k.endswith(("_NAME", "_TABLE", "DUMPS", "FILE"))}
+    names |= set(rf.LIGGGHTS_FILES.values()) | set(rf.LIGGGHTS_TABLES) | {"derived.json", "output/"}
+    assert {"case.yaml", "plan.json", "status.json", "run_record.json", "output/flow.csv", "dump.*.txt"} <= names
+    for path in sorted((ROOT / "postprocess").glob("*.py")):
+        tree = ast.parse(path.read_text())
+        docstrings = {id(n.body[0].value) for n in ast.walk(tree)
+                      if isinstance(n, (ast.Module, ast.FunctionDef, ast.ClassDef)) and n.body
+                      and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                assert node.module not in ("siloflow.case", "siloflow.case_file", "siloflow.derived"), path.name
+                assert not any(a.name.startswith("_") for a in node.names), (path.name, node.module)
+            elif isinstance(node, ast.Import):
+                assert not any(a.name in ("siloflow.case", "siloflow.case_file") for a in node.names), path.name
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
+                hits = [n for n in names if n in node.value]
+                assert not hits, f"{path.name} line {node.lineno} spells {hits}"
+
+
+# ---------------------------------------------------------------- the tables
+def _flow(n=7):
+    step = np.arange(n, dtype=np.int64) * 10
+    return pd.DataFrame({"step": step, "time": step * 1e-5, "atoms": np.full(n, 100), "mass_total": 1.0 / 3 + step,
+                         "mass_silo": np.linspace(1.0, 0.1, n), "discharged_mass": np.linspace(0, 0.9, n) / 7,
+                         "discharged_count": np.arange(n), "ke": np.pi * step, "pe": np.e + step})
+
+
+def test_engine_neutral_tables_round_trip_exactly_and_refuse_other_shapes(tmp_path):
+    run = RunFolder(tmp_path)
+    (tmp_path / "output").mkdir()
+    flow = _flow()
+    run.write_flow(flow.iloc[:, ::-1])               # written in schema order whatever the input's
+    back = run.flow()
+    assert list(back.columns) == list(rf.FLOW_SCHEMA)
+    pd.testing.assert_frame_equal(back, flow, check_exact=True)
+    with pytest.raises(ReadError, match="discharged_count"):
+        run.write_flow(flow.drop(columns="discharged_count"))
+    (tmp_path / rf.FLOW_TABLE).write_text("step,time\n1,2\n")
+    with pytest.raises(ReadError, match="lacks column"):
+        run.flow()
+    with pytest.raises(ReadError, match="wall-force table"):
+        run.wall_forces()
+
+
+def test_liggghts_wall_forces_become_the_long_table_and_back(tmp_path):
+    """LIGGGHTS' wide ave/time table -> the engine-neutral long table -> the wide table post
+    uses: the same numbers, in the plan's wall order, the counting disc left out."""
+    from postprocess.wall_pressure import wide_forces
+    from siloflow.engine.liggghts.tables import neutral_wall_forces, wall_force_columns
+    from siloflow.case_file import load_case as load
+
+    plan = derive(load(ROOT / "tests" / "data" / "small_silo.yaml"))
+    cols = wall_force_columns(plan.walls)
+    rng = np.random.default_rng(3)
+    values = rng.normal(size=(5, len(cols) - 1))
+    path = tmp_path / "wall_forces.txt"
+    lines = ["# Time-averaged data", "# " + " ".join(cols)]
+    lines += [" ".join([str(100 * (k + 1))] + [repr(float(v)) for v in row]) for k, row in enumerate(values)]
+    path.write_text("\n".join(lines) + "\n")
+    long = neutral_wall_forces(path, plan)
+    walls = [w for w in plan.walls if w.is_wall]
+    assert len(long) == 5 * len(walls) and "outlet" not in set(long.wall)
+    run = RunFolder(tmp_path)
+    (tmp_path / "output").mkdir()
+    run.write_wall_forces(long)
+    wide = wide_forces(run.wall_forces(), plan.walls)
+    assert list(wide.columns) == cols
+    np.testing.assert_array_equal(wide.iloc[:, 1:].to_numpy(), values)
+    np.testing.assert_allclose(run.wall_forces().time, np.repeat([[100, 200, 300, 400, 500]], len(walls), 0).ravel()
+                               * plan.dt, rtol=1e-15)
+
+
+# ---------------------------------------------------------------- engines
+def test_engine_registry_imports_no_engine_until_asked():
+    code = ("import sys, siloflow.engine as e; assert 'siloflow.engine.liggghts' not in sys.modules; "
+            "cls = e.engine_class('liggghts'); assert 'siloflow.engine.liggghts' in sys.modules; print(cls.name)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "liggghts"
+    from siloflow.engine import get_engine
+    from siloflow.errors import SetupError
+    with pytest.raises(SetupError, match="unknown engine 'lamps'; known: liggghts"):
+        get_engine("lamps")
+
+
+def test_launch_profile_is_the_machines_not_the_cases(monkeypatch, tmp_path):
+    """The binary, launcher and environment come from the profile (or SILOFLOW_LIGGGHTS), and
+    the environment reaches the engine's process."""
+    from siloflow.engine import LaunchProfile, get_engine
+    monkeypatch.setenv("SILOFLOW_LIGGGHTS", "/opt/x/liggghts")
+    assert get_engine("liggghts").profile.executable == "/opt/x/liggghts"
+    engine = get_engine("liggghts", executable="lmp", mpirun="srun", env={"OMP_NUM_THREADS": "1"})
+    assert engine.profile == LaunchProfile("lmp", "srun", {"OMP_NUM_THREADS": "1"})
+    env = engine.profile.environment()
+    assert env["OMP_NUM_THREADS"] == "1" and env["SILOFLOW_LIGGGHTS"] == "/opt/x/liggghts"
+    assert LaunchProfile().environment() is None          # no extra variables: siloflow's own
