@@ -2,7 +2,8 @@
 
 ``siloflow.open_run(folder)`` and ``siloflow.run(case, folder)`` return a ``Run`` (state,
 summary, flow and wall-pressure tables, dump frames): see ``siloflow.runs``. Cases are read with
-``siloflow.case.load_case(path)`` or validated from a dict with ``Case.model_validate(data)``.
+``Case.from_yaml(path)`` (``siloflow.case_file``) or validated from a dict with
+``Case.model_validate(data)`` (``siloflow.case``).
 """
 __version__ = "0.1.0"
 

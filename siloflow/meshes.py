@@ -2,7 +2,7 @@
 
 z = 0 is the outlet plane. Every cylinder band is split into ``sectors`` azimuthal
 meshes, so that each (band, sector) is a force sensor whose net radial force is
-not cancelled by the opposite side of the ring (ENGINE_NOTES.md).
+not cancelled by the opposite side of the ring (docs/engine_facts.md).
 
 Mesh quality: LIGGGHTS 3.8 refuses a mesh with a triangle whose smallest angle is below the
 ``curvature`` of ``fix mesh/surface`` (default 0.256 deg, ``SurfaceMesh::qualityCheck``: "The minumum

@@ -25,7 +25,7 @@ from siloflow.case_file import case_from_dict, load_case
 from siloflow.deck import render
 from siloflow.derived import derive
 from siloflow.errors import CaseError, SetupError
-from siloflow.meshes import WallMesh, disc, rectangle, silo_meshes, surface_of_revolution
+from siloflow.meshes import WallMesh, disc, rectangle, surface_of_revolution
 
 from conftest import QUICK, ROOT
 
@@ -46,11 +46,12 @@ SLB = dict(kind="planar", width=0.06, height=0.09, thickness=0.00275, half_angle
 @pytest.fixture(autouse=True)
 def _grains_only_make_the_case_valid(monkeypatch, request):
     """The extreme geometries take grains small enough for their outlets, often too many
-    neighbour bins across the silo for LIGGGHTS (refused by siloflow.derived.check_bins, tested in
-    test_engine_failures.py). The meshes are what is measured here: the bin check is lifted,
-    except in the engine test, which runs only cases siloflow accepts."""
+    neighbour bins across the silo for LIGGGHTS (refused by the LIGGGHTS encoding's check_bins,
+    siloflow.engine.liggghts.encoding, when a deck is rendered; tested in test_engine_failures.py).
+    The meshes are what is measured here: the bin check is lifted, except in the engine test,
+    which runs only cases siloflow accepts."""
     if request.node.get_closest_marker("engine") is None:
-        monkeypatch.setattr("siloflow.derived.check_bins", lambda box, radius, skin: None)
+        monkeypatch.setattr("siloflow.engine.liggghts.encoding.check_bins", lambda box, radius, skin: None)
 
 
 def extreme_case(geometry: dict, sensors: dict | None = None, **over):
@@ -115,8 +116,8 @@ ENGINE_CASES = ["cyl-orifice-0.999R", "cyl-segments-16", "cyl-squat", "cyl-thin-
 
 
 def walls_of(case):
-    d = derive(case)
-    return silo_meshes(case, d.outlet_z, d.outlet_disc_radius)
+    """The walls' meshes of the case's run plan (derive makes them: silo_meshes at the plan's outlet)."""
+    return derive(case).meshes
 
 
 def _vertex_ids(tris: np.ndarray) -> np.ndarray:
@@ -297,8 +298,9 @@ def test_user_insert_with_slivers_is_refused_naming_the_insert(tmp_path):
     data = yaml.safe_load(SLAB.read_text())
     data["inserts"] = [{"name": "sliver", "file": "s.stl"}]
     (tmp_path / "case.yaml").write_text(yaml.safe_dump(data))
+    case = load_case(tmp_path / "case.yaml")              # the insert's file is read when the walls are made
     with pytest.raises(CaseError, match=r"inserts\[0\]\.file"):
-        load_case(tmp_path / "case.yaml")
+        derive(case)
 
 
 def test_write_stl_never_writes_a_mesh_liggghts_refuses(tmp_path):
@@ -329,7 +331,7 @@ def test_engine_accepts_the_meshes_of_extreme_geometries(tmp_path, geometry, sen
     case = extreme_case(geometry, sensors)
     folder = render(case, tmp_path / "deck")
     (folder / "in.meshcheck").write_text(mesh_only_deck((folder / "in.liggghts").read_text()))
-    # the screen goes to a pipe: '-screen none' segfaults when LIGGGHTS reads an STL (ENGINE_NOTES.md)
+    # the screen goes to a pipe: '-screen none' segfaults when LIGGGHTS reads an STL (docs/engine_facts.md)
     proc = subprocess.run(["liggghts", "-in", "in.meshcheck", "-log", "log.meshcheck"], cwd=folder,
                           capture_output=True, timeout=300, stdin=subprocess.DEVNULL)
     out = proc.stdout.decode("utf-8", "replace") + proc.stderr.decode("utf-8", "replace")

@@ -1,7 +1,6 @@
 """LIGGGHTS 3.8 as a subprocess (``mpirun -np N`` for N > 1 ranks)."""
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import signal
@@ -16,8 +15,8 @@ from ...case import Case
 from ...deck import check_deck_file, verify_deck
 from ...errors import CaseError, EngineRunError, ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
-from ...run_folder import LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RunFolder, check_plain_tree
-from ..base import Engine, LaunchProfile, ProgressCallback, RunRecord, read_status, run_state, write_status
+from ...run_folder import LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree
+from ..base import Engine, ProgressCallback, RunRecord, read_status, run_state, write_status
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
@@ -92,9 +91,7 @@ class LiggghtsEngine(Engine):
     def command(self, ranks: int, deck: str = DECK_NAME, log: str = LOG_NAME) -> list[str]:
         """The command line that runs the deck in its folder."""
         exe = self._which(self.profile.executable, "LIGGGHTS binary")
-        # '-screen none' segfaults when LIGGGHTS reads an STL (ENGINE_NOTES.md in the shared notes beside
-        # the repository; reproduced by tests/test_engine_run.py): keep the screen on a pipe
-        # segfaults when LIGGGHTS reads an STL (ENGINE_NOTES.md): keep the screen on a pipe
+        # '-screen none' segfaults when LIGGGHTS reads an STL (docs/engine_facts.md): keep the screen on a pipe
         base = [exe, "-in", deck, "-log", log]
         # LIGGGHTS' screen is block-buffered on a pipe, and an ERROR on one rank ends in MPI_Abort,
         # which loses the buffer (the message with it): line-buffer it (coreutils' stdbuf)
@@ -216,7 +213,7 @@ class LiggghtsEngine(Engine):
             self.execute(folder, progress, resume=True)
         finally:
             for name in CONTINUED_TABLES:
-                _splice_table(folder / (name + ".before_resume"), folder / name, step)
+                splice_table(folder / (name + ".before_resume"), folder / name, step)
         return self.collect(folder)
 
     def collect(self, folder: Path) -> RunRecord:
@@ -238,8 +235,8 @@ class LiggghtsEngine(Engine):
         enc = encode(plan)
         try:
             text = _log_text(folder)
-            record = RunRecord(**json.loads((folder / RECORD_NAME).read_text()))
-        except (OSError, ValueError, TypeError) as exc:
+            record = RunFolder(folder).record
+        except (OSError, ReadError) as exc:
             raise ReadError(f"{folder} holds no finished LIGGGHTS run ({exc})") from None   # recorded by collect
         state = parse_log_text(text)
         record.stage_steps, record.inserted, record.completed = state.stage_steps, state.inserted, state.done
@@ -333,7 +330,7 @@ def _disk_full(folder: Path) -> str:
 FILL_LOSS_LIMIT = 0.01
 
 
-def _restart_mark(lines: list[str]) -> Optional[tuple[int, int]]:
+def restart_mark(lines: list[str]) -> Optional[tuple[int, int]]:
     """(line index, step) of the log's restart marker (the settled bed written), or None."""
     for k, line in enumerate(lines):
         if line.startswith(_RESTART_MARK):
@@ -347,7 +344,7 @@ def _restart_mark(lines: list[str]) -> Optional[tuple[int, int]]:
 def _restart_step(folder: Path) -> Optional[int]:
     """The step of the settled bed's restart file, from the first part's log (None if not written)."""
     try:
-        mark = _restart_mark(decode((folder / LOG_NAME).read_bytes()).splitlines())
+        mark = restart_mark(decode((folder / LOG_NAME).read_bytes()).splitlines())
     except OSError:
         return None
     return None if mark is None else mark[1]
@@ -361,12 +358,12 @@ def _log_text(folder: Path) -> str:
     if not resumed.is_file():
         return text
     lines = text.splitlines()
-    mark = _restart_mark(lines)
+    mark = restart_mark(lines)
     cut = len(lines) if mark is None else mark[0]
     return "\n".join(lines[:cut + 1]) + "\n" + decode(resumed.read_bytes())
 
 
-def _splice_table(before: Path, after: Path, step: int) -> None:
+def splice_table(before: Path, after: Path, step: int) -> None:
     """One ave/time table from the first part's rows and the resumed part's rows (headers of the
     first part), written atomically over ``after``. The first part's rows are kept up to the
     resumed part's first row, not only up to the restart ``step``: an average over several
