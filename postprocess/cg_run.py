@@ -17,7 +17,7 @@ from .cg_analyses import axial_profiles, cg_figures, janda_fit, kinetic_peak_hei
 from .cg_kernels import make_kernel
 from .cg_grids import AxisymmetricGrid, CartesianGrid
 from .coarse_grain import CoarseGraining
-from .dumps import dump_files, read_frames
+from .dumps import read_frames
 
 
 @dataclass
@@ -38,7 +38,8 @@ class CgSetup:
     wall_contacts: list | None = None
     wall_contact_columns: list | None = None
     slab_thickness: float | None = None     # a slab silo: the grid is planar (x, z), r_max its half width
-    note: str | None = None                  # said in cg_summary.json
+    note: str | None = None                  # said in the cg summary
+    clump_mass: str = "body"                 # how the dumps carry a clump's mass (clump_bodies.CLUMP_MASS)
 
 
 def setup_from_run(folder) -> CgSetup:
@@ -67,7 +68,8 @@ def setup_from_run(folder) -> CgSetup:
     return CgSetup(atoms, contacts, layout.contact_columns or None, g.half_width, plan.outlet.z,
                    float(top), 0.0, g.outlet_radius, rho_p,
                    int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, layout.wall_contact_columns or None,
-                   slab_thickness=g.thickness if g.kind == "planar" else None, note=note)
+                   slab_thickness=g.thickness if g.kind == "planar" else None, note=note,
+                   clump_mass=layout.clump_mass)
 
 
 def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: float = 2.0, unit: str = "radius",
@@ -100,7 +102,8 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
                              (nr, nr, nz))
     contacts = read_frames(setup.contacts, columns=setup.contact_columns) if setup.contacts else None
     walls = read_frames(setup.wall_contacts, columns=setup.wall_contact_columns) if setup.wall_contacts else None
-    cg = CoarseGraining(grid, kernel, setup.particle_density, species, per_frame=per_frame).run(
+    cg = CoarseGraining(grid, kernel, setup.particle_density, species, per_frame=per_frame,
+                        clump_mass=setup.clump_mass).run(
         in_window(read_frames(setup.atoms, every=every)), contacts, walls)
     ds = cg.dataset()
     tmp = out / ".fields.nc.tmp"

@@ -10,8 +10,10 @@ centre. For spheres the pieces are collinear and this is the usual branch vector
   of the sphere centres (sum w = 1, X = sum w_i x_i). The union is symmetric about the affine
   hull of its centres, so its centroid lies in that hull and the weights exist; being affine
   they survive any rigid motion, and V = sum w_i v_i exactly for a rigid body.
-* The body's mass is the dump's ``mass`` of its spheres (LIGGGHTS gives every sphere of a clump
-  the whole clump's mass), else ``particle_density`` x the union volume.
+* The body's mass comes from the dump's ``mass`` column, as the engine writes it
+  (``clump_mass``): ``"body"``, every sphere carries the whole clump's mass (LIGGGHTS
+  multisphere), or ``"sum"``, each sphere its share (rigid bodies of LAMMPS); without a mass
+  column it is ``particle_density`` x the union volume.
 * Rows with ``mol`` <= 0 or alone in their body (dust, plain spheres) stay as they are.
 """
 from __future__ import annotations
@@ -95,12 +97,18 @@ def body_centres(frame):
     return centre, blocks
 
 
-def body_frame(frame, particle_density: float | None = None, centres=None):
+#: how a dump's ``mass`` column carries a clump's mass (see the module docstring)
+CLUMP_MASS = ("body", "sum")
+
+
+def body_frame(frame, particle_density: float | None = None, centres=None, clump_mass: str = "body"):
     """The frame with each clump replaced by one row at its centroid: id and type of its first
     sphere, velocity sum w_i v_i, the body's mass, its union ``volume`` (m3; spheres: their own),
     and ``radius`` its largest sphere's (species by radius then tell clumps from dust). Frames
     without clumps come back unchanged. ``centres``: :func:`body_centres` of the frame, if
-    already computed."""
+    already computed; ``clump_mass``: one of :data:`CLUMP_MASS`."""
+    if clump_mass not in CLUMP_MASS:
+        raise ValueError(f"clump_mass must be one of {CLUMP_MASS}, not {clump_mass!r}")
     centre, blocks = centres or body_centres(frame)
     if blocks is None:
         return frame
@@ -112,7 +120,8 @@ def body_frame(frame, particle_density: float | None = None, centres=None):
         loose[rows.ravel()] = False
         first = rows[:, 0]
         if "mass" in d:
-            mass = frame.column("mass").astype(float)[first]
+            column = frame.column("mass").astype(float)
+            mass = column[first] if clump_mass == "body" else column[rows].sum(axis=1)
         elif particle_density:
             mass = particle_density * volume
         else:

@@ -140,8 +140,9 @@ class CoarseGraining(FrameAnalysis):
     name = "coarse_graining"
 
     def __init__(self, grid, kernel: Kernel, particle_density: float | None = None, species: str | None = None,
-                 species_classes=None, per_frame: bool = False, n_s: int | None = None):
+                 species_classes=None, per_frame: bool = False, n_s: int | None = None, clump_mass: str = "body"):
         super().__init__()
+        self.clump_mass = clump_mass            # how the dumps carry a clump's mass (clump_bodies.body_frame)
         self.grid, self.kernel, self.rho_p = grid, kernel, particle_density
         self.species, self.species_classes, self.per_frame, self.n_s = species, species_classes, per_frame, n_s
         self._walls: StepCursor | None = None   # wall contact frames during run()
@@ -169,7 +170,7 @@ class CoarseGraining(FrameAnalysis):
         centres = body_centres(frame) if "mol" in frame.data else None
         joined = joined_contacts(contacts, wall_contacts, atoms=frame, centres=centres)
         if centres is not None and centres[1] is not None:
-            frame = body_frame(frame, self.rho_p, centres)
+            frame = body_frame(frame, self.rho_p, centres, self.clump_mass)
         sp, labels = species_of(frame, self.species, self.classes)
         if self.species is not None and self.classes is None:
             self.classes = labels              # the first frame fixes the classes

@@ -17,7 +17,7 @@ from siloflow.atomic_files import write_text
 from siloflow.errors import ReadError
 
 from .coordination import Coordination
-from .dumps import Frame, dump_files, read_frames
+from .dumps import Frame, read_frames
 from .flow_rate import FreeSurface, rate_series, surface_flow_rate
 from .force_chains import force_chain_figure
 from .janssen import fit_janssen

@@ -12,7 +12,6 @@ from typing import Annotated, Literal, Optional, Union
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StringConstraints, model_validator
 
-from .errors import CaseError
 
 #: Names that reach decks and file names: letters, digits, ``_ . -``, not starting with ``.`` or ``-``.
 SAFE_NAME_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$"

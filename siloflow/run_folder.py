@@ -367,13 +367,15 @@ def check_table(table, schema: dict, what: str):
 
 @dataclass(frozen=True)
 class DumpLayout:
-    """What an engine's dumps hold: the species of each atom type, and the column names of its
-    pair-contact and wall-contact dumps (empty when it writes none)."""
+    """What an engine's dumps hold: the species of each atom type, the column names of its
+    pair-contact and wall-contact dumps (empty when it writes none), and how the ``mass`` column
+    carries a clump's mass (``"body"``: every sphere the whole body's; ``"sum"``: each its share)."""
 
     engine: str
     types: dict[int, str]
     contact_columns: list[str]
     wall_contact_columns: list[str]
+    clump_mass: str = "body"
 
     def to_json(self) -> dict:
         return {**asdict(self), "types": {str(k): v for k, v in self.types.items()}}
@@ -383,7 +385,8 @@ class DumpLayout:
         try:
             return cls(engine=str(data["engine"]), types={int(k): str(v) for k, v in data["types"].items()},
                        contact_columns=[str(c) for c in data["contact_columns"]],
-                       wall_contact_columns=[str(c) for c in data["wall_contact_columns"]])
+                       wall_contact_columns=[str(c) for c in data["wall_contact_columns"]],
+                       clump_mass=str(data["clump_mass"]))
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise ReadError(f"{source} is not a dump layout ({exc})") from None
 

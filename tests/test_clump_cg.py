@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -87,6 +89,20 @@ def test_body_frame_puts_each_clump_at_its_centroid_with_its_velocity_and_mass_o
         np.testing.assert_allclose(row[["x", "y", "z"]].to_numpy(float), pos[member][1], atol=1e-12)
         np.testing.assert_allclose(row[["vx", "vy", "vz"]].to_numpy(float), vel[member][1], atol=1e-10)
     assert bodies.data.mass.sum() == pytest.approx(40 * 5.8e-5 + 15 * 5.2e-8)
+
+
+def test_clump_mass_of_either_dump_convention_gives_the_same_bodies():
+    """LIGGGHTS gives every sphere the clump's mass ("body"); rigid bodies of LAMMPS give each
+    sphere its share ("sum"): both conventions give the same body masses."""
+    frame = clump_frame(spin=1.0)
+    shared = frame.data.copy()
+    in_clump = shared.mol > 0
+    shared.loc[in_clump, "mass"] = shared.loc[in_clump, "mass"] * np.array([0.2, 0.5, 0.3] * 40)
+    a = body_frame(frame, clump_mass="body").data.sort_values("id")
+    b = body_frame(replace(frame, data=shared), clump_mass="sum").data.sort_values("id")
+    np.testing.assert_allclose(a.mass.to_numpy(), b.mass.to_numpy(), rtol=1e-14)
+    with pytest.raises(ValueError, match="clump_mass"):
+        body_frame(frame, clump_mass="sphere")
 
 
 def test_clump_mass_is_counted_once_and_spin_makes_no_kinetic_stress():

@@ -19,7 +19,7 @@ from siloflow import contact_physics as cp
 from siloflow.case_file import case_from_dict
 from siloflow.engine.liggghts.deck import render_deck_text
 from siloflow.derived import derive
-from siloflow.meshes import silo_meshes
+from siloflow.engine.liggghts.encoding import encode
 
 from conftest import ROOT, SMALL, hooke_materials
 
@@ -39,7 +39,7 @@ def contact_deck(case, radius: float, density: float, v_rel: float, offset: floa
     # the resumed deck has the bed's contact law with friction restored (no frictionless fill)
     text = render_deck_text(d, case, resume=True)
     lines = [ln for ln in text.splitlines() if ln.startswith(CONTACT_LINES) and not ln.startswith("timestep")]
-    dt = d.timestep / REFINE
+    dt = d.dt / REFINE
     lines.append(f"timestep        {dt!r}")
     gap = 0.05 * radius if gap is None else gap
     box = 10 * radius
@@ -50,7 +50,7 @@ newton          off
 communicate     single vel yes
 units           si
 region          domain block {-box} {box} {-box} {box} {-box} {box} units box
-create_box      {d.n_types} domain
+create_box      {encode(d).n_types} domain
 neighbor        {0.5 * radius} bin
 neigh_modify    delay 0
 {chr(10).join(lines)}
@@ -162,7 +162,7 @@ def test_hertz_impact_gives_the_case_restitution_and_the_damped_hertz_contact_ti
     tc = cp.hertz_contact_time(m_eff, r / 2, y_eff, v)
     e_model, tc_model = damped_hertz_impact(m_eff, r / 2, y_eff, e_case, v)
     d = derive(case)
-    steps = int((0.05 * r / v + 5 * tc) / d.timestep * REFINE)
+    steps = int((0.05 * r / v + 5 * tc) / d.dt * REFINE)
     table, dt = run_impact(tmp_path, case, r, rho, v, steps)
     e, t_contact, _, _ = measured_impact(table, dt, r)
     assert tc / dt > 100
@@ -192,7 +192,7 @@ def test_hooke_impact_matches_the_linear_spring_of_paper_b(tmp_path, velocity):
     zeta = -ln_e / math.sqrt(math.pi ** 2 + ln_e ** 2)
     tc = math.pi / math.sqrt(kn / m_eff * (1 - zeta ** 2))
     d = derive(case)
-    steps = int((0.05 * r / velocity + 4 * tc) / d.timestep * REFINE)
+    steps = int((0.05 * r / velocity + 4 * tc) / d.dt * REFINE)
     table, dt = run_impact(tmp_path, case, r, rho, velocity, steps)
     e, t_contact, _, _ = measured_impact(table, dt, r)
     assert tc / dt > 100
@@ -216,7 +216,7 @@ def test_sliding_oblique_impact_transfers_friction_times_the_normal_impulse(tmp_
     v = 0.5
     offset = 2 * r * math.sin(math.radians(80))
     d = derive(case)
-    steps = int((2.2 * r / v) / d.timestep * REFINE)
+    steps = int((2.2 * r / v) / d.dt * REFINE)
     table, dt = run_impact(tmp_path, case, r, rho, v, steps, offset=offset)
     measured_impact(table, dt, r)                      # touched, resolved, parted
     dn, dt_ = impulses_per_step(table, r)
@@ -245,13 +245,13 @@ def test_linear_impact_of_paper_a_has_its_stiffness_restitution_and_friction(tmp
     tc = math.pi / math.sqrt(pp.kn / m_eff * (1 - zeta ** 2))
     d = derive(case)
     v = 0.5
-    table, dt = run_impact(tmp_path, case, r, rho, v, int((0.05 * r / v + 4 * tc) / d.timestep * REFINE))
+    table, dt = run_impact(tmp_path, case, r, rho, v, int((0.05 * r / v + 4 * tc) / d.dt * REFINE))
     e, t_contact, _, _ = measured_impact(table, dt, r)
     assert tc / dt > 100
     assert e == pytest.approx(pp.restitution, rel=0.01)
     assert t_contact == pytest.approx(tc, rel=0.015)
     offset = 2 * r * math.sin(math.radians(80))
-    table, dt = run_impact(tmp_path, case, r, rho, v, int((2.2 * r / v) / d.timestep * REFINE), offset=offset)
+    table, dt = run_impact(tmp_path, case, r, rho, v, int((2.2 * r / v) / d.dt * REFINE), offset=offset)
     dn, dtan = impulses_per_step(table, r)
     ratio = dtan / np.maximum(dn, 1e-300)
     assert np.mean(np.abs(ratio - pp.friction) < 0.01 * pp.friction) > 0.95

@@ -1,7 +1,6 @@
 """Deck folders: complete, deterministic, atomic, and closed to injection."""
 from __future__ import annotations
 
-import json
 import math
 
 import pytest
@@ -10,6 +9,7 @@ from siloflow.case_file import case_from_dict
 from siloflow.deck import DeckError, _num, _safe_name, render
 from siloflow.engine.liggghts.deck import check_deck
 from siloflow.errors import CaseError, SetupError
+from siloflow.run_folder import RunFolder
 
 
 def test_deck_folder_is_complete_and_deterministic(quick_dict, tmp_path):
@@ -17,14 +17,15 @@ def test_deck_folder_is_complete_and_deterministic(quick_dict, tmp_path):
     a, b = render(case, tmp_path / "a"), render(case, tmp_path / "b")
     deck = (a / "in.liggghts").read_text()
     assert deck == (b / "in.liggghts").read_text()
-    derived = json.loads((a / "derived.json").read_text())
-    for w in derived["walls"]:
-        assert (a / w["file"]).is_file()
-        assert (a / w["file"]).read_bytes() == (b / w["file"]).read_bytes()
-        if w["role"] != "outlet":
-            assert f"meshes {w['name']}" in deck or f" {w['name']}" in deck.split("n_meshes")[1]
-    assert f"nparticles {derived['particle_count']}" in deck
-    assert f"timestep        {derived['timestep']:.10g}" in deck
+    plan = RunFolder(a).plan
+    assert plan.walls
+    for w in plan.walls:
+        assert (a / w.file).is_file()
+        assert (a / w.file).read_bytes() == (b / w.file).read_bytes()
+        if w.role != "outlet":
+            assert f"meshes {w.name}" in deck or f" {w.name}" in deck.split("n_meshes")[1]
+    assert f"nparticles {plan.fill.count}" in deck
+    assert f"timestep        {plan.dt:.10g}" in deck
     assert "delete_atoms yes" in deck and "move/mesh mesh plate" in deck
     assert (a / "case.yaml").is_file()
 

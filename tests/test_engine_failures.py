@@ -105,14 +105,16 @@ def test_run_refused_when_the_output_would_not_fit(tmp_path, monkeypatch):
 def test_error_that_aborts_mpi_still_reaches_the_message(tmp_path, quick_dict):
     """An ERROR on one rank ends in MPI_Abort, which drops LIGGGHTS' block-buffered screen output
     on a pipe: the message must still reach the user (the engine line-buffers it)."""
-    import json
     import re
+
+    from siloflow.engine.liggghts.encoding import encode
+    from siloflow.run_folder import RunFolder
 
     quick_dict["engine"]["ranks"] = 1
     engine = LiggghtsEngine()
     folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
     deck = (folder / "in.liggghts").read_text()
-    seeds = json.loads((folder / "derived.json").read_text())["seeds"]
+    seeds = encode(RunFolder(folder).plan).seeds
     # an insertion seed equal to a template seed: LIGGGHTS refuses it on one rank (error->one)
     deck = re.sub(r"insert/rate/region seed \d+", f"insert/rate/region seed {seeds['templates'][0]}", deck)
     (folder / "in.liggghts").write_text(deck)
@@ -161,12 +163,12 @@ def test_resume_refuses_running_and_complete_runs(tmp_path, quick_dict):
 
 
 def test_splice_keeps_the_first_part_before_the_restart_and_the_resumed_rows(tmp_path):
-    from siloflow.engine.liggghts import _splice_table
+    from siloflow.engine.liggghts.engine import splice_table
 
     before, after = tmp_path / "flow.txt.before_resume", tmp_path / "flow.txt"
     before.write_text("# header 1\n# step a b\n0 1 2\n100 1 2\n200 9 9\n300 9 9\n")   # 200, 300: lost part
     after.write_text("# header 1\n# step a b\n200 3 4\n300 5 6\n")
-    _splice_table(before, after, 200)
+    splice_table(before, after, 200)
     assert after.read_text() == "# header 1\n# step a b\n0 1 2\n100 1 2\n200 3 4\n300 5 6\n"
     assert not before.exists()
 
@@ -267,22 +269,44 @@ def _tiny_grain_case(quick_dict, radius=3e-5):
 def test_grains_below_liggghts_default_volume_limit_get_their_own(quick_dict):
     """LIGGGHTS' particletemplate/sphere refuses spheres under 1e-12 m3 (r < 62 um) unless the
     deck lowers volume_limit; decks of larger grains keep the default (unchanged lines)."""
-    from siloflow.deck import particle_templates
     from siloflow.derived import derive
+    from siloflow.engine.liggghts.deck import monte_carlo_tries, particle_templates
+    from siloflow.engine.liggghts.encoding import encode
+
+    def templates(case):
+        plan = derive(case)
+        return particle_templates(plan, encode(plan), monte_carlo_tries(case))
 
     case = _tiny_grain_case(quick_dict)
-    (t,) = particle_templates(case, derive(case))
+    (t,) = templates(case)
     assert t["volume_limit"] == pytest.approx(4 / 3 * math.pi * 3e-5 ** 3 / 10)
     quick = case_from_dict(yaml.safe_load((ROOT / "decks" / "quick.yaml").read_text()))
-    assert all(t["volume_limit"] is None for t in particle_templates(quick, derive(quick)))
+    assert all(t["volume_limit"] is None for t in templates(quick))
 
 
-def test_a_silo_too_many_grains_across_for_the_engine_bins_is_refused(quick_dict):
+def test_a_silo_too_many_grains_across_for_the_engine_bins_is_refused(tmp_path, quick_dict, write_case):
+    """LIGGGHTS' bin limit is the engine's own check: the plan derives, its encoding (so render,
+    LiggghtsEngine.check and `siloflow validate`) refuses it, naming the field."""
+    from typer.testing import CliRunner
+
+    from siloflow.cli import app
+    from siloflow.derived import derive
+    from siloflow.engine.liggghts.encoding import encode
+
     quick_dict["particles"]["radius"] = 3e-5
     quick_dict["fill"]["count"] = 300
+    case = case_from_dict(quick_dict)
+    plan = derive(case)
+    with pytest.raises(CaseError, match="neighbour bins") as info:
+        encode(plan)
+    assert [w for w, _ in info.value.problems] == ["particles"]
+    problems = LiggghtsEngine().check(case, plan)
+    assert [w for w, _ in problems] == ["particles"] and "neighbour bins" in problems[0][1]
     with pytest.raises(CaseError, match="neighbour bins"):
-        from siloflow.derived import derive
-        derive(case_from_dict(quick_dict))
+        render(case, tmp_path / "deck", plan=plan)
+    assert not (tmp_path / "deck").exists()
+    result = CliRunner().invoke(app, ["validate", str(write_case(quick_dict))])
+    assert result.exit_code != 0 and "neighbour bins" in " ".join(result.output.split())
 
 
 @pytest.mark.engine

@@ -6,6 +6,7 @@ deck holds only whitelisted commands and none of the case's free text."""
 from __future__ import annotations
 
 import copy
+import json
 import math
 import pytest
 import yaml
@@ -17,7 +18,6 @@ from siloflow.deck import FORBIDDEN_WORDS, render
 from siloflow.engine.liggghts.deck import check_deck, render_deck_text
 from siloflow.derived import check_run_length, derive
 from siloflow.errors import CaseError, SiloflowError
-from siloflow.meshes import silo_meshes
 
 from conftest import QUICK, ROOT
 from test_case_loading import memory_cap
@@ -102,7 +102,7 @@ def assert_derives_and_renders(case):
     not; any other exception fails the test."""
     try:
         with memory_cap(2 * 2 ** 30):         # a runaway mesh fails the test instead of the machine
-            derived, deck = _derive_and_render(case)
+            plan, deck = _derive_and_render(case)
     except SiloflowError as exc:
         assert str(exc).strip()
         return
@@ -124,14 +124,16 @@ def assert_refused_or_sound(data) -> None:
 
 
 def _derive_and_render(case):
-    """(derived, deck text) of a case, checking the derived record on the way."""
-    derived = derive(case)
-    assert all(isinstance(w, str) and w for w in derived.warnings)
-    assert check_run_length(derived, allow_long=True) == derived.total_planned_steps
-    for where, value in numbers_in(derived.to_json(), "derived"):
+    """(plan, deck text) of a case, checking the run plan on the way (its walls included)."""
+    plan = derive(case)
+    assert all(isinstance(w, str) and w for w in plan.warnings)
+    assert check_run_length(plan, allow_long=True) == plan.total_planned_steps
+    # the plan's own values (its JSON writes a non-finite number as null, which would hide it)
+    for where, value in numbers_in(plan.model_dump(), "plan"):
         assert math.isfinite(value), where
-    walls = silo_meshes(case, derived.outlet_z, derived.outlet_disc_radius)
-    return derived, render_deck_text(case, derived, walls)
+    for where, value in numbers_in(json.loads(plan.to_json()), "plan.json"):
+        assert math.isfinite(value), where
+    return plan, render_deck_text(plan, case)
 
 
 SCALED_BASES = {name: yaml.safe_load((ROOT / name).read_text()) for name in [

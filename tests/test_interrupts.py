@@ -15,7 +15,7 @@ import time
 import numpy as np
 import pytest
 
-from siloflow.engine.base import run_state
+from siloflow.run_folder import run_state
 
 from conftest import ROOT, SMALL
 

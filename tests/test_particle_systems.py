@@ -12,7 +12,9 @@ from postprocess.dumps import read_frames
 from siloflow.case_file import load_case
 from siloflow.derived import derive
 from siloflow.engine import LiggghtsEngine
+from siloflow.engine.liggghts.encoding import encode
 from siloflow.engine.liggghts.tables import FLOW_COLUMNS, read_ave_time
+from siloflow.run_folder import RunFolder
 
 from conftest import ROOT, hooke_materials
 
@@ -61,13 +63,13 @@ def test_mass_is_conserved_through_settling_and_the_criterion_stopped_it(poly_ru
     assert settling.mass_total.max() == pytest.approx(settling.mass_total.min(), rel=1e-9)
     assert record.settled_ke_pe < case.fill.settle.ke_pe_ratio
     d = derive(case)
-    assert steps["static"] - steps["settle"] < d.settle_max_chunks * d.settle_chunk_steps   # not the cap
+    assert steps["static"] - steps["settle"] < d.settle.max_chunks * d.settle.chunk_steps   # not the cap
     log = (folder / "log.liggghts").read_text(errors="replace")
     printed = [ln for ln in log.splitlines() if ln.startswith("SILOFLOW_")]     # the deck's echo is indented
     assert any(ln.startswith("SILOFLOW_SETTLED ") for ln in printed)
     assert not any(ln.startswith("SILOFLOW_NOT_SETTLED") for ln in printed)
-    info = json.loads((folder / "derived.json").read_text())
-    assert info["mass_fractions"] == pytest.approx(case.particles.mass_fractions)
+    plan = RunFolder(folder).plan
+    assert plan.fill.mass_fractions == pytest.approx(case.particles.mass_fractions)
 
 
 SHRINK = ROOT / "tests" / "data" / "shrink_silo.yaml"
@@ -154,8 +156,9 @@ def test_hooke_contact_law_runs_per_size_pair(tmp_path):
     d = derive(case)
     kn_line = next(ln for ln in (folder / "in.liggghts").read_text().splitlines() if " kn peratomtypepair" in ln)
     kn = np.array([float(v) for v in kn_line.split()[7:]]).reshape(4, 4)   # after "... peratomtypepair 4"
-    assert kn[0, 1] == pytest.approx(d.type_pairs[(1, 2)].kn, rel=1e-9)
-    assert kn[2, 3] == pytest.approx(d.type_pairs[(3, 4)].kn, rel=1e-9)
+    type_pairs = encode(d).type_pairs                    # keyed by (atom type i, atom type j), i <= j
+    assert kn[0, 1] == pytest.approx(type_pairs[(1, 2)].kn, rel=1e-9)
+    assert kn[2, 3] == pytest.approx(type_pairs[(3, 4)].kn, rel=1e-9)
 
 
 # --------------------------------------------------------------------------- clumps + dust
@@ -213,7 +216,7 @@ def test_clump_run_conserves_mass_and_balances_the_weight(clump_run):
     assert settling.mass_total.iloc[-1] == pytest.approx(d.total_mass, rel=0.002)
     assert settling.mass_total.max() == pytest.approx(settling.mass_total.min(), rel=1e-9)
     assert record.settled_ke_pe < case.fill.settle.ke_pe_ratio
-    assert steps["static"] - steps["settle"] < d.settle_max_chunks * d.settle_chunk_steps
+    assert steps["static"] - steps["settle"] < d.settle.max_chunks * d.settle.chunk_steps
     summary = json.loads((folder / "results" / "summary.json").read_text())
     # the walls and bottom carry the weight of the clumps and the dust (measured by the meshes)
     assert summary["force_balance"]["ratio"] == pytest.approx(1.0, abs=0.01)
@@ -260,11 +263,11 @@ def test_clump_contact_stress_carries_the_settled_beds_weight(clump_run):
     from postprocess.cg_kernels import gaussian
     from postprocess.coarse_grain import CartesianGrid, CoarseGraining
     case, folder, record = clump_run
-    derived = json.loads((folder / "derived.json").read_text())
+    layout = RunFolder(folder).dump_layout
     settled = _settled(folder, record)
     dumps = folder / "output" / "dumps"
-    pairs = next(read_frames(dumps / "contacts.*.txt", columns=derived["contact_columns"], steps=[settled.timestep]))
-    walls = next(read_frames(dumps / "wall_contacts.*.txt", columns=derived["wall_contact_columns"],
+    pairs = next(read_frames(dumps / "contacts.*.txt", columns=layout.contact_columns, steps=[settled.timestep]))
+    walls = next(read_frames(dumps / "wall_contacts.*.txt", columns=layout.wall_contact_columns,
                              steps=[settled.timestep]))
     k = gaussian(0.0025)
     half = case.geometry.radius + k.cutoff                 # the whole bed and its kernels' reach

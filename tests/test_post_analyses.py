@@ -389,13 +389,15 @@ def test_beverloo_fit_recovers_c_and_k():
 
 
 def test_beverloo_command_fits_across_run_folders(tmp_path, quick_dict):
-    """Run folders (case.yaml + results/summary.json) with flow rates from Beverloo's law."""
+    """Run folders (plan.json + results/summary.json) with flow rates from Beverloo's law."""
     import json
 
-    import yaml
     from typer.testing import CliRunner
 
+    from siloflow.case_file import case_from_dict
     from siloflow.cli import app
+    from siloflow.derived import derive
+    from siloflow.run_folder import RunFolder
 
     folders = []
     for k, (orifice, radius) in enumerate([(0.006, 0.001), (0.008, 0.001), (0.010, 0.001), (0.012, 0.0015),
@@ -405,7 +407,9 @@ def test_beverloo_command_fits_across_run_folders(tmp_path, quick_dict):
         case["particles"] = dict(case["particles"], radius=radius)
         folder = tmp_path / f"run{k}"
         (folder / "results").mkdir(parents=True)
-        (folder / "case.yaml").write_text(yaml.safe_dump(case))
+        plan = derive(case_from_dict(case))
+        RunFolder(folder).write_plan(plan)
+        assert plan.geometry.outlet_radius == orifice and plan.grains[0].radius == radius
         W = float(beverloo_by_hand(2 * orifice, 2 * radius, 0.6, 1.4, 1500.0, case.get("gravity", 9.81)))
         (folder / "results" / "summary.json").write_text(json.dumps(
             {"flow_rate": {"rate": W, "stderr": 0.01 * W}, "frame_analyses": {"bulk_density_kg_m3": 1500.0}}))

@@ -389,28 +389,28 @@ def test_missing_mpirun_names_the_launcher_fix():
 def test_splice_keeps_the_first_parts_average_at_the_restart_step(tmp_path):
     """ave/time with Nrepeat > 1 (the wall forces) writes no row at the step a run starts from:
     the first part's row there is kept (it averages samples before the restart)."""
-    from siloflow.engine.liggghts import _splice_table
+    from siloflow.engine.liggghts.engine import splice_table
 
     before, after = tmp_path / "wall_forces.txt.before_resume", tmp_path / "wall_forces.txt"
     before.write_text("# h\n13120 1\n13440 2\n13760 8\n")
     after.write_text("# h\n13760 3\n14080 4\n")
-    _splice_table(before, after, 13440)
+    splice_table(before, after, 13440)
     assert after.read_text() == "# h\n13120 1\n13440 2\n13760 3\n14080 4\n"
 
 
 def test_splice_keeps_the_first_parts_rows_up_to_the_resumed_parts_first(tmp_path):
     """A restart between two averages (step 150 of a 100-step table): the first part's row at 200
     is kept (the resumed part's first average is at 300); a last line cut short is dropped."""
-    from siloflow.engine.liggghts import _splice_table
+    from siloflow.engine.liggghts.engine import splice_table
 
     before, after = tmp_path / "wall_forces.txt.before_resume", tmp_path / "wall_forces.txt"
     before.write_text("# h\n0 1\n100 2\n200 3\n300 4\n40")
     after.write_text("# h\n300 5\n400 6\n")
-    _splice_table(before, after, 150)
+    splice_table(before, after, 150)
     assert after.read_text() == "# h\n0 1\n100 2\n200 3\n300 5\n400 6\n"
     before.write_text("# h\n0 1\n100 2\n200 3\n30")
     after.write_text("# h\n")                                   # the resumed part wrote nothing yet
-    _splice_table(before, after, 150)
+    splice_table(before, after, 150)
     assert after.read_text() == "# h\n0 1\n100 2\n"
 
 

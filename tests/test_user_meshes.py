@@ -2,7 +2,6 @@
 pasted into the deck; a bad file is refused naming the insert."""
 from __future__ import annotations
 
-import json
 import shutil
 
 import numpy as np
@@ -13,8 +12,10 @@ from stl import mesh as stl_mesh
 
 from siloflow.case_file import load_case
 from siloflow.deck import render
+from siloflow.derived import derive
 from siloflow.errors import CaseError
 from siloflow.meshes import rectangle
+from siloflow.run_folder import RunFolder
 
 from conftest import ROOT
 
@@ -61,8 +62,8 @@ def test_insert_is_read_checked_and_written_anew(tmp_path, mode):
     stored = load_case(folder / "case.yaml")
     assert stored.inserts[0].file == str((folder / "meshes" / "insert_baffle.stl").resolve())
     assert stored.inserts[0].scale == 1.0
-    walls = json.loads((folder / "derived.json").read_text())["walls"]
-    assert any(w["name"] == "insert_baffle" and w["role"] == "insert" for w in walls)
+    walls = RunFolder(folder).plan.walls
+    assert any(w.name == "insert_baffle" and w.role == "insert" for w in walls)
 
 
 def _refused(tmp_path, tris=None, raw: bytes | None = None, scale: float = 1.0) -> str:
@@ -71,8 +72,9 @@ def _refused(tmp_path, tris=None, raw: bytes | None = None, scale: float = 1.0) 
         path.write_bytes(raw)
     else:
         write_user_stl(path, tris)
+    case = load_case(slab_case_with(tmp_path, str(path), scale))     # the file is read when the walls are made
     with pytest.raises(CaseError) as info:
-        load_case(slab_case_with(tmp_path, str(path), scale))
+        derive(case)
     (field, message), = info.value.problems
     assert field == "inserts[0].file"
     return message
@@ -89,16 +91,24 @@ def test_bad_insert_files_are_refused_naming_the_insert(tmp_path):
     assert "not an STL file" in _refused(tmp_path, raw=np.random.default_rng(1).bytes(5000))
     assert "no triangles" in _refused(tmp_path, raw=b"solid x\n facet normal 0 0 1\n  outer loop\n   vertex 0 0\n")
     assert "outside the silo" in _refused(tmp_path, tris, scale=10.0)
-    with pytest.raises(CaseError, match="cannot read"):
-        load_case(slab_case_with(tmp_path, "missing.stl"))
+    with pytest.raises(CaseError, match="cannot read") as info:
+        derive(load_case(slab_case_with(tmp_path, "missing.stl")))
+    assert [field for field, _ in info.value.problems] == ["inserts[0].file"]
 
 
 def test_an_insert_that_is_a_fifo_is_refused_not_read(tmp_path):
     """A FIFO named as an insert hung siloflow validate (it waited for a writer)."""
     import os
     os.mkfifo(tmp_path / "pipe.stl")
-    with pytest.raises(CaseError, match="FIFO"):
-        load_case(slab_case_with(tmp_path, "pipe.stl"))
+    with pytest.raises(CaseError, match="FIFO") as info:
+        derive(load_case(slab_case_with(tmp_path, "pipe.stl")))
+    assert [field for field, _ in info.value.problems] == ["inserts[0].file"]
+    from typer.testing import CliRunner
+
+    from siloflow.cli import app
+    result = CliRunner().invoke(app, ["validate", str(tmp_path / "case.yaml")])
+    assert result.exit_code == 1
+    assert "inserts[0].file" in result.output and "FIFO" in result.output
 
 
 @pytest.mark.engine
@@ -106,17 +116,15 @@ def test_an_insert_that_is_a_fifo_is_refused_not_read(tmp_path):
                     "CI installs it, so CI never skips this")
 def test_insert_carries_load_in_a_real_run(tmp_path):
     from postprocess.first_results import analyse
-    from siloflow.engine.liggghts.tables import wall_force_columns
     from siloflow.engine import LiggghtsEngine
-    from siloflow.engine.liggghts.tables import read_ave_time
 
     write_user_stl(tmp_path / "b.stl", baffle(), Mode.BINARY)
     case = load_case(slab_case_with(tmp_path, "b.stl"))
     folder = tmp_path / "run"
     record = LiggghtsEngine().run(case, folder)
     summary = analyse(folder)
-    walls = json.loads((folder / "derived.json").read_text())["walls"]
-    forces = read_ave_time(folder / "output" / "wall_forces.txt", wall_force_columns(walls))
-    still = forces[(forces.step > record.stage_steps["static"]) & (forces.step <= record.stage_steps["open"])]
-    assert (still["insert_baffle_fz"] < 0).all()            # grains rest on the baffle (force on it: down)
+    forces = RunFolder(folder).wall_forces()              # the force the grains exert on each wall
+    on_baffle = forces[forces.wall == "insert_baffle"]
+    still = on_baffle[(on_baffle.step > record.stage_steps["static"]) & (on_baffle.step <= record.stage_steps["open"])]
+    assert len(still) and (still.fz < 0).all()            # grains rest on the baffle (force on it: down)
     assert summary["force_balance"]["ratio"] == pytest.approx(1.0, abs=0.01)   # the baffle counted in the balance

@@ -233,7 +233,8 @@ def write_deck(plan: RunPlan, case: Case, folder: Path) -> None:
     write_text(folder / DECK_NAME, text)
     RunFolder(folder).write_dump_layout(DumpLayout(
         engine="liggghts", types={t: name for name, t in enc.types.items()},
-        contact_columns=contact_columns(plan), wall_contact_columns=contact_columns(plan, wall=True)))
+        contact_columns=contact_columns(plan), wall_contact_columns=contact_columns(plan, wall=True),
+        clump_mass="body"))         # multisphere: every sphere carries its clump's mass
 
 
 def write_resume_deck(plan: RunPlan, case: Case, folder) -> Path:
