@@ -45,10 +45,10 @@ def measure(data: dict, folder: Path) -> dict:
     d = derive(case)
     record = LiggghtsEngine().run(case, folder)
     summary = analyse(folder)
-    dust_mass = d.dust_count * d.dust.mass
+    dust_mass = d.fill.dust_count * d.dust.mass
     fa = summary.get("frame_analyses", {})
-    return {"scale": case.particles.dust.density_scale, "seed": case.seed, "dt": d.timestep,
-            "dt_without_dust": d.timestep_without_dust, "wall_s": record.wall_time,
+    return {"scale": case.particles.dust.density_scale, "seed": case.seed, "dt": d.dt,
+            "dt_without_dust": d.timestep.without_dust, "wall_s": record.wall_time,
             "dust_mass_share": dust_mass / d.total_mass,
             "p_static_band0": summary["bands"][0]["static_pressure"],
             "flow_rate": summary["flow_rate"]["rate"],
@@ -65,7 +65,7 @@ def variant_data(base: dict, scale: float, seed: int, keep_dt: bool) -> dict:
         true = variant_data(base, 1.0, seed, keep_dt=False)
         engine = data.setdefault("engine", {})
         fraction = engine.get("timestep_fraction", case_from_dict(data).engine.timestep_fraction)
-        engine["timestep_fraction"] = fraction * derive(case_from_dict(true)).timestep / derive(case_from_dict(data)).timestep
+        engine["timestep_fraction"] = fraction * derive(case_from_dict(true)).dt / derive(case_from_dict(data)).dt
     return data
 
 

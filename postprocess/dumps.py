@@ -29,7 +29,7 @@ from typing import Iterable, Iterator, Sequence
 import numpy as np
 import pandas as pd
 
-from siloflow.engine.liggghts.tables import PAIR_LOCAL_LAYOUT, local_columns  # noqa: F401 (re-exported)
+from siloflow.engine.liggghts.tables import PAIR_LOCAL_LAYOUT, local_columns  # noqa: F401 (re-exported for dump users)
 from siloflow.errors import ReadError
 
 _VTK_VECTORS = {"v": ("vx", "vy", "vz"), "f": ("fx", "fy", "fz"), "omega": ("omegax", "omegay", "omegaz"),

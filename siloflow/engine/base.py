@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from ..case import Case
-from ..run_folder import RunRecord, read_status, run_state, write_status  # noqa: F401 (the engines' API)
+from ..run_folder import RunRecord, write_status
 
 #: progress(stage, current_step, total_steps); total is the current upper bound
 ProgressCallback = Callable[[str, int, int], None]

@@ -15,8 +15,9 @@ from ...case import Case
 from ...deck import check_deck_file, verify_deck
 from ...errors import CaseError, EngineRunError, ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
-from ...run_folder import LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree
-from ..base import Engine, ProgressCallback, RunRecord, read_status, run_state, write_status
+from ...run_folder import (LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree,
+                           read_status, run_state, write_status)
+from ..base import Engine, ProgressCallback, RunRecord
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
