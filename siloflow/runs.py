@@ -104,23 +104,30 @@ def open_run(folder) -> Run:
     return Run(folder)
 
 
-def run(case, folder, force: bool = False, progress=None) -> Run:
+def run(case, folder, force: bool = False, progress=None, allow_long: bool = False,
+        allow_large_output: bool = False) -> Run:
     """Render ``case`` (a ``Case``, a dict of case fields or a case-file path) into ``folder``,
     run its engine, check the run and compute the first results, as ``siloflow run`` does;
-    return the ``Run``."""
+    return the ``Run``. As there, a run over the step cap (``allow_long``) or whose estimated
+    output exceeds the free disk (``allow_large_output``) is refused before anything is written."""
     from postprocess.first_results import analyse
     from .case import Case
     from .case_file import case_from_dict, load_case
-    from .derived import derive
+    from .derived import check_run_length, derive
+    from .disk_estimate import check_disk_space
     from .engine import get_engine
+    from .engine.base import check_case
     keep = []
     if isinstance(case, dict):
         case = case_from_dict(case)
     elif not isinstance(case, Case):
         keep = [case]
         case = load_case(case)
-    plan = derive(case)
     engine = get_engine(case.engine.name)
+    check_case(case, engine)
+    plan = derive(case)
+    check_run_length(plan, allow_long)
+    check_disk_space(case, plan, folder, allow_large_output)
     folder = engine.prepare(case, folder, force=force, keep=keep, plan=plan)
     engine.execute(folder, progress=progress)
     engine.collect(folder)

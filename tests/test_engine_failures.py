@@ -13,7 +13,7 @@ from conftest import ROOT
 from siloflow.case_file import case_from_dict
 from siloflow.deck import render
 from siloflow.engine import LiggghtsEngine
-from siloflow.engine.base import read_status
+from siloflow.run_folder import read_status
 from siloflow.engine.liggghts.log import LogState, diagnose
 from siloflow.errors import CaseError, EngineRunError, SetupError
 
@@ -150,7 +150,7 @@ def test_time_step_verdict_of_the_engine_stops_the_run(tmp_path, quick_dict):
 
 
 def test_resume_refuses_running_and_complete_runs(tmp_path, quick_dict):
-    from siloflow.engine.base import write_status
+    from siloflow.run_folder import write_status
 
     engine = LiggghtsEngine(executable="sh")
     folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
