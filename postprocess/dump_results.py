@@ -181,6 +181,9 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
 
     # Janssen fit of the settled profile
     static = bands_table[bands_table.z_mid < h_settled]
+    if bands_table.empty:
+        summary["janssen_static"] = {"error": "no wall-pressure sensors (outputs.results lacks wall_pressure)"}
+        return summary
     try:
         fit = fit_janssen(h_settled - static.z_mid, static.static_pressure, rho_section,
                           janssen_diameter(g), plan.gravity)

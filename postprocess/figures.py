@@ -20,7 +20,14 @@ def save_figure(fig, path) -> None:
 
 
 def first_results_figure(bands, discharge, band_table, t_open: float, path) -> None:
-    """Pressure per band vs time (left), static/max-dynamic profile (middle), discharged mass (right)."""
+    """Pressure per band vs time (left), static/max-dynamic profile (middle), discharged mass (right);
+    a run without wall-pressure sensors (``bands`` None) gets the discharge only."""
+    if bands is None:
+        fig, ax3 = plt.subplots(figsize=(6, 4.5))
+        _discharge_panel(ax3, discharge, t_open)
+        fig.tight_layout()
+        save_figure(fig, path)
+        return
     fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(15, 4.5))
     cmap = plt.get_cmap("viridis")
     nb = max(1, bands.band.nunique())
@@ -34,13 +41,18 @@ def first_results_figure(bands, discharge, band_table, t_open: float, path) -> N
     ax2.plot(band_table.max_dynamic_pressure, band_table.z_mid * 100, "s--", label="max during discharge")
     ax2.set(xlabel="normal wall pressure (Pa)", ylabel="height of band centre (cm)", title="pressure profile")
     ax2.legend(fontsize=8)
-    ax3.plot(discharge.time, discharge.outlet_mass * 1000, label="through the outlet")
-    ax3.plot(discharge.time, discharge.mass_in_silo * 1000, label="in the silo")
-    ax3.axvline(t_open, color="k", ls="--", lw=0.8)
-    ax3.set(xlabel="time (s)", ylabel="mass (g)", title="discharge")
-    ax3.legend(fontsize=8)
+    _discharge_panel(ax3, discharge, t_open)
     fig.tight_layout()
     save_figure(fig, path)
+
+
+def _discharge_panel(ax, discharge, t_open: float) -> None:
+    """Mass through the outlet and in the silo (g) against time (s)."""
+    ax.plot(discharge.time, discharge.outlet_mass * 1000, label="through the outlet")
+    ax.plot(discharge.time, discharge.mass_in_silo * 1000, label="in the silo")
+    ax.axvline(t_open, color="k", ls="--", lw=0.8)
+    ax.set(xlabel="time (s)", ylabel="mass (g)", title="discharge")
+    ax.legend(fontsize=8)
 
 
 def line_figure(table, x: str, y, path, hue: str | None = None, xlabel: str = "", ylabel: str = "",

@@ -15,7 +15,7 @@ import pandas as pd
 
 from siloflow.atomic_files import write_json, write_text
 from siloflow.errors import ReadError
-from siloflow.run_folder import SUMMARY_NAME, RunFolder
+from siloflow.run_folder import RESULT_TABLES, SUMMARY_NAME, RunFolder
 
 from .discharge import discharge_table, steady_flow_rate
 from .dump_results import analyse_dumps
@@ -35,10 +35,13 @@ class RunOutputs:
         self.dt = self.plan.dt
         self.walls = self.plan.walls
         self.flow = self.run.flow()
-        try:
-            self.forces = wide_forces(self.run.wall_forces(), self.walls)
-        except ValueError as exc:
-            raise ReadError(f"{self.folder}: {exc}") from None
+        self.forces = None                  # no result asked for the walls' forces: none sampled
+        if self.plan.outputs.wall_forces:
+            try:
+                self.forces = wide_forces(self.run.wall_forces(), self.walls)
+            except ValueError as exc:
+                raise ReadError(f"{self.folder}: {exc}") from None
+        self.has_bands = self.forces is not None and any(w.role == "band" for w in self.walls)
         steps = self.record.stage_steps
         missing = [s for s in ("static", "open", "discharge") if s not in steps]
         if missing:
@@ -82,40 +85,50 @@ def analyse(folder, measured_pressure=None) -> dict:
               "median_rate": float(np.nanmedian(w[i0:i1])), "tolerance": 0.2} if i1 > i0 else None
 
     # wall pressure
-    sectors = band_pressures(run.forces, run.walls)
-    bands = band_mean(sectors)
-    bands.insert(1, "time", bands.step * run.dt)
-    static_mask = static_window(bands, run)
-    if not static_mask.any():
-        raise ReadError(f"{folder}: no wall-force sample inside the static window; "
-                        "make fill.settle.static_window longer than outputs.sample_interval")
-    static = bands[static_mask].groupby("band").agg(z_mid=("z_mid", "first"), static_pressure=("pressure", "mean"),
-                                                    static_shear=("shear_force", "mean"))
-    dynamic = bands[bands.step > run.stage_steps["open"] + run.sample_steps].groupby("band").agg(
-        max_dynamic_pressure=("pressure", "max"))
-    table = static.join(dynamic)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        table["discharge_factor"] = table.max_dynamic_pressure / table.static_pressure
-    table = table.reset_index()
+    bands, table = None, pd.DataFrame(columns=["band", "z_mid", "static_pressure", "static_shear",
+                                               "max_dynamic_pressure", "discharge_factor"])
+    if run.has_bands:
+        sectors = band_pressures(run.forces, run.walls)
+        bands = band_mean(sectors)
+        bands.insert(1, "time", bands.step * run.dt)
+        static_mask = static_window(bands, run)
+        if not static_mask.any():
+            raise ReadError(f"{folder}: no wall-force sample inside the static window; "
+                            "make fill.settle.static_window longer than outputs.sample_interval")
+        static = bands[static_mask].groupby("band").agg(z_mid=("z_mid", "first"), static_pressure=("pressure", "mean"),
+                                                        static_shear=("shear_force", "mean"))
+        dynamic = bands[bands.step > run.stage_steps["open"] + run.sample_steps].groupby("band").agg(
+            max_dynamic_pressure=("pressure", "max"))
+        table = static.join(dynamic)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            table["discharge_factor"] = table.max_dynamic_pressure / table.static_pressure
+        table = table.reset_index()
 
     # force balance of the settled bed
-    load = vertical_load(run.forces, run.walls)
-    fmask = static_window(run.forces, run)
-    fstatic = run.flow[(run.flow.step > run.stage_steps["static"]) & (run.flow.step <= run.stage_steps["open"])]
-    weight = float(fstatic.mass_total.mean()) * g
-    wall_load = float(load[fmask].mean())
-    band_cols = [w.name for w in run.walls if w.role in ("band", "wall")]
-    wall_shear = float(sum(-run.forces.loc[fmask, f"{n}_fz"].mean() for n in band_cols))
+    balance = None
+    if run.forces is not None:
+        load = vertical_load(run.forces, run.walls)
+        fmask = static_window(run.forces, run)
+        fstatic = run.flow[(run.flow.step > run.stage_steps["static"]) & (run.flow.step <= run.stage_steps["open"])]
+        weight = float(fstatic.mass_total.mean()) * g
+        wall_load = float(load[fmask].mean())
+        band_cols = [w.name for w in run.walls if w.role in ("band", "wall")]
+        wall_shear = float(sum(-run.forces.loc[fmask, f"{n}_fz"].mean() for n in band_cols))
+        balance = {"weight_N": weight, "wall_and_bottom_load_N": wall_load,
+                   "ratio": wall_load / weight if weight > 0 else float("nan"),
+                   "wall_friction_share": wall_shear / weight if weight > 0 else float("nan")}
 
     # tables
-    write_text(out / "discharge.csv", dis.to_csv(index=False))
-    write_text(out / "wall_pressure.csv", bands.to_csv(index=False))
-    write_text(out / "wall_pressure_sectors.csv", sectors.assign(time=sectors.step * run.dt).to_csv(index=False))
-    write_text(out / "bands.csv", table.to_csv(index=False))
-    try:
-        sectors.to_parquet(out / "wall_pressure_sectors.parquet", index=False)
-    except ImportError:  # pyarrow is a dependency; a missing one only loses the Parquet copy
-        pass
+    write_text(out / RESULT_TABLES["flow"], dis.to_csv(index=False))
+    if bands is not None:
+        write_text(out / RESULT_TABLES["wall_pressure"], bands.to_csv(index=False))
+        write_text(out / RESULT_TABLES["wall_pressure_sectors"],
+                   sectors.assign(time=sectors.step * run.dt).to_csv(index=False))
+        write_text(out / RESULT_TABLES["bands"], table.to_csv(index=False))
+        try:
+            sectors.to_parquet(out / "wall_pressure_sectors.parquet", index=False)
+        except ImportError:  # pyarrow is a dependency; a missing one only loses the Parquet copy
+            pass
 
     summary = {
         "particles_inserted": run.record.inserted,
@@ -123,9 +136,8 @@ def analyse(folder, measured_pressure=None) -> dict:
         "initial_mass_kg": initial_mass,
         "settled_ke_pe": run.record.settled_ke_pe,
         "time_open_s": t_open,
-        "force_balance": {"weight_N": weight, "wall_and_bottom_load_N": wall_load,
-                          "ratio": wall_load / weight if weight > 0 else float("nan"),
-                          "wall_friction_share": wall_shear / weight if weight > 0 else float("nan")},
+        "force_balance": balance,
+        "results_asked": run.plan.outputs.results,
         "flow_rate": asdict(rate),
         "steady_window_detected": steady,
         "discharged_mass_kg": float(dis.outlet_mass.iloc[-1]),
@@ -136,6 +148,9 @@ def analyse(folder, measured_pressure=None) -> dict:
     }
     summary["frame_analyses"] = analyse_dumps(run, out, table, dis, rate)
     if measured_pressure is not None:
+        if bands is None:
+            raise ReadError(f"{folder} has no wall-pressure sensors to compare with {measured_pressure} "
+                            "(its outputs.results does not ask for wall_pressure)")
         try:
             measured = pd.read_csv(measured_pressure)
         except (OSError, ValueError) as exc:
@@ -169,8 +184,9 @@ def report_text(summary: dict, run: RunOutputs) -> str:
                 if summary.get("fill_losses") else ""),
              f"- settled at KE/PE = {_fmt(summary['settled_ke_pe'], '.2e')}; outlet opened at t = "
              f"{_fmt(summary['time_open_s'])} s",
-             f"- force balance of the settled bed: walls + bottom carry {_fmt(fb['ratio'], '.4f')} x the weight "
-             f"({_fmt(fb['wall_friction_share'], '.2f')} of it by wall friction)",
+             (f"- force balance of the settled bed: walls + bottom carry {_fmt(fb['ratio'], '.4f')} x the weight "
+              f"({_fmt(fb['wall_friction_share'], '.2f')} of it by wall friction)" if fb else
+              "- force balance: not measured (outputs.results asks for neither force_balance nor wall_pressure)"),
              f"- steady flow rate Wf = {_fmt(fr['rate'] * 1000)} +/- {_fmt(fr['stderr'] * 1000, '.2g')} g/s "
              f"(t = {_fmt(fr['t_start'], '.3g')}-{_fmt(fr['t_end'], '.3g')} s, r2 {_fmt(fr['r2'], '.4f')})",
              f"- discharged {_fmt(summary['discharged_mass_kg'] * 1000)} g; {_fmt(summary['mass_in_silo_end_kg'] * 1000)} g left"]
@@ -199,10 +215,11 @@ def report_text(summary: dict, run: RunOutputs) -> str:
                       f"r2 {_fmt(j['r2'], '.3f')})"]
     else:
         lines += [f"- frame analyses: {fa.get('dumps', 'none')}"]
-    lines += ["", "| band | z (m) | static p (Pa) | max dynamic p (Pa) | C_h |", "|---|---|---|---|---|"]
-    for b in summary["bands"]:
-        lines.append(f"| {b['band']} | {_fmt(b['z_mid'], '.3f')} | {_fmt(b['static_pressure'], '.1f')} | "
-                     f"{_fmt(b['max_dynamic_pressure'], '.1f')} | {_fmt(b['discharge_factor'], '.2f')} |")
+    if summary["bands"]:
+        lines += ["", "| band | z (m) | static p (Pa) | max dynamic p (Pa) | C_h |", "|---|---|---|---|---|"]
+        for b in summary["bands"]:
+            lines.append(f"| {b['band']} | {_fmt(b['z_mid'], '.3f')} | {_fmt(b['static_pressure'], '.1f')} | "
+                         f"{_fmt(b['max_dynamic_pressure'], '.1f')} | {_fmt(b['discharge_factor'], '.2f')} |")
     if "pressure_comparison" in summary:
         lines += ["", "| band | max measured (Pa) | max simulated (Pa) | difference | W (Eq. 34) |", "|---|---|---|---|---|"]
         for r in summary["pressure_comparison"]:

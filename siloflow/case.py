@@ -487,15 +487,34 @@ class Discharge(Strict):
         return self
 
 
-class Outputs(Strict):
-    """What the run writes."""
+#: the results a case can ask for, and what each needs of the deck (siloflow.derived.outputs_plan)
+RESULTS = ("flow_rate", "force_balance", "wall_pressure", "porosity", "free_surface", "coordination",
+           "force_chains", "coarse_graining", "vtk")
 
+
+class Outputs(Strict):
+    """What the run writes. ``results`` lists what the run is for; the deck then holds only what
+    those results need (no sensor meshes without ``wall_pressure``, no wall-force sampling without
+    it or ``force_balance``, no dumps without a frame analysis, no contact dumps without
+    ``coordination``, ``force_chains`` or ``coarse_graining``). Unset: everything the other fields
+    ask for (sensors always, dumps when ``dump_interval`` is set)."""
+
+    results: Optional[list[Literal[RESULTS]]] = Field(
+        None, max_length=len(RESULTS), description="what the run is for (flow_rate is always measured): "
+        + ", ".join(RESULTS) + "; unset: everything")
     sample_interval: Positive = Field(0.005, description="wall forces and flow sampled this often, s", le=100)
     dump_interval: Optional[Positive] = Field(None, description="particle dumps this often, s (none if unset)")
     vtk: bool = Field(False, description="also write VTK particle files for ParaView")
     contacts: bool = Field(True, description="with dumps: also dump pair contacts (positions, ids, "
                            "forces) for coordination numbers and force chains")
     figures: bool = True
+
+    @model_validator(mode="after")
+    def _results_fit(self):
+        if self.results is not None:
+            if len(set(self.results)) != len(self.results):
+                raise ValueError("outputs.results lists a result twice")
+        return self
 
 
 class EngineSettings(Strict):

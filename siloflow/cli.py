@@ -44,14 +44,13 @@ def _fail(exc: SiloflowError) -> None:
 @app.command()
 def validate(case_file: Path = typer.Argument(..., help="YAML case file")) -> None:
     """Check a case file; report every problem with its field path, and the physics warnings."""
-    from .derived import derive
     from .engine import get_engine
     from .engine.base import check_case
     try:
         case = load_case(case_file)
         engine = get_engine(case.engine.name)
         check_case(case, engine)                 # what the engine cannot do, before the plan
-        d = derive(case)                         # reads and checks the inserts' meshes too
+        d = plan_of(case, case_file)             # reads and checks the inserts' meshes too
         check_case(case, engine, d)
     except SiloflowError as exc:
         _fail(exc)
@@ -64,6 +63,15 @@ def validate(case_file: Path = typer.Argument(..., help="YAML case file")) -> No
 def schema() -> None:
     """Print the JSON schema of case files (for editors)."""
     print(json.dumps(Case.model_json_schema(), indent=2))
+
+
+def plan_of(case: Case, case_file: Path):
+    """The case's run plan (``derive``), a refusal naming the case file and the field."""
+    from .derived import derive
+    try:
+        return derive(case)
+    except CaseError as exc:
+        raise CaseError(exc.problems, str(case_file)) from None
 
 
 FORCE_HELP = "replace an existing folder siloflow made (never one holding files it did not write)"
@@ -82,14 +90,14 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
            force: bool = typer.Option(False, "--force", help=FORCE_HELP),
            allow_long: bool = typer.Option(False, help=ALLOW_LONG_HELP)) -> None:
     """Write a self-contained run folder (the engine's deck and meshes, case copy, run plan)."""
-    from .derived import check_run_length, derive
+    from .derived import check_run_length
     from .engine import get_engine
     from .engine.base import check_case
     try:
         case = load_case(case_file)
         engine = get_engine(case.engine.name)
         check_case(case, engine)
-        d = derive(case)
+        d = plan_of(case, case_file)
         check_run_length(d, allow_long)
         folder = engine.prepare(case, output, force=force, keep=[case_file], plan=d)
     except SiloflowError as exc:
@@ -148,9 +156,12 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         liggghts: Optional[str] = typer.Option(None, "--liggghts", envvar="SILOFLOW_LIGGGHTS",
                                                help="LIGGGHTS binary (default: liggghts on PATH)"),
         post_process: bool = typer.Option(True, "--post/--no-post", help="compute first results"),
-        allow_large_output: bool = typer.Option(False, help="run even if the estimated output exceeds the free disk")) -> None:
+        allow_large_output: bool = typer.Option(False, help="run even if the estimated output exceeds the free disk"),
+        cache: Optional[Path] = typer.Option(None, "--cache", envvar="SILOFLOW_CACHE",
+                                             help="fill cache folder: start from a cached settled bed of the same "
+                                                  "fill, or cache this run's")) -> None:
     """Render, run LIGGGHTS with a progress bar, check the run, and compute first results."""
-    from .derived import check_run_length, derive
+    from .derived import check_run_length
     from .disk_estimate import check_disk_space
     from .engine import get_engine
     from .engine.base import check_case
@@ -166,7 +177,7 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         engine = get_engine(case.engine.name, executable=liggghts)
         check_case(case, engine)
         engine.command(case.engine.ranks)  # binary and launcher present before anything is written
-        derived = derive(case)             # the run plan: computed once, handed on
+        derived = plan_of(case, case_file)  # the run plan: computed once, handed on
         check_run_length(derived, allow_long)
         sizes = check_disk_space(case, derived, output, allow_large_output)
         folder = engine.prepare(case, output, force=force, keep=[case_file], plan=derived)
@@ -178,7 +189,17 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
               f"{sizes['frames']} dump frames)")
     if dust_note(derived):
         out.print(dust_note(derived))
-    _drive(folder, lambda progress: (engine.execute(folder, progress=progress), engine.collect(folder))[1],
+    if cache is None:
+        _drive(folder, lambda progress: (engine.execute(folder, progress=progress), engine.collect(folder))[1],
+               post_process)
+        return
+    from .fill_cache import FillCache, run_with_cache
+
+    def hit(key: str) -> None:
+        out.print(f"fill from the cache {cache} (key {key[:12]}): the settled bed is reused, the run starts "
+                  "at its static stage")
+
+    _drive(folder, lambda progress: run_with_cache(engine, folder, derived, FillCache(cache), progress, on_hit=hit),
            post_process)
 
 
@@ -232,8 +253,9 @@ def _post(folder: Path, measured: Path | None = None) -> None:
     finally:                # what post wrote is siloflow's: --force may replace it later
         record_products(folder, RunFolder(folder).results, since)
     fb, fr = summary["force_balance"], summary["flow_rate"]
-    out.print(f"force balance of the settled bed: walls+bottom carry {fb['ratio']:.4f} x the weight "
-              f"({fb['wall_friction_share']:.2f} of it by wall friction)")
+    if fb:
+        out.print(f"force balance of the settled bed: walls+bottom carry {fb['ratio']:.4f} x the weight "
+                  f"({fb['wall_friction_share']:.2f} of it by wall friction)")
     out.print(f"steady flow rate: {fr['rate'] * 1000:.2f} +/- {fr['stderr'] * 1000:.2f} g/s; "
               f"discharged {summary['discharged_mass_kg'] * 1000:.1f} g")
     fa = summary.get("frame_analyses", {})
@@ -415,6 +437,37 @@ def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folder
     out.print(f"Beverloo over {fit.n_runs} runs: C = {fit.C:.3f} +/- {fit.C_stderr:.3f}, "
               f"k = {fit.k:.2f} +/- {fit.k_stderr:.2f} (rms residual {fit.rms_relative_residual:.1%})")
     out.print(f"table: {output}; fit: {output.with_suffix('.json')}")
+
+
+cache_app = typer.Typer(help="The fill cache: settled beds reused by runs of the same fill.")
+app.add_typer(cache_app, name="cache")
+CACHE_OPTION = typer.Option(None, "--cache", envvar="SILOFLOW_CACHE", help="cache folder (default ~/.cache/siloflow)")
+
+
+@cache_app.command("list")
+def cache_list(cache: Optional[Path] = CACHE_OPTION) -> None:
+    """List the cached fills: key, age, size, the run that made each."""
+    from .fill_cache import FillCache
+    store = FillCache(cache)
+    entries = store.entries()
+    for e in entries:
+        size = sum(p.stat().st_size for p in e.files.values())
+        age = (time.time() - e.info.get("time", time.time())) / 3600
+        out.print(printable(f"{e.key[:16]}  {size / 1e6:8.2f} MB  {age:7.1f} h old  from {e.info.get('source')}"),
+                  markup=False, highlight=False)
+    out.print(f"{len(entries)} fill(s) in {store.fills}")
+
+
+@cache_app.command("clear")
+def cache_clear(key: Optional[str] = typer.Argument(None, help="a key (or its first characters); default: all"),
+                cache: Optional[Path] = CACHE_OPTION) -> None:
+    """Remove one cached fill, or all of them."""
+    from .fill_cache import FillCache
+    try:
+        n = FillCache(cache).clear(key)
+    except SiloflowError as exc:
+        _fail(exc)
+    out.print(f"removed {n} fill(s)")
 
 
 def main() -> None:

@@ -436,12 +436,15 @@ def derive(case: Case) -> RunPlan:
         d_chunk, d_chunks = _steps(dis.duration, dt), 1
 
     out = case.outputs
+    needs = result_needs(case)
     sample_freq = _steps(out.sample_interval, dt)
     sample_every = max(1, sample_freq // 5)  # 5 samples per average: wall-force sampling is not free
     sample_repeat = sample_freq // sample_every
     sample_freq = sample_every * sample_repeat
     thermo_every = settle_chunk  # settle checks read thermo values, so they must coincide
-    dump_every = _steps(out.dump_interval, dt) if out.dump_interval else None
+    dump_every = None
+    if needs["dumps"]:              # outputs.dump_interval, else as often as the frame analyses need
+        dump_every = _steps(out.dump_interval or auto_dump_interval(case), dt)
 
     static_steps = _steps(s.static_window, dt)
     if static_steps < 2 * sample_freq:      # the time check of the case can miss by a rounded step
@@ -480,14 +483,15 @@ def derive(case: Case) -> RunPlan:
         outlet=Outlet(z=outlet_z, radius=g.outlet_radius + 2 * d),
         sensors=Sensors(bands=0, sectors=2 if planar else case.sensors.sectors),
         outputs=Outputs(thermo_every=thermo_every, sample_steps=sample_freq, samples_per_average=sample_repeat,
-                        dump_every=dump_every, vtk=bool(dump_every and out.vtk),
-                        contacts=bool(dump_every and out.contacts)),
+                        dump_every=dump_every, vtk=bool(dump_every and needs["vtk"]),
+                        contacts=bool(dump_every and needs["contacts"]), results=out.results,
+                        wall_pressure=needs["wall_pressure"], wall_forces=needs["wall_forces"]),
         total_mass=count * final_mass + (dust_count * dust.mass if dust is not None else 0.0),
         particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass,
         analysis=case.analysis, run_length_fields=run_length_fields(case, source),
     )
     from .meshes import silo_meshes
-    meshes = silo_meshes(case, plan.outlet.z, plan.outlet.radius)
+    meshes = silo_meshes(case, plan.outlet.z, plan.outlet.radius, sensors=needs["wall_pressure"])
     walls = [Wall(**m.info()) for m in meshes]
     plan = plan.model_copy(update={
         "walls": walls, "warnings": physics_warnings(case, plan),
@@ -495,6 +499,36 @@ def derive(case: Case) -> RunPlan:
                            sectors=plan.sensors.sectors)})
     plan._meshes = meshes
     return plan
+
+
+#: dump frames the frame analyses need over the discharge, when the case sets no dump interval:
+#: the free surface's fit and the coarse-graining's time average (paper B averages 50 and more)
+FRAMES_FOR = {"free_surface": 20, "porosity": 20, "coordination": 20, "force_chains": 5, "vtk": 20,
+              "coarse_graining": 50}
+
+
+def result_needs(case: Case) -> dict[str, bool]:
+    """What the deck must hold for the results the case asks for (``outputs.results``; unset:
+    everything its other fields ask): sensor meshes, wall-force sampling, dumps, contact dumps, VTK."""
+    out = case.outputs
+    if out.results is None:
+        return {"wall_pressure": True, "wall_forces": True, "dumps": out.dump_interval is not None,
+                "contacts": out.contacts, "vtk": out.vtk}
+    r = set(out.results)
+    frames = r & set(FRAMES_FOR)
+    return {"wall_pressure": "wall_pressure" in r, "wall_forces": bool(r & {"wall_pressure", "force_balance"}),
+            "dumps": bool(frames), "contacts": bool(r & {"coordination", "force_chains", "coarse_graining"}),
+            "vtk": "vtk" in r}
+
+
+def auto_dump_interval(case: Case) -> float:
+    """The dump interval (s) when results need frames and the case sets none: the discharge
+    (its cap, for until_empty) over the frames the most demanding result needs, and no longer
+    than the static window (so a frame shows the settled bed before the orifice opens)."""
+    dis = case.discharge
+    span = dis.duration if dis.duration is not None else dis.max_time
+    frames = max(FRAMES_FOR[k] for k in case.outputs.results if k in FRAMES_FOR)
+    return min(case.fill.settle.static_window, span / frames)
 
 
 def check_opening(gravity: float, speed: float, outlet_z: float, down: float = 1.0) -> None:

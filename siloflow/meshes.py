@@ -512,12 +512,14 @@ def band_boundaries(case: Case) -> list[float]:
     return [h * i / s.bands for i in range(s.bands + 1)]
 
 
-def silo_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallMesh]:
+def silo_meshes(case: Case, outlet_z: float, outlet_radius: float, sensors: bool = True) -> list[WallMesh]:
     """All meshes of a silo (cylinder, hopper or slab) and its inserts, in the order the deck lists them.
 
     ``outlet_z``, ``outlet_radius``: position and size of the counting disc below the orifice.
-    Every generated wall is checked (:func:`check_wall`); one that cannot be triangulated well is
-    refused with a ``CaseError`` naming the geometry fields that shape it.
+    Without ``sensors`` the side walls' pieces (bands and the rest) are one mesh ``wall`` of the
+    same facets: no result reads their pressure. Every generated wall is checked
+    (:func:`check_wall`); one that cannot be triangulated well is refused with a ``CaseError``
+    naming the geometry fields that shape it.
     """
     g = case.geometry
     try:
@@ -527,6 +529,8 @@ def silo_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallM
             meshes = cylinder_meshes(case, outlet_z, outlet_radius)
         else:
             raise NotImplementedError(f"no meshes for geometry kind {g.kind!r}")
+        if not sensors:
+            meshes = merge_side_walls(meshes)
         for w in meshes:
             check_wall(w)
     except MeshQualityError as exc:
@@ -534,6 +538,18 @@ def silo_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallM
         raise CaseError([(fields[0], f"the wall mesh '{exc.wall}' cannot be triangulated for LIGGGHTS: "
                           f"{exc.reason}; change {' or '.join(fields)}")], case.name) from None
     return meshes[:-1] + insert_meshes(case) + meshes[-1:]          # the counting mesh stays last
+
+
+def merge_side_walls(meshes: list[WallMesh]) -> list[WallMesh]:
+    """The meshes with every side-wall piece (roles ``band`` and ``wall``) merged into one plain
+    wall ``wall`` of the same triangles, where the first piece was."""
+    side = [m for m in meshes if m.role in ("band", "wall")]
+    if not side:
+        return meshes
+    merged = WallMesh("wall", "wall", np.concatenate([m.triangles for m in side]))
+    first = meshes.index(side[0])
+    rest = [m for m in meshes if m.role not in ("band", "wall")]
+    return rest[:first] + [merged] + rest[first:]
 
 
 def check_wall(wall: WallMesh) -> None:
@@ -844,7 +860,8 @@ def insert_meshes(case: Case) -> list[WallMesh]:
         except MeshError as exc:
             problems.append((f"inserts[{k}].file", str(exc)))
             continue
-        meshes.append(WallMesh(ins.mesh_name, "insert", tris))
+        # as the run folder's STL copy holds it (float32): a render from the copy is the same
+        meshes.append(WallMesh(ins.mesh_name, "insert", as_written(tris)))
     if problems:
         raise CaseError(problems, case.name)
     return meshes

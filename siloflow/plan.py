@@ -228,8 +228,11 @@ class Sensors(Frozen):
 
 
 class Outputs(Frozen):
-    """Output intervals, in steps. Wall forces are averaged over ``sample_steps`` from
-    ``samples_per_average`` samples ``sample_steps // samples_per_average`` steps apart."""
+    """What the run writes, and how often (steps). Wall forces are averaged over ``sample_steps``
+    from ``samples_per_average`` samples ``sample_steps // samples_per_average`` steps apart.
+    ``results``: what the case asked for (None: everything its fields ask); ``wall_pressure``:
+    the side walls are split into sensor meshes; ``wall_forces``: the walls' forces are sampled
+    (wall pressure, the settled bed's force balance)."""
 
     thermo_every: int
     sample_steps: int
@@ -237,6 +240,9 @@ class Outputs(Frozen):
     dump_every: Optional[int] = None
     vtk: bool = False
     contacts: bool = False          # pair and wall contacts dumped with the particles
+    results: Optional[list[str]] = None
+    wall_pressure: bool = True
+    wall_forces: bool = True
 
 
 class EngineChoice(Frozen):
@@ -329,13 +335,9 @@ class RunPlan(Frozen):
         return sum(self.planned_steps().values())
 
     @property
-    def sensor_walls(self) -> list[Wall]:
-        return [w for w in self.walls if w.role == "band"]
-
-    @property
     def meshes(self) -> list:
-        """The walls' triangles (``siloflow.meshes.WallMesh``), built from the geometry on first use
-        of a plan read back from JSON."""
+        """The walls' triangles (``siloflow.meshes.WallMesh``) of a freshly derived plan; a plan read
+        back from plan.json has none (``ReadError``): its triangles are the run folder's meshes."""
         if self._meshes is None:
             raise ReadError("this plan was read from plan.json: its wall triangles are in the run folder's meshes/")
         return self._meshes

@@ -51,6 +51,11 @@ RESTART_FILE = "output/restart/settled.restart"
 RESULTS = "results"
 SUMMARY_NAME = "summary.json"
 CG_SUMMARY_NAME = "cg_summary.json"
+#: what a run of siloflow's before the run plan holds instead of plan.json (such folders are re-rendered)
+OLD_PLAN_NAME = "derived.json"
+#: what ``siloflow post`` writes under results/ (besides the summary), read back by ``siloflow.runs``
+RESULT_TABLES = {"flow": "discharge.csv", "wall_pressure": "wall_pressure.csv",
+                 "wall_pressure_sectors": "wall_pressure_sectors.csv", "bands": "bands.csv"}
 #: LIGGGHTS' deck, logs and screens, and the resumed run's (siloflow.engine.liggghts)
 LIGGGHTS_FILES = {"deck": "in.liggghts", "resume_deck": "in.resume.liggghts", "log": "log.liggghts",
                   "resume_log": "log.resume.liggghts", "screen": "screen.txt", "resume_screen": "screen.resume.txt"}
@@ -304,8 +309,7 @@ def run_state(folder: Path) -> dict:
     belongs to another process) is reported as ``abandoned``; a deck folder without a status
     (``siloflow render``) as ``rendered``."""
     folder = Path(folder)
-    if not (folder / STATUS_NAME).exists() and is_siloflow_folder(folder) and not (
-            folder / LIGGGHTS_FILES["log"]).exists():
+    if not (folder / STATUS_NAME).exists() and is_siloflow_folder(folder):
         return {"state": "rendered"}
     status = read_status(folder)
     host = status.get("host")
@@ -333,6 +337,7 @@ class RunRecord:
     warnings: list[str] = field(default_factory=list)
     templates_inserted: Optional[int] = None   # grains + dust spheres the insertion placed
     fill_losses: int = 0                       # atoms that left the box during the fill (recorded, < 1 %)
+    fill_cache: Optional[dict] = None          # {"key", "hit"}: the settled bed came from (or went to) the cache
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -403,9 +408,6 @@ class RunFolder:
     def __repr__(self) -> str:
         return f"RunFolder({str(self.path)!r})"
 
-    def __truediv__(self, name: str) -> Path:
-        return self.path / name
-
     # -------------------------------------------------------------- names
     @property
     def case_file(self) -> Path:
@@ -426,10 +428,6 @@ class RunFolder:
     @property
     def dumps(self) -> Path:
         return self.path / DUMPS
-
-    @property
-    def restart_file(self) -> Path:
-        return self.path / RESTART_FILE
 
     def is_run_folder(self) -> bool:
         return self.plan_file.is_file()
@@ -473,9 +471,6 @@ class RunFolder:
         """The run's status (``run_state``): rendered, running, complete, failed, interrupted, abandoned."""
         return run_state(self.path)
 
-    def write_status(self, state: str, **extra) -> None:
-        write_status(self.path, state, **extra)
-
     @cached_property
     def record(self) -> RunRecord:
         """The engine run's record."""
@@ -517,15 +512,12 @@ class RunFolder:
         return check_table(table, schema, str(path))
 
     # -------------------------------------------------------------- dumps and results
-    def dump_files(self, kind: str = "particles") -> Optional[list[str]]:
+    def dump_files(self, kind: str = "particles") -> Optional[list[Path]]:
         """The dump files of ``kind`` (``particles``, ``contacts``, ``wall_contacts``) in step
         order, or None when the run wrote none."""
-        from postprocess.dumps import dump_files
         pattern = {"particles": PARTICLE_DUMPS, "contacts": CONTACT_DUMPS, "wall_contacts": WALL_CONTACT_DUMPS}[kind]
-        try:
-            return dump_files(str(self.dumps / pattern))
-        except ReadError:
-            return None
+        files = [p for p in self.dumps.glob(pattern) if p.is_file()] if self.dumps.is_dir() else []
+        return sorted(files, key=lambda p: int(re.findall(r"\d+", p.name)[-1])) or None
 
     def read_summary(self, name: str = SUMMARY_NAME, folder: Optional[Path] = None) -> dict:
         """A summary JSON of the results (``results/summary.json`` by default)."""

@@ -22,10 +22,7 @@ from typing import Iterator, Optional
 import pandas as pd
 
 from .errors import ReadError
-from .run_folder import RunFolder
-
-#: what ``siloflow post`` writes under results/ and a ``Run`` reads back
-TABLES = {"flow": "discharge.csv", "wall_pressure": "wall_pressure.csv", "bands": "bands.csv"}
+from .run_folder import PLAN_NAME, RESULT_TABLES, RunFolder
 
 
 class Run:
@@ -35,7 +32,7 @@ class Run:
         self.folder = Path(folder)
         self.run_folder = RunFolder(self.folder)
         if not self.run_folder.is_run_folder():
-            raise ReadError(f"{self.folder} is not a siloflow run folder (no plan.json)")
+            raise ReadError(f"{self.folder} is not a siloflow run folder (no {PLAN_NAME})")
 
     def __repr__(self) -> str:
         return f"Run({str(self.folder)!r}, state={self.state!r})"
@@ -68,7 +65,7 @@ class Run:
         return self.run_folder.read_summary()
 
     def _table(self, name: str) -> pd.DataFrame:
-        path = self._results() / TABLES[name]
+        path = self._results() / RESULT_TABLES[name]
         try:
             return pd.read_csv(path)
         except (OSError, ValueError) as exc:

@@ -12,7 +12,7 @@ from ..errors import SetupError
 from .base import Engine, LaunchProfile, RunRecord
 
 #: engine name -> "module:class", imported on first use
-ENGINES = {"liggghts": "siloflow.engine.liggghts:LiggghtsEngine"}
+ENGINES = {"liggghts": "siloflow.engine.liggghts.engine:LiggghtsEngine"}
 
 
 def engine_class(name: str) -> type[Engine]:

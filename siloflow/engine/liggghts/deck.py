@@ -163,8 +163,9 @@ def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, r
         "contact_model": "hertz" if plan.contact_model == "hertz" else "hooke/stiffness",   # hooke: kn, kt here
         "rolling": uses_rolling_friction(plan),
         "timestep": plan.dt, "gravity": plan.gravity,
-        "walls": [{"name": w.name, "type": enc.face_type if w.role == "face" else enc.wall_type}
-                  for w in plan.walls if w.is_wall],
+        "walls": [{"name": w.name, "type": enc.face_type if w.role == "face" else enc.wall_type,
+                   "stress": plan.outputs.wall_forces} for w in plan.walls if w.is_wall],
+        "sensed_walls": [{"name": w.name} for w in plan.walls if w.is_wall and plan.outputs.wall_forces],
         "planar": plan.planar,
         "seeds": enc.seeds, "density": plan.grains[0].density, "radius": plan.particle_radius,
         "friction_restore": friction_restore(plan, enc),

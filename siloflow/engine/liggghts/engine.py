@@ -217,6 +217,38 @@ class LiggghtsEngine(Engine):
                 splice_table(folder / (name + ".before_resume"), folder / name, step)
         return self.collect(folder)
 
+    # ------------------------------------------------------------------ fill cache
+    def fill_key_parts(self, plan: RunPlan) -> dict:
+        """What of this engine defines a fill (siloflow.fill_cache): its version, and the box and
+        skin of the plan's encoding (the restart file carries the box)."""
+        enc = encode(plan)
+        return {"name": self.name, "version": self.version(), "ranks": plan.engine.ranks,
+                "box": enc.box, "skin": enc.skin}
+
+    def fill_files(self, folder: Path) -> dict[str, bytes]:
+        """The settled bed of a finished run, as the files a later run starts from: the restart
+        file, the log and the flow table up to it (``SetupError`` if the run wrote none)."""
+        folder = Path(folder)
+        lines = decode((folder / LOG_NAME).read_bytes()).splitlines() if (folder / LOG_NAME).is_file() else []
+        mark = restart_mark(lines)
+        restart = folder / RESTART_FILE
+        if mark is None or not restart.is_file():
+            raise SetupError(f"{folder} holds no settled bed to cache (no {RESTART_FILE})")
+        flow = (folder / LIGGGHTS_TABLES[0]).read_text(errors="replace").splitlines(keepends=True)
+        kept = [ln for ln in flow if ln.startswith("#") or (ln.endswith("\n") and ln.split()
+                                                              and ln.split()[0].isdigit() and int(ln.split()[0]) <= mark[1])]
+        return {"settled.restart": restart.read_bytes(), "log.liggghts": ("\n".join(lines[:mark[0] + 1]) + "\n").encode(),
+                "flow.txt": "".join(kept).encode()}
+
+    def start_from_fill(self, folder: Path, files: dict, progress: Optional[ProgressCallback] = None) -> RunRecord:
+        """Run a rendered folder from a cached settled bed (``files``: :meth:`fill_files`'
+        names -> paths) through the resume path: static, opening and discharge stages."""
+        folder = Path(folder)
+        for name, target in (("settled.restart", RESTART_FILE), ("log.liggghts", LOG_NAME),
+                             ("flow.txt", LIGGGHTS_TABLES[0])):
+            shutil.copyfile(files[name], folder / target)
+        return self.resume(folder, progress)
+
     def collect(self, folder: Path) -> RunRecord:
         """Check the run: every stage reached, insertion complete, no particle lost through a wall.
         Any failure to read or write the folder is recorded as ``failed`` with its reason."""

@@ -38,8 +38,11 @@ def wall_force_columns(walls) -> list[str]:
 
 def neutral_wall_forces(path, plan) -> pd.DataFrame:
     """The engine-neutral ``wall_forces`` table (long: one row per sample and wall, in the plan's
-    wall order) of LIGGGHTS' wall_forces.txt."""
-    walls = [w for w in plan.walls if w.is_wall]
+    wall order) of LIGGGHTS' wall_forces.txt; empty when the plan samples no wall forces."""
+    walls = [w for w in plan.walls if w.is_wall] if plan.outputs.wall_forces else []
+    if not walls:
+        return pd.DataFrame({"step": np.zeros(0, np.int64), "time": np.zeros(0), "wall": np.zeros(0, object),
+                             "fx": np.zeros(0), "fy": np.zeros(0), "fz": np.zeros(0)})
     wide = read_ave_time(path, wall_force_columns(plan.walls))
     step = wide.step.to_numpy()
     n = len(step)
