@@ -144,6 +144,8 @@ def analyse(folder, measured_pressure=None) -> dict:
         "mass_in_silo_end_kg": float(dis.mass_in_silo.iloc[-1]),
         "bands": table.to_dict(orient="records"),
         "engine_wall_time_s": run.record.wall_time,
+        **({"discharge_stop": run.record.discharge_stop} if run.record.discharge_stop else {}),
+        **({"fill_cache": run.record.fill_cache} if run.record.fill_cache else {}),
         "engine_warnings": run.record.warnings,
     }
     summary["frame_analyses"] = analyse_dumps(run, out, table, dis, rate)

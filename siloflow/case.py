@@ -471,19 +471,33 @@ class Opening(Strict):
 
 
 class Discharge(Strict):
-    """After settling the orifice opens; the run lasts ``duration`` or until the silo is empty."""
+    """After settling the orifice opens; the run lasts ``duration``, or until the silo is empty
+    (``until_empty``), or until the steady flow rate is known to ``precision`` (``until_steady``:
+    the relative standard error of the mean of the rates of ``batch_time`` chunks, batch means,
+    from ``min_batches`` chunks after the first ``startup_time``); both end at ``max_time``."""
 
     duration: Optional[Positive] = Field(None, description="discharge time after opening, s", le=1e5)
     until_empty: bool = False
+    until_steady: bool = False
     empty_fraction: Real = Field(0.01, gt=0, lt=1, allow_inf_nan=False,
                                   description="'empty' when less than this fraction of the mass remains")
-    max_time: Positive = Field(60.0, description="cap on an until_empty discharge, s", le=1e5)
+    max_time: Positive = Field(60.0, description="cap on an until_empty or until_steady discharge, s", le=1e5)
+    precision: Real = Field(0.02, gt=1e-4, lt=1, allow_inf_nan=False,
+                            description="until_steady: relative standard error of the steady flow rate")
+    batch_time: Positive = Field(0.05, le=100, description="until_steady: length of the chunks whose rates are "
+                                 "averaged (longer than the flow's correlation time), s")
+    min_batches: Int = Field(5, ge=3, le=100_000, description="until_steady: fewest chunks before it may stop")
+    startup_time: Real = Field(0.2, ge=0, le=1e4, allow_inf_nan=False,
+                               description="until_steady: start-up after opening left out of the rate, s")
     opening: Opening = Opening()
 
     @model_validator(mode="after")
     def _one_of(self):
-        if (self.duration is None) == (not self.until_empty):
-            raise ValueError("give either 'duration' or 'until_empty: true'")
+        if (self.duration is not None) + self.until_empty + self.until_steady != 1:
+            raise ValueError("give one of 'duration', 'until_empty: true' or 'until_steady: true'")
+        if self.until_steady and self.startup_time + self.min_batches * self.batch_time > self.max_time:
+            raise ValueError(f"until_steady needs max_time ({self.max_time} s) of at least startup_time + "
+                             "min_batches x batch_time")
         return self
 
 

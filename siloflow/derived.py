@@ -12,7 +12,7 @@ from . import contact_physics as cp
 from .case import Case, HopperGeometry, PlanarGeometry
 from .errors import CaseError, SetupError
 from .plan import (FACES, WALL, Discharge, EngineChoice, Fill, InsertionRegion, Material, Opening, Outlet,
-                   Outputs, PairParameters, RunPlan, Sensors, Settle, Silo, Species, TimeStep, Wall)
+                   Outputs, PairParameters, RunPlan, Sensors, Settle, Silo, Species, SteadyStop, TimeStep, Wall)
 
 #: speed at which grains are inserted downwards, m/s (keeps batches clear of the region)
 INSERTION_SPEED = 1.5
@@ -429,9 +429,16 @@ def derive(case: Case) -> RunPlan:
     open_steps = _steps(plate_travel / v_open, dt)
 
     dis = case.discharge
+    steady = None
     if dis.until_empty:
         chunk_time = min(0.1, dis.max_time)
         d_chunk, d_chunks = _steps(chunk_time, dt), max(1, math.ceil(dis.max_time / chunk_time))
+    elif dis.until_steady:
+        d_chunk = _steps(dis.batch_time, dt)
+        d_chunks = max(1, math.ceil(dis.max_time / dis.batch_time))
+        steady = SteadyStop(precision=dis.precision, chunk_time=d_chunk * dt,
+                            skip_chunks=math.ceil(dis.startup_time / (d_chunk * dt) - 1e-9),
+                            min_batches=dis.min_batches)
     else:
         d_chunk, d_chunks = _steps(dis.duration, dt), 1
 
@@ -477,7 +484,7 @@ def derive(case: Case) -> RunPlan:
         settle=Settle(ke_pe_ratio=s.ke_pe_ratio, chunk_steps=settle_chunk, max_chunks=settle_chunks),
         static_steps=static_steps,
         opening=Opening(speed=v_open, travel=plate_travel, steps=open_steps),
-        discharge=Discharge(chunk_steps=d_chunk, max_chunks=d_chunks, until_empty=dis.until_empty,
+        discharge=Discharge(chunk_steps=d_chunk, max_chunks=d_chunks, until_empty=dis.until_empty, steady=steady,
                             empty_mass=dis.empty_fraction * (count * final_mass + (dust_count * dust.mass if dust
                                                                                    is not None else 0.0))),
         outlet=Outlet(z=outlet_z, radius=g.outlet_radius + 2 * d),

@@ -148,14 +148,25 @@ class Opening(Frozen):
     steps: int
 
 
+class SteadyStop(Frozen):
+    """Stop the discharge once the relative standard error of the mean chunk rate (batch means)
+    is below ``precision``: chunks after the first ``skip_chunks`` count, at least ``min_batches``."""
+
+    precision: float
+    chunk_time: float               # s, one chunk (= Discharge.chunk_steps x dt)
+    skip_chunks: int
+    min_batches: int
+
+
 class Discharge(Frozen):
     """Discharge: ``max_chunks`` chunks of ``chunk_steps``, stopping early (``until_empty``) once
-    less than ``empty_mass`` (kg) is left in the silo."""
+    less than ``empty_mass`` (kg) is left in the silo, or (``steady``) once the flow rate is known."""
 
     chunk_steps: int
     max_chunks: int
     until_empty: bool
     empty_mass: float
+    steady: Optional[SteadyStop] = None
 
 
 class Outlet(Frozen):

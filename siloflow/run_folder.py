@@ -338,6 +338,7 @@ class RunRecord:
     templates_inserted: Optional[int] = None   # grains + dust spheres the insertion placed
     fill_losses: int = 0                       # atoms that left the box during the fill (recorded, < 1 %)
     fill_cache: Optional[dict] = None          # {"key", "hit"}: the settled bed came from (or went to) the cache
+    discharge_stop: Optional[dict] = None      # until_steady: why it stopped (steady, empty, max_time), rate error
 
     def to_json(self) -> dict:
         return asdict(self)

@@ -3,6 +3,7 @@ it hits; entries are published whole, checked, listed and cleared; two runs of o
 from __future__ import annotations
 
 import copy
+import shutil
 import threading
 import time
 
@@ -129,3 +130,54 @@ def test_cache_commands_list_and_clear(tmp_path, quick_dict):
     assert listed.exit_code == 0 and "abababab" in listed.output and "/runs/x" in listed.output
     cleared = runner.invoke(app, ["cache", "clear", "--cache", str(tmp_path)])
     assert cleared.exit_code == 0 and "removed 1" in cleared.output and cache.entries() == []
+
+
+@pytest.mark.engine
+@pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS is not installed")
+def test_a_cached_fill_gives_the_same_bed_and_a_lean_early_stopped_discharge(small_run, tmp_path):
+    """The small run's settled bed, cached, starts a run with another orifice (a flat bottom:
+    same fill), a lean deck (flow rate and force balance only) and an until_steady discharge:
+    the cache is hit, the bed is the same (particles and mass exactly, force balance within 1 %),
+    and the discharge stops when its rate is known, saying why."""
+    import yaml
+
+    from siloflow.case_file import case_from_dict as from_dict
+    from siloflow.engine import get_engine
+    from siloflow.fill_cache import run_with_cache
+    from postprocess.first_results import analyse
+    from conftest import SMALL
+
+    case, folder, record, summary = small_run
+    engine = get_engine("liggghts")
+    cache = FillCache(tmp_path / "cache")
+    small = derive(case)
+    cache.put(fill_key(small, engine), engine.fill_files(folder), fill_key_inputs(small, engine), source=str(folder))
+
+    data = yaml.safe_load(SMALL.read_text())
+    data["geometry"]["orifice_radius"] = 0.0050
+    data["outputs"] = {"sample_interval": 0.005, "results": ["flow_rate", "force_balance"]}
+    data["discharge"] = {"until_steady": True, "precision": 0.04, "batch_time": 0.05, "max_time": 1.2}
+    variant = from_dict(data)
+    plan = derive(variant)
+    assert fill_key(plan, engine) == fill_key(small, engine)
+    hits = []
+    run_folder = engine.prepare(variant, tmp_path / "variant", plan=plan)
+    lean = run_with_cache(engine, run_folder, plan, cache, on_hit=hits.append)
+    assert hits == [fill_key(plan, engine)] and lean.fill_cache["hit"] is True
+    result = analyse(run_folder)
+    # the same bed: the restart carries it, so particles and mass are exact
+    assert result["particles_inserted"] == summary["particles_inserted"]
+    assert result["initial_mass_kg"] == pytest.approx(summary["initial_mass_kg"], rel=1e-12)
+    assert result["force_balance"]["ratio"] == pytest.approx(summary["force_balance"]["ratio"], abs=0.01)
+    # the lean deck: one side wall, no sensors, no dumps
+    assert not any(w.role == "band" for w in plan.walls) and result["bands"] == []
+    assert "dump" not in (run_folder / "in.liggghts").read_text().split("# ---------------------------------------------------------------- stage 1")[0].replace("dump_", "")
+    # the early stop: said why, and it stopped before the cap when the rate was known
+    stop = result["discharge_stop"]
+    assert stop["reason"] in ("steady", "max_time", "empty")
+    if stop["reason"] == "steady":
+        assert stop["relative_error"] < 0.04
+        assert result["flow_rate"]["t_end"] - result["time_open_s"] < 1.2 - 0.05
+    # the smaller orifice flows slower: Beverloo's (D0 - 1.5 d)^2.5 gives 0.69 of the 11 mm orifice's
+    ratio = result["flow_rate"]["rate"] / summary["flow_rate"]["rate"]
+    assert 0.55 < ratio < 0.83, ratio

@@ -273,7 +273,7 @@ class LiggghtsEngine(Engine):
             raise ReadError(f"{folder} holds no finished LIGGGHTS run ({exc})") from None   # recorded by collect
         state = parse_log_text(text)
         record.stage_steps, record.inserted, record.completed = state.stage_steps, state.inserted, state.done
-        record.settled_ke_pe = state.settled_ke_pe
+        record.settled_ke_pe, record.discharge_stop = state.settled_ke_pe, state.discharge_stop
         tail = "\n".join(text.splitlines()[-15:])
 
         def fail(message, cause="", fix=""):

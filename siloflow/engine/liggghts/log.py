@@ -13,6 +13,8 @@ from ...errors import ANSI_ESCAPES
 
 _STAGE = re.compile(r"^SILOFLOW_STAGE (\w+) (\d+)\s*$")
 _MARK = re.compile(r"^SILOFLOW_(INSERTED|SETTLED|NOT_SETTLED|DONE)\s*(\S*)\s*$")
+#: why an until_steady discharge stopped (steady, empty, max_time) and the rate's relative error then
+_STOP = re.compile(r"^SILOFLOW_STOP (steady|empty|max_time) (\S+)\s*$")
 _THERMO = re.compile(r"^\s*(\d+)\s+([-+0-9.eE]+)\s+(\d+)(\s+[-+0-9.eEnaif]+)*\s*$")
 #: an insertion fix's report of one batch (fix id, templates: a clump or a sphere each)
 _INSERT_BATCH = re.compile(r"^INFO: Particle insertion (\S+): inserted (\d+) particle templates")
@@ -42,6 +44,7 @@ class LogState:
     settled_ke_pe: Optional[float] = None
     not_settled_ke_pe: Optional[float] = None
     done: bool = False
+    discharge_stop: Optional[dict] = None       # until_steady: {"reason", "relative_error"}
     errors: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     fatal: bool = False             # the run must be stopped (an error the engine itself does not end on)
@@ -71,6 +74,14 @@ class LogState:
                 self.not_settled_ke_pe = float(value)
             elif kind == "DONE":
                 self.done = True
+            return False
+        m = _STOP.match(line)
+        if m:
+            try:
+                error = float(m.group(2))
+            except ValueError:
+                error = None
+            self.discharge_stop = {"reason": m.group(1), "relative_error": error}
             return False
         m = _INSERT_BATCH.match(line)
         if m:

@@ -1,0 +1,182 @@
+"""What skipping saves (issue 15), on the quick case: the speed-up of each saving against the same
+run with everything on and no cache, and whether the answers stay the same.
+
+    python benchmarks/skip_savings.py [--case decks/quick.yaml] [--out benchmarks/results/skip] [--work DIR]
+    (make bench-skip)
+
+Runs, one engine job at a time (2 ranks each, as the case says):
+
+- ``full``: the case as it is (sensor bands, dumps, contacts, VTK), no cache;
+- ``lean``: ``outputs.results: [flow_rate, force_balance]`` (one plain side wall, no dumps);
+- ``early``: the full outputs with ``discharge.until_steady`` (precision 0.03, capped at the
+  case's duration);
+- ``cached``: the full case started from the full run's settled bed (fill cache hit);
+- ``separate_<r>`` and ``sweep``: three orifice radii run separately without a cache, against
+  ``siloflow sweep`` of the same three (one fill, two cache hits).
+
+Each finished run is kept under ``--work`` (run folders, logs, caches; default
+``$TMPDIR/siloflow-bench-skip``) and its row in ``--out``/``runs.csv``; a second invocation skips
+what is there, so the benchmark resumes where it stopped. The table ``skip_savings.csv`` and the
+figure ``skip_savings.png`` are written from all rows. Wall times are whole ``siloflow run``
+processes (render, engine, checks, first results), measured here, one at a time: the machine is
+noisy, so a ratio is given with the spread of repeated runs where there are any (see the note).
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+ORIFICES = (0.006, 0.007, 0.008)
+
+
+def variants(base: dict) -> dict[str, dict]:
+    """The case of every run, by name."""
+    out = {"full": copy.deepcopy(base)}
+    lean = copy.deepcopy(base)
+    lean["outputs"] = {"sample_interval": base["outputs"].get("sample_interval", 0.005),
+                       "results": ["flow_rate", "force_balance"]}
+    out["lean"] = lean
+    early = copy.deepcopy(base)
+    early["discharge"] = {"until_steady": True, "precision": 0.03, "batch_time": 0.05,
+                          "max_time": base["discharge"]["duration"]}
+    out["early"] = early
+    out["cached"] = copy.deepcopy(base)
+    for r in ORIFICES:
+        sep = copy.deepcopy(base)
+        sep["geometry"]["orifice_radius"] = r
+        out[f"separate_{r:g}"] = sep
+    return out
+
+
+def siloflow(*args: str) -> list[str]:
+    return [sys.executable, "-m", "siloflow.cli", *args]
+
+
+def timed(cmd: list[str], log: Path) -> float:
+    """Run ``cmd`` (output to ``log``); its wall time, s. A failure stops the benchmark."""
+    t0 = time.perf_counter()
+    with open(log, "w") as fh:
+        proc = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT, env={**os.environ, "COLUMNS": "200"})
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode}); see {log}")
+    return wall
+
+
+def result_row(name: str, folder: Path, wall: float) -> dict:
+    from siloflow.run_folder import RunFolder
+    run = RunFolder(folder)
+    s = run.read_summary()
+    fb = s.get("force_balance") or {}
+    return {"run": name, "wall_s": wall, "engine_s": run.record.wall_time,
+            "flow_rate_kg_s": s["flow_rate"]["rate"], "flow_rate_stderr_kg_s": s["flow_rate"]["stderr"],
+            "particles": s["particles_inserted"], "initial_mass_kg": s["initial_mass_kg"],
+            "force_balance": fb.get("ratio"), "cache_hit": (run.record.fill_cache or {}).get("hit"),
+            "stop": (run.record.discharge_stop or {}).get("reason"),
+            "discharge_s": s["flow_rate"]["t_end"] - s["time_open_s"]}
+
+
+def main(case_file: Path, out: Path, work: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    work.mkdir(parents=True, exist_ok=True)
+    table = out / "runs.csv"
+    import pandas as pd
+    done = pd.read_csv(table) if table.is_file() else pd.DataFrame()
+    rows = done.to_dict(orient="records")
+    have = {r["run"] for r in rows}
+    base = yaml.safe_load(case_file.read_text())
+    cases = variants(base)
+    for name, data in cases.items():
+        if name in have:
+            print(f"{name}: kept from an earlier invocation")
+            continue
+        case_path = work / f"{name}.yaml"
+        case_path.write_text(yaml.safe_dump({**data, "name": f"{base['name']}_{name}".replace(".", "p")}))
+        folder = work / "runs" / name
+        cmd = siloflow("run", str(case_path), "-o", str(folder))
+        if name == "cached":            # the full run's settled bed, published, then a hit
+            from siloflow.case_file import load_case
+            from siloflow.derived import derive
+            from siloflow.engine import get_engine
+            from siloflow.fill_cache import FillCache, fill_key, fill_key_inputs
+            engine = get_engine("liggghts")
+            plan = derive(load_case(case_path))
+            cache = FillCache(work / "cache_cached")
+            cache.put(fill_key(plan, engine), engine.fill_files(work / "runs" / "full"),
+                      fill_key_inputs(plan, engine), source="full")
+            cmd += ["--cache", str(cache.root)]
+        wall = timed(cmd, work / f"{name}.log")
+        rows.append(result_row(name, folder, wall))
+        pd.DataFrame(rows).to_csv(table, index=False)
+        print(f"{name}: {wall:.1f} s")
+    if "sweep" not in have:
+        sweep_dir = work / "sweep"
+        case_path = work / "sweep.yaml"
+        case_path.write_text(yaml.safe_dump({**base, "name": f"{base['name']}_sweep"}))
+        values = ",".join(f"{r:g}" for r in ORIFICES)
+        wall = timed(siloflow("sweep", str(case_path), "--set", f"geometry.orifice_radius={values}",
+                              "--cores", "2", "-o", str(sweep_dir)), work / "sweep.log")
+        sweep = pd.read_csv(sweep_dir / "sweep.csv")
+        rows.append({"run": "sweep", "wall_s": wall, "engine_s": float(sweep.wall_s.sum()),
+                     "flow_rate_kg_s": float("nan"), "cache_hit": int(sweep.fill_from_cache.sum())})
+        pd.DataFrame(rows).to_csv(table, index=False)
+        print(f"sweep: {wall:.1f} s")
+    report(pd.DataFrame(rows), out)
+
+
+def report(runs, out: Path) -> None:
+    """The savings table and figure from the runs."""
+    import numpy as np
+    import pandas as pd
+    r = runs.set_index("run")
+    full = r.loc["full"]
+    lines = []
+    for name in ("lean", "early", "cached"):
+        row = r.loc[name]
+        diff = row.flow_rate_kg_s - full.flow_rate_kg_s
+        err = float(np.hypot(row.flow_rate_stderr_kg_s, full.flow_rate_stderr_kg_s))
+        lines.append({"saving": name, "speedup_total": full.wall_s / row.wall_s,
+                      "speedup_engine": full.engine_s / row.engine_s,
+                      "flow_rate_change": diff / full.flow_rate_kg_s, "change_in_stderr": diff / err if err else np.nan,
+                      "particles_same": int(row.particles) == int(full.particles),
+                      "mass_change": row.initial_mass_kg / full.initial_mass_kg - 1,
+                      "force_balance_change": row.force_balance - full.force_balance
+                      if pd.notna(row.force_balance) else np.nan})
+    separate = sum(r.loc[f"separate_{x:g}"].wall_s for x in ORIFICES)
+    if "sweep" in r.index:
+        lines.append({"saving": "sweep_vs_separate", "speedup_total": separate / r.loc["sweep"].wall_s,
+                      "cost_ratio": r.loc["sweep"].wall_s / separate})
+    table = pd.DataFrame(lines)
+    table.to_csv(out / "skip_savings.csv", index=False)
+    print(table.to_string(index=False))
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    ax.bar(table.saving, table.speedup_total, color="tab:blue", label="whole run")
+    if "speedup_engine" in table:
+        ax.plot(table.saving, table.speedup_engine, "ko", label="engine only")
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.set(ylabel="speed-up against the full run", title=f"skip what a scene does not need ({out.name})")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "skip_savings.png", dpi=120)
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--case", type=Path, default=ROOT / "decks" / "quick.yaml")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "skip")
+    parser.add_argument("--work", type=Path, default=Path(os.environ.get("TMPDIR", "/tmp")) / "siloflow-bench-skip")
+    args = parser.parse_args()
+    main(args.case, args.out, args.work)

@@ -1,0 +1,96 @@
+"""Outputs decide the deck (issue 15): each result asked for adds exactly the deck lines it needs;
+asking for the flow rate alone gives the leanest deck."""
+from __future__ import annotations
+
+import copy
+
+import pytest
+
+from siloflow.case_file import case_from_dict
+from siloflow.derived import derive
+from siloflow.engine.liggghts.deck import render_deck_text
+
+
+def deck(quick_dict, results, **outputs):
+    data = copy.deepcopy(quick_dict)
+    data["outputs"] = {**{k: v for k, v in data["outputs"].items() if k not in ("dump_interval", "vtk")},
+                       "results": results, **outputs}
+    case = case_from_dict(data)
+    plan = derive(case)
+    return plan, render_deck_text(plan, case)
+
+
+def commands(text: str) -> set[str]:
+    """Each deck line reduced to its command and the style or kind it sets up (names stripped)."""
+    out = set()
+    for line in text.splitlines():
+        words = line.split()
+        if not words or words[0].startswith("#"):
+            continue
+        if words[0] == "fix" and len(words) > 3 and words[3] == "ave/time":       # flow and wall forces
+            out.add(f"fix ave/time {words[1]}")
+        elif words[0] in ("fix", "compute", "dump") and len(words) > 3:
+            out.add(f"{words[0]} {words[3]}")
+        elif words[0] in ("fix", "compute", "dump"):
+            out.add(words[0])
+    return out
+
+
+#: what each result adds to the flow-rate deck, as (command, style) pairs
+ADDS = {
+    "force_balance": {"fix mesh/surface/stress", "fix ave/time wall_forces"},
+    "wall_pressure": {"fix mesh/surface/stress", "fix ave/time wall_forces"},
+    "porosity": {"dump custom"},
+    "free_surface": {"dump custom"},
+    "coordination": {"dump custom", "compute pair/gran/local", "dump local", "compute wall/gran/local"},
+    "force_chains": {"dump custom", "compute pair/gran/local", "dump local", "compute wall/gran/local"},
+    "coarse_graining": {"dump custom", "compute pair/gran/local", "dump local", "compute wall/gran/local"},
+    "vtk": {"dump custom", "dump custom/vtk"},
+}
+
+
+def test_flow_rate_alone_is_the_leanest_deck(quick_dict):
+    plan, text = deck(quick_dict, ["flow_rate"])
+    assert [w.name for w in plan.walls] == ["wall", "bottom", "plate", "outlet"]      # one plain side wall
+    assert "mesh/surface/stress" not in text and "ave/time 1" not in text.replace("flow all ave/time", "")
+    assert "wall_forces" not in text and "dump " not in text and "pair/gran/local" not in text
+    assert "fix             flow all ave/time" in text and "massflow/mesh" in text      # the flow rate itself
+    full_plan, full = deck(quick_dict, None, dump_interval=0.1, vtk=True)
+    assert len(text.splitlines()) < len(full.splitlines())
+    lean_meshes = sum(1 for w in plan.walls if w.is_wall)
+    assert lean_meshes < sum(1 for w in full_plan.walls if w.is_wall) / 5
+
+
+@pytest.mark.parametrize("result", sorted(ADDS))
+def test_each_result_adds_the_lines_it_needs(quick_dict, result):
+    _, lean = deck(quick_dict, ["flow_rate"])
+    plan, text = deck(quick_dict, ["flow_rate", result])
+    added = commands(text) - commands(lean)
+    assert added == ADDS[result], f"{result} adds {sorted(added)}"
+    if result == "wall_pressure":
+        assert sum(1 for w in plan.walls if w.role == "band") == 6 * 4           # bands x sectors
+    else:
+        assert not any(w.role == "band" for w in plan.walls)
+
+
+def test_dump_interval_follows_the_analyses(quick_dict):
+    """Without outputs.dump_interval: as often as the most demanding analysis needs over the
+    discharge (coarse-graining's time average 50 frames, the free surface 20), at most the static
+    window; with it, the case's."""
+    plan, _ = deck(quick_dict, ["flow_rate", "free_surface"])
+    dis = quick_dict["discharge"]["duration"]
+    static = quick_dict["fill"]["settle"]["static_window"]
+    assert plan.outputs.dump_every * plan.dt == pytest.approx(min(static, dis / 20), rel=1e-3)
+    plan, _ = deck(quick_dict, ["flow_rate", "coarse_graining"])
+    assert plan.outputs.dump_every * plan.dt == pytest.approx(min(static, dis / 50), rel=1e-3)
+    plan, _ = deck(quick_dict, ["flow_rate", "porosity"], dump_interval=0.05)
+    assert plan.outputs.dump_every * plan.dt == pytest.approx(0.05, rel=1e-3)
+
+
+def test_a_result_listed_twice_or_unknown_is_refused(quick_dict):
+    from siloflow.errors import CaseError
+    for bad in (["flow_rate", "flow_rate"], ["flow_rates"]):
+        data = copy.deepcopy(quick_dict)
+        data["outputs"]["results"] = bad
+        with pytest.raises(CaseError, match="outputs.results"):
+            case_from_dict(data)
