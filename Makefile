@@ -64,6 +64,11 @@ bench: install
 bench-dust: install
 	$(PY) benchmarks/dust_density_scaling.py
 
+# what skipping saves on the quick case (lean deck, early stop, cached fill, a 3-orifice sweep):
+# about ten engine runs, resumable (benchmarks/results/skip/: runs.csv, skip_savings.csv/.png)
+bench-skip: install
+	$(PY) benchmarks/skip_savings.py
+
 # rewrite tests/golden/ (the decks every shipped case renders) after a change that alters decks on
 # purpose; commit them with the change (tests/test_golden_decks.py compares)
 golden: $(VENV)/.installed

@@ -416,12 +416,83 @@ def cg_scaling(folders: List[Path] = typer.Argument(..., help="cg result folders
 
 
 @app.command()
-def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folders (different orifices or grains)"),
+def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
+          set_specs: List[str] = typer.Option([], "--set", help="PATH=V1,V2,...: a case field and its values "
+                                              "(repeatable; every combination is run)"),
+          seeds: int = typer.Option(1, "--seeds", min=1, help="seeds per combination: the case's seed, +1, +2, ..."),
+          cores: Optional[int] = typer.Option(None, "--cores", min=1, help="the engine ranks of the runs at once add "
+                                              "up to at most this (default: this machine's cores)"),
+          output: Path = typer.Option(..., "-o", "--output", help="sweep folder: cases/, runs/, logs/, sweep.csv"),
+          cache: Optional[Path] = typer.Option(None, "--cache", help="fill cache (default OUT/cache)"),
+          slurm: bool = typer.Option(False, "--slurm", help="write Slurm job arrays and submit.sh instead of running"),
+          force: bool = typer.Option(False, "--force", help="reuse an existing sweep folder (nothing in it is "
+                                     "deleted; a run folder already there is refused)")) -> None:
+    """Run a case over every combination of --set values and seeds: one fill per distinct settled bed, then
+    the other runs from it, in parallel within --cores; the table of results is OUT/sweep.csv."""
+    import os
+    from .sweep import prepare_sweep, run_sweep, table_summary, write_slurm
+    cache = cache or output / "cache"
+    try:
+        variants, groups = prepare_sweep(case_file, set_specs, seeds, output, force, need_binary=not slurm)
+        if slurm:
+            script = write_slurm(variants, groups, output, cache)
+            out.print(f"{len(variants)} runs, {len(groups)} fill(s): submit with {script} (fills.sbatch, then "
+                      "runs.sbatch after them)")
+            return
+        signal.signal(signal.SIGTERM, _interrupt)
+        out.print(f"{len(variants)} runs, {len(groups)} distinct fill(s); logs in {output / 'logs'}")
+        with Progress(TextColumn("[bold]sweep"), BarColumn(), TextColumn("{task.completed}/{task.total} done"),
+                      TimeElapsedColumn(), TextColumn("{task.fields[running]}"), console=err) as bar:
+            task = bar.add_task("sweep", total=len(variants), running="")
+
+            def progress(done: int, total: int, running: list) -> None:
+                names = ", ".join(running)
+                bar.update(task, completed=done, running=f"running {names[:60]}" if names else "")
+
+            table = run_sweep(variants, output, cores or os.cpu_count() or 1, cache, progress=progress, groups=groups)
+    except KeyboardInterrupt:
+        err.print(f"[yellow]interrupted: the running runs were stopped; their folders under {output / 'runs'} "
+                  "are kept (siloflow status tells each one's state)[/yellow]")
+        raise typer.Exit(130)
+    except SiloflowError as exc:
+        _fail(exc)
+    n = table_summary(table)
+    out.print(f"{n['complete']} runs complete, {n['failed']} failed; fills: {n['computed']} computed, "
+              f"{n['reused']} reused from the cache")
+    for row in table[table.status != "complete"].head(5).itertuples():
+        out.print(printable(f"failed: {row.name} (exit code {row.returncode}), see {row.log}"), markup=False,
+                  highlight=False)
+    out.print(f"table: {output / 'sweep.csv'} (siloflow beverloo {output / 'sweep.csv'} fits it)")
+
+
+def _sweep_table_runs(table_file: Path) -> list[Path]:
+    """The run folders of a sweep table's complete runs (its ``run`` column; a relative path is
+    taken from the table's folder). Raises ``ReadError``."""
+    import pandas as pd
+    try:
+        rows = pd.read_csv(table_file)
+    except (OSError, ValueError) as exc:
+        raise ReadError(f"cannot read the sweep table {table_file}: {exc}") from None
+    if "run" not in rows.columns:
+        raise ReadError(f"{table_file} has no 'run' column: give run folders, or the sweep.csv of siloflow sweep")
+    if "status" in rows.columns:
+        rows = rows[rows.status == "complete"]
+    runs = [path if path.is_absolute() else table_file.parent / path for path in map(Path, rows.run.astype(str))]
+    if not runs:
+        raise ReadError(f"{table_file} lists no complete run")
+    return runs
+
+
+@app.command()
+def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folders (different orifices or grains), "
+                                                  "or one sweep table (sweep.csv: its complete runs)"),
              output: Path = typer.Option(Path("beverloo.csv"), "-o", "--output", help="table of the runs and the fit")) -> None:
     """Fit Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) across runs: C and k with standard errors."""
     from postprocess.flow_rate import beverloo_table, fit_beverloo
     from .atomic_files import write_json, write_text
     try:
+        if len(folders) == 1 and folders[0].suffix == ".csv" and folders[0].is_file():
+            folders = _sweep_table_runs(folders[0])
         table = beverloo_table(folders)
         if table.g.nunique() > 1:
             raise ReadError("the runs differ in gravity; one Beverloo fit needs one g")
