@@ -590,6 +590,39 @@ class Analysis(Strict):
         "as_printed", description="reading of paper A's Eqs. 36-37 (see postprocess.porosity)")
 
 
+class DesignSettings(Strict):
+    """The bulk solid of the EN 1991-4 design loads (``siloflow design``; never reaches a deck):
+    a row of the Annex E table (``material``, see ``siloflow.design_loads.MATERIALS``) or explicit
+    values, which replace the table's and are used for every load case. Without ``material``,
+    ``unit_weight``, ``K`` and ``mu`` are required."""
+
+    material: Optional[str] = Field(None, max_length=64, description="EN 1991-4 Annex E solid (e.g. wheat, "
+                                    "maize, sand, cement); none: the explicit values")
+    unit_weight: Optional[Positive] = Field(None, ge=100, le=1e5, description="bulk unit weight gamma, N/m3")
+    K: Optional[Positive] = Field(None, le=1, description="lateral pressure ratio")
+    mu: Optional[Positive] = Field(None, le=2, description="wall friction coefficient")
+    phi_r_deg: Optional[Positive] = Field(None, lt=90, description="angle of repose, degrees")
+    C_op: Optional[NonNegative] = Field(None, le=10, description="patch load solid reference factor")
+    wall_type: Literal["D1", "D2", "D3"] = Field("D2", description="wall friction category: D1 low, "
+                                                   "D2 moderate (smooth steel), D3 high (concrete, rough)")
+    action_assessment_class: Int = Field(2, ge=1, le=3, description="EN 1991-4 action assessment class")
+    eccentricity: NonNegative = Field(0.0, le=100, description="filling / outlet eccentricity e, m")
+
+    @model_validator(mode="after")
+    def _solid(self):
+        if self.material is not None:
+            from .design_loads import MATERIAL_NAMES      # lazily: design_loads stays free of the schema
+            if self.material not in MATERIAL_NAMES:
+                raise ValueError(f"design.material {self.material!r} is not in the EN 1991-4 Annex E table; "
+                                 "one of: " + ", ".join(MATERIAL_NAMES))
+        else:
+            missing = [k for k in ("unit_weight", "K", "mu") if getattr(self, k) is None]
+            if missing:
+                raise ValueError("design: give a material or the explicit values; missing "
+                                 + ", ".join(f"design.{k}" for k in missing))
+        return self
+
+
 class Case(Strict):
     """A complete, validated silo case (``Case.from_yaml(path)``, ``Case.model_validate(dict)``)."""
 
@@ -615,6 +648,8 @@ class Case(Strict):
     inserts: list[WallInsert] = Field(default_factory=list, max_length=20,
                                       description="extra walls from STL files (inserts, baffles)")
     seed: Int = Field(12345, ge=0, le=2**31 - 1)
+    design: Optional[DesignSettings] = Field(None, description="EN 1991-4 design loads' bulk solid "
+                                             "(siloflow design); post-processing only")
 
     @model_validator(mode="after")
     def _consistent(self):

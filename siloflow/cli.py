@@ -510,6 +510,58 @@ def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folder
     out.print(f"table: {output}; fit: {output.with_suffix('.json')}")
 
 
+@app.command()
+def design(case_file: Path = typer.Argument(..., help="YAML case file (its design section: the bulk solid)"),
+           output: Path = typer.Option(Path("design"), "-o", "--output", help="folder for design_loads.csv and .png"),
+           run_folder: Optional[Path] = typer.Option(None, "--run", help="a finished run of the case: its band "
+                                                     "pressures beside the EN loads (design_vs_dem.csv)"),
+           top: str = typer.Option("flat", help="free surface: flat (h_o = 0) or heap (a cone at the angle of repose)")) -> None:
+    """EN 1991-4 design loads of the case's silo filled to its bed height: filling, discharge, patch, hopper."""
+    import numpy as np
+    import pandas as pd
+    from postprocess.design_figure import compare_with_dem, design_figure
+    from .atomic_files import write_text
+    from .case import DesignSettings
+    from .design_loads import bulk_solid, design_loads
+    from .run_folder import RESULT_TABLES
+    try:
+        case = load_case(case_file)
+        d = plan_of(case, case_file)
+        s = case.design or DesignSettings(material="wheat")
+        solid = bulk_solid(s.material, unit_weight=s.unit_weight, K=s.K, mu=s.mu, phi_r=s.phi_r_deg, C_op=s.C_op)
+        loads = design_loads(d.geometry, solid, d.fill.bed_height_estimate, s.wall_type, s.action_assessment_class,
+                             s.eccentricity, top=top)
+        bands_file = RunFolder(run_folder).results / RESULT_TABLES["bands"] if run_folder else None
+        if bands_file is not None and not bands_file.is_file():
+            raise ReadError(f"{bands_file} not found: post-process the run first (siloflow post {run_folder})")
+        bands = pd.read_csv(bands_file) if bands_file is not None else None
+        output.mkdir(parents=True, exist_ok=True)
+    except SiloflowError as exc:
+        _fail(exc)
+    except ValueError as exc:
+        _fail(SiloflowError(str(exc)))
+    if case.design is None:
+        rho_g = case.materials.particle.density * d.fill.packing_fraction * case.gravity
+        out.print(f"note: the case has no design section: wheat (Annex E), wall D2, AAC 2; the DEM grains' bulk "
+                  f"unit weight is about {rho_g:.4g} N/m3 (design: unit_weight, K, mu to use them)")
+    m, v = loads.material, loads.values["max_horizontal"]
+    out.print(printable(f"{m.name}, {loads.wall_type}, AAC {loads.aac}: {loads.classification} silo ({loads.top} top), h_c/d_c "
+                        f"{loads.aspect_ratio:.3g}; K {v.K:.3g}, mu {v.mu:.3g}, z_o {v.z_o:.3g} m; C_h {loads.C_h:.3g}, "
+                        f"C_w {loads.C_w:.3g}, C_pe {loads.C_pe:.3g}, p_vft {loads.p_vft:.4g} Pa"), markup=False)
+    out.print(f"{'z (m)':>9} {'p_hf':>10} {'p_wf':>10} {'p_vf':>10} {'p_he':>10} {'p_patch':>10}  (Pa)")
+    for z in np.linspace(loads.transition, loads.surface - loads.h_o, 6)[::-1]:
+        out.print(f"{z:9.4g} " + " ".join(f"{float(loads.at(c, z)):10.4g}" for c in ("p_hf", "p_wf", "p_vf", "p_he",
+                                                                                    "p_patch")))
+    for line in loads.notes:
+        out.print(printable(f"note: {line}"), markup=False)
+    write_text(output / "design_loads.csv", loads.table().to_csv(index=False))
+    design_figure(loads, output / "design_loads.png", bands)
+    if bands is not None:
+        write_text(output / "design_vs_dem.csv", compare_with_dem(loads, bands).to_csv(index=False))
+    out.print(f"written: {output / 'design_loads.csv'}, {output / 'design_loads.png'}"
+              + (f", {output / 'design_vs_dem.csv'}" if bands is not None else ""))
+
+
 cache_app = typer.Typer(help="The fill cache: settled beds reused by runs of the same fill.")
 app.add_typer(cache_app, name="cache")
 CACHE_OPTION = typer.Option(None, "--cache", envvar="SILOFLOW_CACHE", help="cache folder (default ~/.cache/siloflow)")

@@ -189,3 +189,15 @@ def test_launch_profile_is_the_machines_not_the_cases(monkeypatch, tmp_path):
     env = engine.profile.environment()
     assert env["OMP_NUM_THREADS"] == "1" and env["SILOFLOW_LIGGGHTS"] == "/opt/x/liggghts"
     assert LaunchProfile().environment() is None          # no extra variables: siloflow's own
+
+
+@pytest.mark.skipif(__import__("shutil").which("liggghts") is None, reason="LIGGGHTS is not installed")
+def test_asking_the_engine_version_writes_nothing_where_it_runs(tmp_path, monkeypatch):
+    """``liggghts -h`` writes log.liggghts in its working directory: siloflow asks it elsewhere,
+    so a user's own log.liggghts in the current directory is never replaced."""
+    from siloflow.engine import get_engine
+    mine = tmp_path / "log.liggghts"
+    mine.write_text("my notes\n")
+    monkeypatch.chdir(tmp_path)
+    assert "LIGGGHTS" in get_engine("liggghts").version()
+    assert mine.read_text() == "my notes\n" and sorted(p.name for p in tmp_path.iterdir()) == ["log.liggghts"]

@@ -62,8 +62,13 @@ class LiggghtsEngine(Engine):
         return os.path.abspath(path)
 
     def version(self) -> str:
+        """The binary's version line. ``liggghts -h`` writes ``log.liggghts`` where it runs, so it
+        runs in a scratch folder: never in the user's current directory, whose log it would replace."""
+        import tempfile
         exe = self._which(self.profile.executable, "LIGGGHTS binary")
-        proc = subprocess.run([exe, "-h"], capture_output=True, timeout=60, stdin=subprocess.DEVNULL)
+        with tempfile.TemporaryDirectory(prefix="siloflow-version-") as scratch:
+            proc = subprocess.run([exe, "-h"], capture_output=True, timeout=60, stdin=subprocess.DEVNULL, cwd=scratch,
+                                  env=self.profile.environment())
         for line in decode(proc.stdout).splitlines():
             if "LIGGGHTS" in line and ("version" in line.lower() or "(" in line):
                 return line.strip()
