@@ -12,6 +12,8 @@ from typing import Annotated, Literal, Optional, Union
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StringConstraints, model_validator
 
+from .engines import ENGINES
+
 
 #: Names that reach decks and file names: letters, digits, ``_ . -``, not starting with ``.`` or ``-``.
 SAFE_NAME_PATTERN = r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$"
@@ -532,7 +534,10 @@ class Outputs(Strict):
 
 
 class EngineSettings(Strict):
-    name: Literal["liggghts"] = "liggghts"
+    """Which engine runs the case (one of ``siloflow.engines.ENGINES``), on how many MPI ranks, at
+    what time step. What an engine cannot do of a case is its own check (``Engine.check``)."""
+
+    name: Literal[tuple(ENGINES)] = "liggghts"
     ranks: Int = Field(1, ge=1, le=1024, description="MPI ranks")
     timestep_fraction: Fraction = Field(0.15, ge=MIN_TIMESTEP_FRACTION, description="time step as a "
                                         "fraction of the critical (contact) time")

@@ -2,17 +2,15 @@
 
 Engines are registered by name and imported only when asked for (:func:`get_engine`); a new
 engine is a subpackage with an ``Engine`` subclass, its deck writer and templates, and a line
-in :data:`ENGINES`.
+in :data:`siloflow.engines.ENGINES`.
 """
 from __future__ import annotations
 
 from importlib import import_module
 
+from ..engines import ENGINES
 from ..errors import SetupError
 from .base import Engine, LaunchProfile, RunRecord
-
-#: engine name -> "module:class", imported on first use
-ENGINES = {"liggghts": "siloflow.engine.liggghts.engine:LiggghtsEngine"}
 
 
 def engine_class(name: str) -> type[Engine]:
