@@ -1,6 +1,10 @@
 """Frame analyses of a siloflow run folder's dumps: bulk solid fraction, coordination number,
-force chains, free surface and Wr vs Wf, and the Janssen fit of the settled wall-pressure
-profile. Called by :func:`postprocess.first_results.analyse` when the run wrote dumps.
+force chains, free surface and Wr vs Wf, and the band-true Janssen fit of the settled
+wall-pressure profile. Called by :func:`postprocess.first_results.analyse` when the run wrote dumps.
+
+Every derived number that can be unresolved carries ``resolved`` and ``reason`` beside it: Wr
+(the surface must descend :data:`MIN_SURFACE_DESCENT` grain diameters over its fit window), a
+steady window (:data:`MIN_STEADY_SAMPLES` samples), the Janssen fit (its ``flags``).
 
 Everything is read from the folder (its run plan and dumps, through ``RunFolder``); the geometry only
 places the measurement regions (the bulk core: two grain diameters from the wall, three
@@ -18,10 +22,56 @@ from siloflow.errors import ReadError
 
 from .coordination import Coordination
 from .dumps import Frame, read_frames
-from .flow_rate import FreeSurface, rate_series, surface_flow_rate
+from .flow_rate import FreeSurface, LinearRate, rate_series, surface_flow_rate
 from .force_chains import force_chain_figure
-from .janssen import fit_janssen
+from .janssen import fit_janssen_bands
 from .porosity import MeasureRegion, Porosity
+
+
+#: Wr is resolved when the free surface descends at least this many grain diameters over its fit window
+MIN_SURFACE_DESCENT = 3.0
+#: a steady window is resolved with at least this many samples
+MIN_STEADY_SAMPLES = 10
+
+
+def surface_rate_resolution(wr: LinearRate, area: float, bulk_density: float, d: float,
+                            min_diameters: float = MIN_SURFACE_DESCENT) -> dict:
+    """Whether Wr (``wr``, kg/s, from ``flow_rate.surface_flow_rate``) is resolved: the free
+    surface must descend at least ``min_diameters`` grain diameters ``d`` (m) over the fit window.
+    The descent is the fitted speed times the window, Wr / (``area`` m2 x ``bulk_density``
+    kg/m3) x (t_end - t_start). Returns resolved, reason ('' when resolved),
+    surface_descent_m, surface_descent_grain_diameters, min_descent_grain_diameters."""
+    out = {"surface_descent_m": float("nan"), "surface_descent_grain_diameters": float("nan"),
+           "min_descent_grain_diameters": float(min_diameters)}
+    if wr.n_samples < 3 or not np.isfinite(wr.rate):
+        return {"resolved": False, "reason": f"only {wr.n_samples} free-surface sample(s) in the Wr window "
+                f"(needs 3)", **out}
+    duration = wr.t_end - wr.t_start
+    descent = wr.rate / (area * bulk_density) * duration
+    out.update(surface_descent_m=float(descent), surface_descent_grain_diameters=float(descent / d))
+    if descent < min_diameters * d:
+        return {"resolved": False, "reason": (
+            f"the free surface descended {descent * 1000:.3g} mm = {descent / d:.2g} grain diameters over "
+            f"t = {wr.t_start:.3g}-{wr.t_end:.3g} s; Wr needs at least {min_diameters:g} "
+            f"({min_diameters * d * 1000:.3g} mm)"), **out}
+    return {"resolved": True, "reason": "", **out}
+
+
+def steady_resolution(n_samples: int, min_samples: int = MIN_STEADY_SAMPLES, what: str = "the steady window") -> dict:
+    """Whether a window (``what``) of ``n_samples`` samples is resolved: resolved, reason."""
+    if n_samples < min_samples:
+        return {"resolved": False, "reason": f"{what} holds {n_samples} samples (needs {min_samples})"}
+    return {"resolved": True, "reason": ""}
+
+
+def band_extents(walls) -> dict[int, tuple[float, float]]:
+    """Each sensor band's height range (z0, z1), m, from the plan's walls of role ``band``."""
+    out: dict[int, tuple[float, float]] = {}
+    for w in walls:
+        if w.role == "band":
+            lo, hi = out.get(w.band, (w.z0, w.z1))
+            out[w.band] = (min(lo, w.z0), max(hi, w.z1))
+    return out
 
 
 def bed_regions(g, surface: float, d: float) -> list[MeasureRegion]:
@@ -170,8 +220,11 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     st = surface.table
     in_window = (st.time >= flow_rate.t_start) & (st.time <= flow_rate.t_end) & (st.surface_height > g.hopper_height + 3 * d)
     wr = surface_flow_rate(st.time[in_window], st.surface_height[in_window], area, rho_section)
-    summary["flow_rate_surface"] = asdict(wr)
-    summary["flow_rate_surface_over_outlet"] = wr.rate / flow_rate.rate if flow_rate.rate else float("nan")
+    summary["flow_rate_surface"] = {**asdict(wr), **surface_rate_resolution(wr, area, rho_section, d)}
+    ratio = wr.rate / flow_rate.rate if flow_rate.rate else float("nan")
+    summary["flow_rate_surface_over_outlet"] = ratio     # resolved as flow_rate_surface is
+    summary["flow_rate_surface_over_outlet_stderr"] = abs(ratio) * float(np.hypot(
+        wr.stderr / wr.rate, flow_rate.stderr / flow_rate.rate)) if wr.rate and flow_rate.rate else float("nan")
     wf_t = rate_series(discharge.time, discharge.outlet_mass)
     flows = pd.DataFrame({"time": discharge.time, "Wf_kg_s": wf_t})
     wr_t = -rate_series(st.time, st.surface_height) * area * rho_section
@@ -179,15 +232,28 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
                           on="time", direction="nearest", tolerance=0.5 * dt * run.sample_steps)
     write_text(out / "flow_rates.csv", flows.to_csv(index=False))
 
-    # Janssen fit of the settled profile
-    static = bands_table[bands_table.z_mid < h_settled]
-    if bands_table.empty:
-        summary["janssen_static"] = {"error": "no wall-pressure sensors (outputs.results lacks wall_pressure)"}
-        return summary
-    try:
-        fit = fit_janssen(h_settled - static.z_mid, static.static_pressure, rho_section,
-                          janssen_diameter(g), plan.gravity)
-        summary["janssen_static"] = asdict(fit)
-    except ValueError as exc:
-        summary["janssen_static"] = {"error": str(exc)}
+    summary["janssen_static"] = janssen_static(plan, bands_table, h_settled, rho_section)
     return summary
+
+
+def janssen_static(plan, bands_table: pd.DataFrame, surface: float, bulk_density: float,
+                   exclude_corner: bool = True) -> dict:
+    """The band-true Janssen fit (``janssen.fit_janssen_bands``) of a run's static band pressures
+    (``bands_table``: band, static_pressure), as summary.json's ``janssen_static``: each band
+    averaged over its height (the plan's walls) below the settled ``surface`` (m), the corner
+    band excluded by default, ``bulk_density`` (kg/m3) the cross-section's, D from
+    :func:`janssen_diameter`, mu_w the plan's particle-wall friction. Without sensors or with a
+    bad band: {error, resolved False, reason}."""
+    if bands_table.empty:
+        why = "no wall-pressure sensors (outputs.results lacks wall_pressure)"
+        return {"error": why, "resolved": False, "reason": why}
+    extents = band_extents(plan.walls)
+    static = bands_table[bands_table.band.isin(list(extents))]
+    try:
+        fit = fit_janssen_bands([extents[b][0] for b in static.band], [extents[b][1] for b in static.band],
+                                static.static_pressure, surface, bulk_density, janssen_diameter(plan.geometry),
+                                plan.pairs["particle_wall"].friction, plan.gravity, floor=plan.geometry.hopper_height,
+                                exclude_corner=exclude_corner, bands=static.band.to_numpy())
+    except ValueError as exc:
+        return {"error": str(exc), "resolved": False, "reason": str(exc)}
+    return asdict(fit)

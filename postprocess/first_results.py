@@ -18,7 +18,7 @@ from siloflow.errors import ReadError
 from siloflow.run_folder import RESULT_TABLES, SUMMARY_NAME, RunFolder
 
 from .discharge import discharge_table, steady_flow_rate
-from .dump_results import analyse_dumps
+from .dump_results import MIN_STEADY_SAMPLES, analyse_dumps, steady_resolution
 from .flow_rate import rate_series, steady_window
 from .janssen import compare_with_measurement
 from .wall_pressure import band_mean, band_pressures, vertical_load, wide_forces
@@ -60,6 +60,64 @@ def static_window(forces: pd.DataFrame, run: RunOutputs) -> pd.Series:
     return (forces.step > lo) & (forces.step <= hi)
 
 
+def batch_means_stderr(values, batches: int | None = None) -> tuple[float, int]:
+    """Standard error of the mean of an autocorrelated series by batch means; (stderr, batches).
+
+    The series is cut into b contiguous batches of m = n // b samples (the first n - b m samples
+    are dropped: a window's start is nearest its transient) and SE = std(batch means, ddof=1) /
+    sqrt(b). b = ``batches``, else 10 from 40 samples on and 5 from 10 to 39 samples; fewer than
+    10 samples (or fewer than 2 batches): (NaN, 0). Valid when a batch is much longer than the
+    series' correlation time (for an AR(1) series of coefficient phi, m >> (1 + phi) / (1 - phi))."""
+    x = np.asarray(values, float)
+    x = x[np.isfinite(x)]
+    n = len(x)
+    b = batches if batches is not None else (10 if n >= 40 else 5 if n >= MIN_STEADY_SAMPLES else 0)
+    if b < 2 or n < b:
+        return float("nan"), 0
+    m = n // b
+    means = x[n - b * m:].reshape(b, m).mean(axis=1)
+    return float(means.std(ddof=1) / np.sqrt(b)), int(b)
+
+
+def pressure_window(steady: dict | None, rate) -> dict | None:
+    """The discharge window of the pressure statistics: the detected steady window when it is
+    resolved, else the flow-rate fit's window; None if neither exists. {source, t_start, t_end} (s)."""
+    if steady and steady.get("resolved", True):
+        return {"source": "steady window detected", "t_start": steady["t_start"], "t_end": steady["t_end"]}
+    if np.isfinite(rate.t_start) and np.isfinite(rate.t_end) and rate.t_end > rate.t_start:
+        return {"source": "flow-rate fit window", "t_start": float(rate.t_start), "t_end": float(rate.t_end)}
+    return None
+
+
+#: the pressure-statistics columns of bands.csv, after the first six
+BAND_STATISTICS = ["static_pressure_stderr", "static_samples", "static_batches", "dynamic_mean_pressure",
+                   "dynamic_std_pressure", "dynamic_p95_pressure", "dynamic_max_pressure", "dynamic_samples"]
+
+
+def band_statistics(bands: pd.DataFrame, dynamic_mask, static_mask) -> pd.DataFrame:
+    """Per band (index ``band``) of a tidy band table (step, band, pressure Pa): the static
+    window's sample count and the batch-means standard error of its mean pressure
+    (:func:`batch_means_stderr`), and over the dynamic window the mean, standard deviation
+    (ddof 1), 95th percentile (linear interpolation, numpy's default), maximum and count of
+    the pressure (Pa): the columns :data:`BAND_STATISTICS`."""
+    def aligned(mask):
+        return pd.Series(np.broadcast_to(np.asarray(mask, bool), (len(bands),)), index=bands.index)
+
+    static_mask, dynamic_mask = aligned(static_mask), aligned(dynamic_mask)
+    rows = {}
+    for band, grp in bands.groupby("band"):
+        st = grp[static_mask[grp.index]].sort_values("step").pressure.to_numpy(float)
+        dy = grp[dynamic_mask[grp.index]].pressure.to_numpy(float)
+        se, nb = batch_means_stderr(st)
+        nan = float("nan")
+        rows[band] = {"static_pressure_stderr": se, "static_samples": len(st), "static_batches": nb,
+                      "dynamic_mean_pressure": float(dy.mean()) if len(dy) else nan,
+                      "dynamic_std_pressure": float(dy.std(ddof=1)) if len(dy) > 1 else nan,
+                      "dynamic_p95_pressure": float(np.percentile(dy, 95)) if len(dy) else nan,
+                      "dynamic_max_pressure": float(dy.max()) if len(dy) else nan, "dynamic_samples": len(dy)}
+    return pd.DataFrame.from_dict(rows, orient="index", columns=BAND_STATISTICS).rename_axis("band")
+
+
 def analyse(folder, measured_pressure=None) -> dict:
     """Compute the results of a run folder; return the summary (also written to results/).
 
@@ -82,11 +140,13 @@ def analyse(folder, measured_pressure=None) -> dict:
     w = rate_series(after.time, after.outlet_mass, window=max(5, len(after) // 10))
     i0, i1 = steady_window(w, tolerance=0.2)
     steady = {"t_start": float(after.time.iloc[i0]), "t_end": float(after.time.iloc[i1 - 1]),
-              "median_rate": float(np.nanmedian(w[i0:i1])), "tolerance": 0.2} if i1 > i0 else None
+              "median_rate": float(np.nanmedian(w[i0:i1])), "tolerance": 0.2, "n_samples": int(i1 - i0),
+              **steady_resolution(int(i1 - i0))} if i1 > i0 else None
 
     # wall pressure
     bands, table = None, pd.DataFrame(columns=["band", "z_mid", "static_pressure", "static_shear",
-                                               "max_dynamic_pressure", "discharge_factor"])
+                                               "max_dynamic_pressure", "discharge_factor", *BAND_STATISTICS])
+    pressure_stats = None
     if run.has_bands:
         sectors = band_pressures(run.forces, run.walls)
         bands = band_mean(sectors)
@@ -102,7 +162,20 @@ def analyse(folder, measured_pressure=None) -> dict:
         table = static.join(dynamic)
         with np.errstate(divide="ignore", invalid="ignore"):
             table["discharge_factor"] = table.max_dynamic_pressure / table.static_pressure
-        table = table.reset_index()
+        # designer's statistics: dynamic pressure over the steady discharge, static mean's error
+        window = pressure_window(steady, rate)
+        dyn_mask = bands.step > run.stage_steps["open"] + run.sample_steps
+        dyn_mask &= (bands.time >= window["t_start"]) & (bands.time <= window["t_end"]) if window else False
+        table = table.join(band_statistics(bands, dyn_mask, static_mask)).reset_index()
+        n_dyn = int(table.dynamic_samples.min()) if len(table) else 0
+        pressure_stats = {
+            "dynamic_window": {**(window or {"source": "none: no steady or flow-rate window"}),
+                               "n_samples": n_dyn, **steady_resolution(n_dyn, what="the pressure window")},
+            "static_window": {"t_start": float(bands.time[static_mask].min()),
+                              "t_end": float(bands.time[static_mask].max()),
+                              "n_samples": int(table.static_samples.min()) if len(table) else 0},
+            "static_stderr": "batch means: contiguous batches (10 from 40 samples, 5 from 10), "
+                             "SE = sd(batch means) / sqrt(batches); the samples are autocorrelated"}
 
     # force balance of the settled bed
     balance = None
@@ -143,6 +216,7 @@ def analyse(folder, measured_pressure=None) -> dict:
         "discharged_mass_kg": float(dis.outlet_mass.iloc[-1]),
         "mass_in_silo_end_kg": float(dis.mass_in_silo.iloc[-1]),
         "bands": table.to_dict(orient="records"),
+        "pressure_statistics": pressure_stats,
         "engine_wall_time_s": run.record.wall_time,
         **({"discharge_stop": run.record.discharge_stop} if run.record.discharge_stop else {}),
         **({"fill_cache": run.record.fill_cache} if run.record.fill_cache else {}),
@@ -177,6 +251,42 @@ def _fmt(value, spec: str = ".4g") -> str:
         return "n/a"
 
 
+def _ci(ci, spec: str = ".3g") -> str:
+    return f"[{_fmt(ci[0], spec)}, {_fmt(ci[1], spec)}]" if ci else "[n/a]"
+
+
+def _ranges(numbers) -> str:
+    """1, 2, 3, 5 -> '1-3, 5'."""
+    out, run = [], []
+    for k in sorted(numbers):
+        if run and k != run[-1] + 1:
+            out.append(f"{run[0]}-{run[-1]}" if len(run) > 1 else f"{run[0]}")
+            run = []
+        run.append(k)
+    if run:
+        out.append(f"{run[0]}-{run[-1]}" if len(run) > 1 else f"{run[0]}")
+    return ", ".join(out)
+
+
+def janssen_lines(j: dict) -> list[str]:
+    """The report's lines on the band-true Janssen fit (summary's ``janssen_static``)."""
+    if not j:
+        return []
+    if "K" not in j:
+        return [f"- Janssen fit of the settled profile: not fitted: {j.get('error', 'no fit')}"]
+    how = (f"band-averaged below the free surface, {j['n_bands_used']} band(s) {_ranges(j['bands_used'])}"
+           + ("; corner band excluded" if j.get("exclude_corner") else "; corner band included") + ")")
+    values = (f"K = {_fmt(j['K'], '.3f')} {_ci(j['K_ci'])}, mu_eff = {_fmt(j['mu_eff'], '.3f')} {_ci(j['mu_eff_ci'])}, "
+              f"mobilisation mu_eff / mu_w = {_fmt(j['mobilisation'], '.2f')} {_ci(j['mobilisation_ci'], '.2f')} "
+              f"of mu_w = {_fmt(j['mu_w'], '.3g')}, r2 {_fmt(j['r2'], '.3f')}")
+    hyd = (f"  - hydrostatic comparison p = K rho_b g d: K = {_fmt(j['hydrostatic_K'], '.3f')} "
+           f"{_ci(j['hydrostatic_K_ci'])}, r2 {_fmt(j['hydrostatic_r2'], '.3f')}")
+    if j["resolved"]:
+        return [f"- Janssen fit of the settled profile ({how}: {values} (95 % intervals)", hyd]
+    return [f"- Janssen fit of the settled profile ({how}: not resolved: {j['reason']}",
+            f"  - fitted values, not to be used as material data: {values}", hyd]
+
+
 def report_text(summary: dict, run: RunOutputs) -> str:
     """A short human-readable report of a run's results (Markdown)."""
     fb, fr = summary["force_balance"], summary["flow_rate"]
@@ -192,6 +302,12 @@ def report_text(summary: dict, run: RunOutputs) -> str:
              f"- steady flow rate Wf = {_fmt(fr['rate'] * 1000)} +/- {_fmt(fr['stderr'] * 1000, '.2g')} g/s "
              f"(t = {_fmt(fr['t_start'], '.3g')}-{_fmt(fr['t_end'], '.3g')} s, r2 {_fmt(fr['r2'], '.4f')})",
              f"- discharged {_fmt(summary['discharged_mass_kg'] * 1000)} g; {_fmt(summary['mass_in_silo_end_kg'] * 1000)} g left"]
+    steady = summary.get("steady_window_detected")
+    if steady:
+        lines += [f"- steady discharge detected: t = {_fmt(steady['t_start'], '.3g')}-{_fmt(steady['t_end'], '.3g')} s, "
+                  f"median rate {_fmt(steady['median_rate'] * 1000)} g/s"
+                  + (f" ({steady['n_samples']} samples)" if steady.get("resolved", True)
+                     else f": not resolved: {steady['reason']}")]
     fa = summary.get("frame_analyses", {})
     if "bulk_solid_fraction" in fa:
         if "cross_section_solid_fraction" in fa:
@@ -208,20 +324,34 @@ def report_text(summary: dict, run: RunOutputs) -> str:
                       f"mechanical {_fmt(c['z_mech'], '.2f')}"]
         if "flow_rate_surface" in fa:
             wr = fa["flow_rate_surface"]
-            lines += [f"- free-surface flow rate Wr = {_fmt(wr['rate'] * 1000)} g/s = "
-                      f"{_fmt(fa['flow_rate_surface_over_outlet'], '.3f')} x Wf"]
-        j = fa.get("janssen_static", {})
-        if "K" in j:
-            lines += [f"- Janssen fit of the settled profile: K = {_fmt(j['K'], '.3f')}, mu_w = {_fmt(j['mu_w'], '.3f')} "
-                      f"({'saturated' if j['saturated'] else 'not saturated: only K near the surface is resolved'}, "
-                      f"r2 {_fmt(j['r2'], '.3f')})"]
+            if wr.get("resolved", True):
+                lines += [f"- free-surface flow rate Wr = {_fmt(wr['rate'] * 1000)} g/s = "
+                          f"{_fmt(fa['flow_rate_surface_over_outlet'], '.3f')} +/- "
+                          f"{_fmt(fa.get('flow_rate_surface_over_outlet_stderr'), '.2g')} x Wf (the surface descended "
+                          f"{_fmt(wr.get('surface_descent_grain_diameters'), '.3g')} grain diameters)"]
+            else:
+                lines += [f"- free-surface flow rate Wr: not resolved: {wr['reason']}"]
+        lines += janssen_lines(fa.get("janssen_static", {}))
     else:
         lines += [f"- frame analyses: {fa.get('dumps', 'none')}"]
     if summary["bands"]:
-        lines += ["", "| band | z (m) | static p (Pa) | max dynamic p (Pa) | C_h |", "|---|---|---|---|---|"]
+        ps = summary.get("pressure_statistics") or {}
+        win = ps.get("dynamic_window") or {}
+        if win.get("t_start") is not None:
+            lines += ["", f"Band pressures (Pa). Static: mean over t = {_fmt(ps['static_window']['t_start'], '.3g')}-"
+                      f"{_fmt(ps['static_window']['t_end'], '.3g')} s +/- its batch-means standard error. Dynamic: "
+                      f"over the {win['source']} t = {_fmt(win['t_start'], '.3g')}-{_fmt(win['t_end'], '.3g')} s "
+                      f"({win['n_samples']} samples"
+                      + (")" if win.get("resolved", True) else f"; not resolved: {win['reason']})")
+                      + "; max dynamic and C_h = max dynamic / static over the whole discharge."]
+        lines += ["", "| band | z (m) | static p | dynamic mean +/- sd | p95 | max (window) | max dynamic | C_h |",
+                  "|---|---|---|---|---|---|---|---|"]
         for b in summary["bands"]:
-            lines.append(f"| {b['band']} | {_fmt(b['z_mid'], '.3f')} | {_fmt(b['static_pressure'], '.1f')} | "
-                         f"{_fmt(b['max_dynamic_pressure'], '.1f')} | {_fmt(b['discharge_factor'], '.2f')} |")
+            lines.append(f"| {b['band']} | {_fmt(b['z_mid'], '.3f')} | {_fmt(b['static_pressure'], '.1f')} +/- "
+                         f"{_fmt(b.get('static_pressure_stderr'), '.2g')} | {_fmt(b.get('dynamic_mean_pressure'), '.1f')} "
+                         f"+/- {_fmt(b.get('dynamic_std_pressure'), '.2g')} | {_fmt(b.get('dynamic_p95_pressure'), '.1f')} | "
+                         f"{_fmt(b.get('dynamic_max_pressure'), '.1f')} | {_fmt(b['max_dynamic_pressure'], '.1f')} | "
+                         f"{_fmt(b['discharge_factor'], '.2f')} |")
     if "pressure_comparison" in summary:
         lines += ["", "| band | max measured (Pa) | max simulated (Pa) | difference | W (Eq. 34) |", "|---|---|---|---|---|"]
         for r in summary["pressure_comparison"]:

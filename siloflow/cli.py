@@ -263,7 +263,12 @@ def _post(folder: Path, measured: Path | None = None) -> None:
         line = f"settled bulk solid fraction {fa['bulk_solid_fraction']:.3f}"
         if "coordination_settled" in fa:
             line += f", coordination number {fa['coordination_settled']['z_mean']:.2f}"
-        out.print(line + f"; free-surface flow rate / outlet flow rate = {fa['flow_rate_surface_over_outlet']:.3f}")
+        wr = fa.get("flow_rate_surface", {})
+        if wr.get("resolved", True):
+            line += f"; free-surface flow rate / outlet flow rate = {fa['flow_rate_surface_over_outlet']:.3f}"
+        else:
+            line += f"; free-surface flow rate not resolved ({wr.get('reason', 'see the report')})"
+        out.print(printable(line), markup=False, highlight=False)
     elif "bulk_solid_fraction" in fa:
         out.print(f"no bulk solid fraction: {fa['bulk_solid_fraction']['error']}")
     out.print(f"results: {RunFolder(folder).results} (summary.json, *.csv, *.parquet, *.png)")
