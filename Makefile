@@ -69,6 +69,11 @@ bench-dust: install
 bench-skip: install
 	$(PY) benchmarks/skip_savings.py
 
+# fill protocols and the static wall load (rain, pour, frictionless, mobilised; 3 seeds each):
+# twelve runs of the small test silo, resumable (benchmarks/results/fill_protocols/)
+bench-fill: install
+	$(PY) benchmarks/fill_protocols.py
+
 # rewrite tests/golden/ (the decks every shipped case renders) after a change that alters decks on
 # purpose; commit them with the change (tests/test_golden_decks.py compares)
 golden: $(VENV)/.installed

@@ -223,6 +223,7 @@ def analyse(folder, measured_pressure=None) -> dict:
         "engine_warnings": run.record.warnings,
     }
     summary["frame_analyses"] = analyse_dumps(run, out, table, dis, rate)
+    summary["design_loads"] = en1991_comparison(run, table, summary, out)
     if measured_pressure is not None:
         if bands is None:
             raise ReadError(f"{folder} has no wall-pressure sensors to compare with {measured_pressure} "
@@ -242,6 +243,43 @@ def analyse(folder, measured_pressure=None) -> dict:
     from .figures import first_results_figure  # matplotlib only when figures are drawn
     first_results_figure(bands, dis, table, t_open, out / "first_results.png")
     return summary
+
+
+def en1991_comparison(run: RunOutputs, table: pd.DataFrame, summary: dict, out) -> dict:
+    """EN 1991-4's filling and discharge wall pressures for the run's silo beside its bands
+    (``design_vs_dem.csv``, ``design_loads.png``). The solid is the case's ``design`` section, or
+    else the simulated one: unit weight from the bed's measured bulk density (the case's packing
+    fraction without dumps), K = 1.1 (1 - sin phi) with tan phi the grains' friction (the
+    standard's K_m from phi_im), mu the grains' wall friction, phi_r = phi. Fill height: the
+    settled surface if measured, else the plan's estimate."""
+    import math
+    from siloflow.design_loads import bulk_solid, design_loads
+    from .design_figure import compare_with_dem, design_figure
+    plan = run.plan
+    if table.empty:
+        return {"computed": False, "reason": "no wall-pressure sensors (outputs.results lacks wall_pressure)"}
+    fa = summary.get("frame_analyses", {})
+    surface = fa.get("settled_surface_height_m") or plan.fill.bed_height_estimate
+    s = plan.design
+    try:
+        if s is not None:
+            solid = bulk_solid(s.material, unit_weight=s.unit_weight, K=s.K, mu=s.mu, phi_r=s.phi_r_deg, C_op=s.C_op)
+            wall_type, aac, ecc, what = s.wall_type, s.action_assessment_class, s.eccentricity, s.material or "explicit"
+        else:
+            rho_b = fa.get("cross_section_bulk_density_kg_m3") or plan.fill.packing_fraction * plan.grains[0].density
+            phi = math.atan(plan.pairs["particle_particle"].friction)
+            solid = bulk_solid(unit_weight=rho_b * plan.gravity, K=1.1 * (1 - math.sin(phi)),
+                               mu=plan.pairs["particle_wall"].friction, phi_r=math.degrees(phi))
+            wall_type, aac, ecc, what = "D2", 2, 0.0, "the simulated grains"
+        loads = design_loads(plan.geometry, solid, surface, wall_type, aac, ecc)
+    except ValueError as exc:
+        return {"computed": False, "reason": str(exc)}
+    compared = compare_with_dem(loads, table)
+    write_text(out / "design_vs_dem.csv", compared.to_csv(index=False))
+    design_figure(loads, out / "design_loads.png", table)
+    return {"computed": True, "solid": what, "classification": loads.classification, "C_h": loads.C_h,
+            "C_w": loads.C_w, "fill_height_m": surface, "notes": list(loads.notes),
+            "bands": compared.to_dict(orient="records")}
 
 
 def _fmt(value, spec: str = ".4g") -> str:
@@ -352,6 +390,18 @@ def report_text(summary: dict, run: RunOutputs) -> str:
                          f"+/- {_fmt(b.get('dynamic_std_pressure'), '.2g')} | {_fmt(b.get('dynamic_p95_pressure'), '.1f')} | "
                          f"{_fmt(b.get('dynamic_max_pressure'), '.1f')} | {_fmt(b['max_dynamic_pressure'], '.1f')} | "
                          f"{_fmt(b['discharge_factor'], '.2f')} |")
+    en = summary.get("design_loads") or {}
+    if en.get("computed"):
+        lines += ["", f"EN 1991-4 beside the DEM ({en['classification']} silo, solid: {en['solid']}; "
+                  f"C_h = {_fmt(en['C_h'], '.3g')}): design_vs_dem.csv, design_loads.png", "",
+                  "| band | EN p_hf (Pa) | DEM static / p_hf | EN p_he (Pa) | DEM max dynamic / p_he | DEM C_h |",
+                  "|---|---|---|---|---|---|"]
+        for b in en["bands"]:
+            lines.append(f"| {b['band']} | {_fmt(b['en_p_hf'], '.1f')} | {_fmt(b['static_over_p_hf'], '.2f')} | "
+                         f"{_fmt(b['en_p_he'], '.1f')} | {_fmt(b['max_dynamic_over_p_he'], '.2f')} | "
+                         f"{_fmt(b['dem_discharge_factor'], '.2f')} |")
+    elif en:
+        lines += ["", f"EN 1991-4 loads: not computed ({en.get('reason')})"]
     if "pressure_comparison" in summary:
         lines += ["", "| band | max measured (Pa) | max simulated (Pa) | difference | W (Eq. 34) |", "|---|---|---|---|---|"]
         for r in summary["pressure_comparison"]:

@@ -440,8 +440,22 @@ class Settle(Strict):
                                     "wall loads before the orifice opens, s", le=100)
 
 
+class Mobilise(Strict):
+    """After settling, the floor (bottom and orifice plate) is lowered by ``floor_drop`` grain
+    diameters over ``time`` and the bed settles again: it slides down along the wall and mobilises
+    the wall friction a poured bed leaves unused (Ovarlez, Fond and Clement, PRE 67, 060302, 2003).
+    At most a quarter diameter: the gap opened under the wall stays far narrower than a grain."""
+
+    floor_drop: Real = Field(0.1, gt=0, le=0.25, allow_inf_nan=False, description="in grain diameters")
+    time: Positive = Field(0.05, le=10, description="time the floor takes to move, s")
+
+
 class Fill(Strict):
-    """How the silo is filled: a particle count, or a fill height converted with ``packing_fraction``."""
+    """How the silo is filled: a particle count, or a fill height converted with ``packing_fraction``.
+
+    ``protocol``: ``rain``, batches dropped from a tall region above the bed (the default), or
+    ``pour``, a slow continuous pour from a thin layer at the top lasting ``pour_time``. Paper A's
+    ``frictionless`` fill and a ``mobilise`` step after settling combine with either."""
 
     count: Optional[Int] = Field(None, ge=1, le=50_000_000)
     height: Optional[Positive] = Field(None, description="target bed height above the outlet, m")
@@ -456,6 +470,9 @@ class Fill(Strict):
                                             "(distributed fill); small: a central fill (paper A)")
     frictionless: bool = Field(False, description="paper A: particle-particle friction is 0 while pouring and "
                                "restored to its value before settling (a denser bed)")
+    protocol: Literal["rain", "pour"] = "rain"
+    pour_time: Positive = Field(1.0, le=1e4, description="pour: how long the pour lasts, s")
+    mobilise: Optional[Mobilise] = Field(None, description="lower the floor after settling, then settle again")
     settle: Settle = Settle()
 
     @model_validator(mode="after")
@@ -679,6 +696,9 @@ class Case(Strict):
                 problems.append(f"geometry.thickness ({g.thickness} m) must exceed the grains' thickness "
                                 f"({across:.6g} m) by 1 %")
         top = g.hopper_height + g.height
+        if f.mobilise is not None and g.kind != "cylinder":
+            problems.append(f"fill.mobilise lowers a flat floor: it needs geometry.kind cylinder, not {g.kind} "
+                            "(a hopper or slab floor cannot move down without opening a gap at its walls)")
         if f.height is not None and f.height >= top:
             problems.append(f"fill.height ({f.height} m) must be below the top of the silo ({top:.6g} m)")
         zmin, zmax = f.insertion_z_min, f.insertion_z_max

@@ -372,6 +372,8 @@ def derive(case: Case) -> RunPlan:
     z_max = f.insertion_z_max if f.insertion_z_max is not None else top - 0.5 * d
     z_min = f.insertion_z_min if f.insertion_z_min is not None else max(
         h_bed + 2 * d, z_max - max(0.3 * g.height, 4 * d), g.hopper_height + d)
+    if f.protocol == "pour" and f.insertion_z_min is None:      # a thin layer at a fixed height
+        z_min = max(z_min, z_max - POUR_LAYER * d)
     if z_max - z_min < 2 * d:
         raise CaseError([("fill", f"the expected bed ({h_bed:.4g} m at solid fraction "
                           f"{f.packing_fraction}) leaves no room to insert particles below the top "
@@ -413,6 +415,13 @@ def derive(case: Case) -> RunPlan:
     h_region = z_max - z_min
     t_clear = (-INSERTION_SPEED + math.sqrt(INSERTION_SPEED ** 2 + 2 * case.gravity * h_region)) / case.gravity
     insert_every = _steps(1.1 * t_clear, dt)
+    if f.protocol == "pour":        # small batches, one per clearing time, over the pour time
+        wanted = math.ceil(count / max(1, math.floor(f.pour_time / (insert_every * dt))))
+        if wanted > batch:
+            raise CaseError([("fill.pour_time", f"{f.pour_time} s is too short to pour {count} grains through a "
+                              f"layer {POUR_LAYER} grains deep: at most {batch} per {insert_every * dt:.3g} s fit, "
+                              f"so the pour takes at least {math.ceil(count / batch) * insert_every * dt:.3g} s")])
+        batch = max(1, wanted)
     n_batches = math.ceil(count / batch)
     t_fall = (-INSERTION_SPEED + math.sqrt(INSERTION_SPEED ** 2 + 2 * case.gravity * z_max)) / case.gravity
     fill_steps = n_batches * insert_every + _steps(1.5 * t_fall, dt)
@@ -495,17 +504,37 @@ def derive(case: Case) -> RunPlan:
                         wall_pressure=needs["wall_pressure"], wall_forces=needs["wall_forces"]),
         total_mass=count * final_mass + (dust_count * dust.mass if dust is not None else 0.0),
         particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass,
-        analysis=case.analysis, run_length_fields=run_length_fields(case, source),
+        analysis=case.analysis, design=case.design, run_length_fields=run_length_fields(case, source),
     )
     from .meshes import silo_meshes
     meshes = silo_meshes(case, plan.outlet.z, plan.outlet.radius, sensors=needs["wall_pressure"])
     walls = [Wall(**m.info()) for m in meshes]
+    if f.mobilise is not None or f.protocol != "rain":
+        plan = plan.model_copy(update={"fill": plan.fill.model_copy(update={
+            "protocol": f.protocol, "mobilise": mobilise_plan(case, meshes, dt)})})
     plan = plan.model_copy(update={
         "walls": walls, "warnings": physics_warnings(case, plan),
         "sensors": Sensors(bands=len([w for w in walls if w.role == "band"]) // plan.sensors.sectors,
                            sectors=plan.sensors.sectors)})
     plan._meshes = meshes
     return plan
+
+
+#: depth of a pour's insertion layer at the top of the silo, grain diameters
+POUR_LAYER = 3.0
+
+
+def mobilise_plan(case: Case, meshes, dt: float):
+    """The floor's lowering after settling (None without ``fill.mobilise``): the floor meshes
+    (bottom and orifice plate), drop (m), speed (m/s), steps."""
+    mob = case.fill.mobilise
+    if mob is None:
+        return None
+    from .plan import Mobilise as MobilisePlan
+    drop = mob.floor_drop * 2 * case.particles.max_radius
+    steps = _steps(mob.time, dt)
+    return MobilisePlan(drop=drop, speed=drop / (steps * dt), steps=steps,
+                        meshes=[m.name for m in meshes if m.role in ("bottom", "plate")])
 
 
 #: dump frames the frame analyses need over the discharge, when the case sets no dump interval:

@@ -15,7 +15,7 @@ from typing import Literal, Optional
 
 from pydantic import BaseModel, ConfigDict, PrivateAttr, ValidationError
 
-from .case import Analysis
+from .case import Analysis, DesignSettings
 from .errors import ReadError
 
 #: bumped whenever a field changes meaning; a plan of another version is refused
@@ -111,8 +111,19 @@ class InsertionRegion(Frozen):
     yhi: Optional[float] = None
 
 
+class Mobilise(Frozen):
+    """After settling the floor meshes are lowered by ``drop`` (m) at ``speed`` (m/s) in ``steps``,
+    then the bed settles again."""
+
+    drop: float
+    speed: float
+    steps: int
+    meshes: list[str]
+
+
 class Fill(Frozen):
-    """The fill: grains rained in batches from the insertion region, then settled."""
+    """The fill: grains inserted in batches from the insertion region (``protocol`` rain: a tall
+    region, pour: a thin layer at the top, slowly), then settled (and ``mobilise``d)."""
 
     count: int                      # grains (clumps count one each)
     dust_count: int
@@ -130,6 +141,8 @@ class Fill(Frozen):
     packing_fraction: float         # expected solid fraction of the bed
     bed_height_estimate: float      # m above the outlet
     impact_velocity: float          # m/s, fastest impact of a grain on the bed
+    protocol: str = "rain"
+    mobilise: Optional[Mobilise] = None
 
 
 class Settle(Frozen):
@@ -291,6 +304,7 @@ class RunPlan(Frozen):
     particle_volume: float          # mean volume per grain once the bed has its sizes, m3
     particle_mass: float            # kg
     analysis: Analysis
+    design: Optional[DesignSettings] = None      # the EN 1991-4 comparison's bulk solid (post-processing only)
     run_length_fields: dict[str, list[str]] = {}   # stage (and "timestep") -> case fields setting it
     warnings: list[str] = []        # physics warnings, each naming its consequence
 
@@ -337,6 +351,9 @@ class RunPlan(Frozen):
         out = {"fill": self.fill.steps, "settle": settle}
         if self.fill.shrink_classes:
             out["shrink"] = settle
+        if self.fill.mobilise is not None:
+            out["mobilise"] = self.fill.mobilise.steps
+            out["resettle"] = settle
         return {**out, "static": self.static_steps,
                 "open": self.opening.steps if open_steps is None else open_steps,
                 "discharge": self.discharge.chunk_steps * self.discharge.max_chunks}

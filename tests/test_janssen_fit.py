@@ -370,7 +370,12 @@ class FakeRun:
         out = np.clip(0.02 * (t - 0.25), 0, None)
         self.flow = pd.DataFrame({"step": steps, "discharged_mass": out, "mass_silo": 0.07 - out,
                                   "mass_total": 0.07 - out, "atoms": np.full(len(t), 5000)})
-        self.plan = SimpleNamespace(gravity=G, outputs=SimpleNamespace(results=None))
+        self.plan = SimpleNamespace(gravity=G, outputs=SimpleNamespace(results=None), design=None,
+                                    fill=SimpleNamespace(bed_height_estimate=0.2, packing_fraction=0.6),
+                                    grains=[SimpleNamespace(density=2500.0)],
+                                    pairs={"particle_particle": SimpleNamespace(friction=0.5),
+                                           "particle_wall": SimpleNamespace(friction=0.5)},
+                                    geometry=SimpleNamespace(kind="planar"))   # EN 1991-4: not computed
         self.record = SimpleNamespace(inserted=5000, fill_losses=0, settled_ke_pe=1e-6, wall_time=1.0,
                                       discharge_stop=None, fill_cache=None, warnings=[])
 

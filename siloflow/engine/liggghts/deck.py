@@ -196,7 +196,7 @@ def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, r
         "settle_ratio": plan.settle.ke_pe_ratio, "static_steps": plan.static_steps,
         "opening_speed": plan.opening.speed, "open_steps": enc.open_steps,
         "discharge_max_chunks": plan.discharge.max_chunks, "discharge_chunk_steps": plan.discharge.chunk_steps,
-        "steady": plan.discharge.steady,
+        "steady": plan.discharge.steady, "mobilise": plan.fill.mobilise,
     }
 
 
