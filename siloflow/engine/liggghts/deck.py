@@ -163,9 +163,12 @@ def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, r
         "contact_model": "hertz" if plan.contact_model == "hertz" else "hooke/stiffness",   # hooke: kn, kt here
         "rolling": uses_rolling_friction(plan),
         "timestep": plan.dt, "gravity": plan.gravity,
-        "walls": [{"name": w.name, "type": enc.face_type if w.role == "face" else enc.wall_type,
-                   "stress": plan.outputs.wall_forces} for w in plan.walls if w.is_wall],
-        "sensed_walls": [{"name": w.name} for w in plan.walls if w.is_wall and plan.outputs.wall_forces],
+        "walls": [{"name": w.name, "fid": fix_id(w.name, w.role, resume),
+                   "type": enc.face_type if w.role == "face" else enc.wall_type, "stress": plan.outputs.wall_forces,
+                   "move": floor_offset(plan, w.role) if resume else None} for w in plan.walls if w.is_wall],
+        "sensed_walls": [{"fid": fix_id(w.name, w.role, resume)} for w in plan.walls
+                         if w.is_wall and plan.outputs.wall_forces],
+        "outlet_id": fix_id("outlet", "outlet", resume), "plate_id": fix_id("plate", "plate", resume),
         "planar": plan.planar,
         "seeds": enc.seeds, "density": plan.grains[0].density, "radius": plan.particle_radius,
         "friction_restore": friction_restore(plan, enc),
@@ -198,6 +201,26 @@ def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, r
         "discharge_max_chunks": plan.discharge.max_chunks, "discharge_chunk_steps": plan.discharge.chunk_steps,
         "steady": plan.discharge.steady, "mobilise": plan.fill.mobilise,
     }
+
+
+#: walls a resumed deck defines as new fixes: LIGGGHTS restores a restarted fix's mesh from the
+#: restart file ("data will be taken from restart file"), so a run from a cached fill with another
+#: orifice would keep the fill's floor, plate and counting disc (docs/engine_facts.md)
+NEW_ON_RESUME = ("bottom", "plate", "outlet")
+
+
+def fix_id(name: str, role: str, resume: bool) -> str:
+    """The fix ID of a mesh: its name, or a new one in a resumed deck for the floor's meshes."""
+    return f"{name}_resumed" if resume and role in NEW_ON_RESUME else name
+
+
+def floor_offset(plan: RunPlan, role: str) -> float | None:
+    """Where a resumed deck's new floor mesh starts, m along z: lowered by the mobilising step
+    (``fill.mobilise``) if the fill had one, else where its STL file puts it (None)."""
+    m = plan.fill.mobilise
+    if m is None or role not in ("bottom", "plate"):
+        return None
+    return -m.drop
 
 
 def monte_carlo_tries(case: Case) -> int:
