@@ -135,7 +135,7 @@ def test_cache_commands_list_and_clear(tmp_path, quick_dict):
 @pytest.mark.engine
 @pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS is not installed")
 def test_a_cached_fill_gives_the_same_bed_and_a_lean_early_stopped_discharge(small_run, tmp_path):
-    """The small run's settled bed, cached, starts a run with another orifice (a flat bottom:
+    """The small run's settled bed, cached, starts a run with a wider orifice (a flat bottom:
     same fill), a lean deck (flow rate and force balance only) and an until_steady discharge:
     the cache is hit, the bed is the same (particles and mass exactly, force balance within 1 %),
     and the discharge stops when its rate is known, saying why."""
@@ -154,7 +154,7 @@ def test_a_cached_fill_gives_the_same_bed_and_a_lean_early_stopped_discharge(sma
     cache.put(fill_key(small, engine), engine.fill_files(folder), fill_key_inputs(small, engine), source=str(folder))
 
     data = yaml.safe_load(SMALL.read_text())
-    data["geometry"]["orifice_radius"] = 0.0050
+    data["geometry"]["orifice_radius"] = 0.0065          # D0/d 5.2 (4.4 in the cached run): both flow
     data["outputs"] = {"sample_interval": 0.005, "results": ["flow_rate", "force_balance"]}
     data["discharge"] = {"until_steady": True, "precision": 0.04, "batch_time": 0.05, "max_time": 1.2}
     variant = from_dict(data)
@@ -174,10 +174,11 @@ def test_a_cached_fill_gives_the_same_bed_and_a_lean_early_stopped_discharge(sma
     assert "dump" not in (run_folder / "in.liggghts").read_text().split("# ---------------------------------------------------------------- stage 1")[0].replace("dump_", "")
     # the early stop: said why, and it stopped before the cap when the rate was known
     stop = result["discharge_stop"]
-    assert stop["reason"] in ("steady", "max_time", "empty")
+    assert stop["reason"] in ("steady", "max_time", "empty")      # not "clogged": this orifice flows
     if stop["reason"] == "steady":
         assert stop["relative_error"] < 0.04
         assert result["flow_rate"]["t_end"] - result["time_open_s"] < 1.2 - 0.05
-    # the smaller orifice flows slower: Beverloo's (D0 - 1.5 d)^2.5 gives 0.69 of the 11 mm orifice's
+    # the larger orifice is the variant's own (not the cached run's, which a restart would restore):
+    # Beverloo's (D0 - 1.5 d)^2.5 gives 1.84 x the 11 mm orifice's rate
     ratio = result["flow_rate"]["rate"] / summary["flow_rate"]["rate"]
-    assert 0.55 < ratio < 0.83, ratio
+    assert 1.45 < ratio < 2.3, ratio

@@ -13,8 +13,9 @@ from ...errors import ANSI_ESCAPES
 
 _STAGE = re.compile(r"^SILOFLOW_STAGE (\w+) (\d+)\s*$")
 _MARK = re.compile(r"^SILOFLOW_(INSERTED|SETTLED|NOT_SETTLED|DONE)\s*(\S*)\s*$")
-#: why an until_steady discharge stopped (steady, empty, max_time) and the rate's relative error then
-_STOP = re.compile(r"^SILOFLOW_STOP (steady|empty|max_time) (\S+)\s*$")
+#: why an until_steady discharge stopped (steady, empty, max_time; clogged: nothing flowed over the
+#: batches after the start-up) and the rate's relative error then
+_STOP = re.compile(r"^SILOFLOW_STOP (steady|empty|max_time|clogged) (\S+)\s*$")
 _THERMO = re.compile(r"^\s*(\d+)\s+([-+0-9.eE]+)\s+(\d+)(\s+[-+0-9.eEnaif]+)*\s*$")
 #: an insertion fix's report of one batch (fix id, templates: a clump or a sphere each)
 _INSERT_BATCH = re.compile(r"^INFO: Particle insertion (\S+): inserted (\d+) particle templates")
