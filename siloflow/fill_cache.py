@@ -6,7 +6,8 @@ protocol, gravity and seed, the silo the fill sees (its walls' triangles; for a 
 floor is a plane whatever the orifice, since the bed rests on the closed plate), siloflow's
 version and the engine's own parts (name, version, ranks and, for LIGGGHTS, the box). What
 comes after the fill (the orifice of a flat bottom, the static window, the opening, the
-discharge, the outputs and sensors' partition of the same wall facets) is not in the key.
+discharge, the dumps and sampling) is not in the key; the walls' partition into sensor meshes is
+(``outputs.results`` with or without ``wall_pressure`` are two fills).
 
 Layout: ``<cache>/fills/<key>/`` holds the engine's files of the settled bed (LIGGGHTS: the
 restart file, the log and the flow table up to it), ``key.json`` (what went into the key) and
@@ -51,18 +52,20 @@ def default_root() -> Path:
 
 
 def walls_digest(plan) -> str:
-    """SHA-256 of the triangles of the walls the fill touches (m, float64, order-free); a flat
-    floor (bottom and plate of a silo without hopper) counts as the plane z = 0."""
+    """SHA-256 of the walls the fill touches, mesh by mesh (each mesh's triangles, m, float64,
+    order-free; the meshes order-free); a flat floor (bottom and plate of a silo without hopper)
+    counts as the plane z = 0. The partition into meshes is part of it: the same facets split
+    into sensor meshes make another bed (LIGGGHTS counts a grain on an edge shared by two meshes
+    once per mesh; measured: benchmarks/results/skip/seams.csv)."""
     flat = plan.geometry.hopper_height == 0
-    blocks = []
+    digests = []
     for mesh in plan.meshes:
         if mesh.role == "outlet" or (flat and mesh.role in FLOOR_ROLES):
             continue
         tris = np.round(np.asarray(mesh.triangles, float).reshape(-1, 9), 12)
-        blocks.append(tris)
-    tris = np.concatenate(blocks) if blocks else np.zeros((0, 9))
-    tris = tris[np.lexsort(tris.T[::-1])]
-    digest = hashlib.sha256(tris.tobytes())
+        tris = tris[np.lexsort(tris.T[::-1])]
+        digests.append(hashlib.sha256(tris.tobytes()).hexdigest())
+    digest = hashlib.sha256("".join(sorted(digests)).encode())
     digest.update(b"flat floor" if flat else b"")
     return digest.hexdigest()
 
