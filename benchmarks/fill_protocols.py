@@ -24,15 +24,16 @@ import argparse
 import copy
 import math
 import os
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_runs import run_case  # noqa: E402
 
 PROTOCOLS = ("rain", "pour", "frictionless", "mobilised")
 
@@ -96,17 +97,8 @@ def main(case_file: Path, seeds: int, work: Path, out: Path) -> None:
         for protocol in PROTOCOLS:
             if (protocol, seed) in have:
                 continue
-            data = protocol_case(base, protocol, seed)
-            case_path = work / f"{data['name']}.yaml"
-            case_path.write_text(yaml.safe_dump(data))
-            folder = work / "runs" / data["name"]
-            t0 = time.perf_counter()
-            with open(work / f"{data['name']}.log", "w") as log:
-                proc = subprocess.run([sys.executable, "-m", "siloflow.cli", "run", str(case_path), "-o", str(folder)],
-                                      stdout=log, stderr=subprocess.STDOUT, cwd=ROOT, env={**os.environ, "COLUMNS": "200"})
-            if proc.returncode != 0:
-                raise SystemExit(f"{data['name']} failed; see {work / (data['name'] + '.log')}")
-            rows.append(row_of(protocol, seed, folder, time.perf_counter() - t0))
+            folder, wall = run_case(protocol_case(base, protocol, seed), work)
+            rows.append(row_of(protocol, seed, folder, wall))
             pd.DataFrame(rows).to_csv(table, index=False)
             print(f"{protocol} seed {seed}: wall share {rows[-1]['wall_share']:.3f}, K {rows[-1]['K']:.3g}, "
                   f"share / Janssen {rows[-1]['share_over_janssen']:.3f}")

@@ -15,15 +15,16 @@ from __future__ import annotations
 import argparse
 import copy
 import os
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_runs import run_case  # noqa: E402
 VARIANTS = {"one_wall": ["flow_rate", "force_balance"], "sensor_meshes": ["flow_rate", "force_balance", "wall_pressure"]}
 
 
@@ -44,17 +45,9 @@ def main(case_file: Path, seeds: int, work: Path, out: Path) -> None:
             data = copy.deepcopy(base)
             data.update(name=f"{base['name']}_{name}_{seed}", seed=seed)
             data["outputs"] = {"sample_interval": base["outputs"].get("sample_interval", 0.005), "results": results}
-            case_path = work / f"{data['name']}.yaml"
-            case_path.write_text(yaml.safe_dump(data))
-            folder = work / "runs" / data["name"]
-            t0 = time.perf_counter()
-            with open(work / f"{data['name']}.log", "w") as log:
-                proc = subprocess.run([sys.executable, "-m", "siloflow.cli", "run", str(case_path), "-o", str(folder)],
-                                      stdout=log, stderr=subprocess.STDOUT, cwd=ROOT, env={**os.environ, "COLUMNS": "200"})
-            if proc.returncode != 0:
-                raise SystemExit(f"{data['name']} failed; see its log in {work}")
+            folder, wall = run_case(data, work)
             s = RunFolder(folder).read_summary()
-            rows.append({"variant": name, "seed": seed, "wall_s": time.perf_counter() - t0,
+            rows.append({"variant": name, "seed": seed, "wall_s": wall,
                          "flow_rate_kg_s": s["flow_rate"]["rate"], "flow_rate_stderr_kg_s": s["flow_rate"]["stderr"],
                          "force_balance": s["force_balance"]["ratio"],
                          "wall_friction_share": s["force_balance"]["wall_friction_share"]})

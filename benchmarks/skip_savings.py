@@ -26,15 +26,16 @@ from __future__ import annotations
 import argparse
 import copy
 import os
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from bench_runs import siloflow, timed  # noqa: E402
 
 #: three orifices that flow: D0/d = 5.3, 6 and 6.7 for the quick case's 3 mm beads (4 and 4.7 clog)
 ORIFICES = (0.008, 0.009, 0.010)
@@ -57,21 +58,6 @@ def variants(base: dict) -> dict[str, dict]:
         sep["geometry"]["orifice_radius"] = r
         out[f"separate_{r:g}"] = sep
     return out
-
-
-def siloflow(*args: str) -> list[str]:
-    return [sys.executable, "-m", "siloflow.cli", *args]
-
-
-def timed(cmd: list[str], log: Path) -> float:
-    """Run ``cmd`` (output to ``log``); its wall time, s. A failure stops the benchmark."""
-    t0 = time.perf_counter()
-    with open(log, "w") as fh:
-        proc = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT, env={**os.environ, "COLUMNS": "200"})
-    wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode}); see {log}")
-    return wall
 
 
 def result_row(name: str, folder: Path, wall: float) -> dict:

@@ -1,0 +1,39 @@
+"""What the engine benchmarks share: running one ``siloflow`` command, timed, its output to a log,
+and running one case (a dict) into a work folder. A failed run stops the benchmark."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def siloflow(*args: str) -> list[str]:
+    """The command line of ``siloflow ARGS`` in this checkout's Python."""
+    return [sys.executable, "-m", "siloflow.cli", *args]
+
+
+def timed(cmd: list[str], log: Path) -> float:
+    """Run ``cmd`` in the repository (output to ``log``); its wall time, s."""
+    t0 = time.perf_counter()
+    with open(log, "w") as fh:
+        proc = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT, env={**os.environ, "COLUMNS": "200"})
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode}); see {log}")
+    return wall
+
+
+def run_case(data: dict, work: Path, *extra: str) -> tuple[Path, float]:
+    """``siloflow run`` of the case ``data`` (named by its ``name``) into ``work/runs/<name>``,
+    its case file and log beside it in ``work``: (run folder, wall time s)."""
+    case_path = work / f"{data['name']}.yaml"
+    case_path.write_text(yaml.safe_dump(data))
+    folder = work / "runs" / data["name"]
+    wall = timed(siloflow("run", str(case_path), "-o", str(folder), *extra), work / f"{data['name']}.log")
+    return folder, wall
