@@ -228,10 +228,11 @@ def monte_carlo_tries(case: Case) -> int:
     return getattr(case.particles, "monte_carlo_tries", 0)
 
 
-def render_deck_text(plan: RunPlan, case: Case, resume: bool = False) -> str:
+def render_deck_text(plan: RunPlan, case: Case, resume: bool = False,
+                     enc: LiggghtsEncoding | None = None) -> str:
     """The rendered, checked ``in.liggghts`` text; with ``resume``, the deck that reads the settled
-    bed's restart file and goes on from the static stage."""
-    enc = encode(plan)
+    bed's restart file and goes on from the static stage. ``enc``: the plan's encoding, if made."""
+    enc = enc if enc is not None else encode(plan)
     try:
         text = template_environment("liggghts").get_template("in.liggghts.j2").render(
             {**deck_context(plan, enc, monte_carlo_tries(case), resume), "resume": resume,
@@ -246,8 +247,8 @@ def write_deck(plan: RunPlan, case: Case, folder: Path) -> None:
     """Write the LIGGGHTS deck of ``plan`` into the run folder ``folder`` being rendered: the deck,
     the walls' STL meshes, the output folders the deck writes into, the dump layout."""
     folder = Path(folder)
-    text = render_deck_text(plan, case)
     enc = encode(plan)
+    text = render_deck_text(plan, case, enc=enc)
     (folder / "meshes").mkdir()
     out = plan.outputs
     for sub in ["output", "output/restart"] + (["output/dumps"] if out.dump_every else []) + (
