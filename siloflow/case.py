@@ -550,14 +550,64 @@ class Outputs(Strict):
         return self
 
 
+class Guard(Strict):
+    """The instability guard of every run (``siloflow.guard``): the engine reports these signals at
+    each thermo output and the run is stopped, naming the signal and its fix, when one trips."""
+
+    enabled: bool = Field(True, description="watch the run (off only to study an instability)")
+    max_overlap: Real = Field(0.5, gt=0, le=2, allow_inf_nan=False,
+                              description="deepest pair overlap allowed, as a fraction of the smallest "
+                              "grain radius: beyond half a radius grains are passing through each other "
+                              "(softened contacts reach 0.2-0.5 in fill impacts; lower it to be strict)")
+    speed_factor: Real = Field(2.0, ge=1.0, le=1000, allow_inf_nan=False,
+                               description="fastest grain allowed, as a multiple of the free-fall speed "
+                               "over the silo's height (plus the insertion speed): faster needs energy "
+                               "from nowhere")
+    energy_growth: Real = Field(10.0, gt=1.0, le=1e6, allow_inf_nan=False,
+                                description="kinetic energy growth (factor) that trips the guard in a stage "
+                                "without sources (settling, static), once it is above 1e-3 of the "
+                                "potential energy")
+    escape_margin: Real = Field(1.0, ge=0.1, le=100, allow_inf_nan=False,
+                                description="grain diameters beyond the walls at which a grain counts "
+                                "as escaped")
+
+
+#: the profiles a case can ask for (``siloflow.profiles``); custom: the case's own settings
+PROFILE_NAMES = ("custom", "reference", "fast")
+#: time-step fraction of the custom profile when the case gives none
+DEFAULT_TIMESTEP_FRACTION = 0.15
+
+
 class EngineSettings(Strict):
     """Which engine runs the case (one of ``siloflow.engines.ENGINES``), on how many MPI ranks, at
-    what time step. What an engine cannot do of a case is its own check (``Engine.check``)."""
+    what time step and stiffness. What an engine cannot do of a case is its own check
+    (``Engine.check``). ``profile`` names a set of numerical settings (``siloflow.profiles``):
+    ``reference`` (the papers': dt = t_c/50, full stiffness, true dust density), ``fast`` (the
+    benchmark's recommendation, with its error bounds) or ``custom`` (the case's own
+    ``timestep_fraction`` and ``stiffness_scale``, which the other two set and refuse)."""
 
     name: Literal[tuple(ENGINES)] = "liggghts"
     ranks: Int = Field(1, ge=1, le=1024, description="MPI ranks")
-    timestep_fraction: Fraction = Field(0.15, ge=MIN_TIMESTEP_FRACTION, description="time step as a "
-                                        "fraction of the critical (contact) time")
+    profile: Literal[PROFILE_NAMES] = Field("custom", description="numerical settings: custom (this "
+                                            "section's), reference (the papers'), fast (benchmarked)")
+    timestep_fraction: Optional[Annotated[Real, Field(ge=MIN_TIMESTEP_FRACTION, le=1, allow_inf_nan=False)]] = Field(
+        None, description="time step "
+                                                  "as a fraction of the critical (contact) time (custom "
+                                                  f"profile; default {DEFAULT_TIMESTEP_FRACTION})")
+    stiffness_scale: Optional[Real] = Field(None, ge=1e-8, le=1.0, allow_inf_nan=False,
+                                            description="contact stiffness x this factor: Young's moduli "
+                                            "(hertz, hooke) or kn and kt (linear) of every material and "
+                                            "pair (custom profile; default 1)")
+    guard: Guard = Guard()
+
+    @model_validator(mode="after")
+    def _profile_owns_settings(self):
+        if self.profile != "custom":
+            given = [f for f in ("timestep_fraction", "stiffness_scale") if getattr(self, f) is not None]
+            if given:
+                raise ValueError(f"profile '{self.profile}' sets {' and '.join(given)}: remove "
+                                 f"{' and '.join('engine.' + f for f in given)}, or use profile: custom")
+        return self
 
 
 class MeasurementRegion(Strict):

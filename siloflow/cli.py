@@ -470,6 +470,60 @@ def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
     out.print(f"table: {output / 'sweep.csv'} (siloflow beverloo {output / 'sweep.csv'} fits it)")
 
 
+@app.command()
+def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settings are replaced by each candidate's)"),
+          output: Path = typer.Option(..., "-o", "--output", help="bench folder: runs/, runs.csv, comparison.csv, "
+                                      "pareto.png, recommended_profile.json (a second call resumes)"),
+          seeds: int = typer.Option(3, "--seeds", min=2, help="runs (fills) per candidate: the case's seed, +1, ..."),
+          candidates: Optional[str] = typer.Option(None, "--candidates", help="comma-separated candidate names "
+                                                   "(default: all; the reference is always run)"),
+          flow_tolerance: float = typer.Option(0.03, "--flow-tolerance", min=0.0, help="flow rate: largest "
+                                               "relative 95 % error bound of the recommended profile"),
+          static_tolerance: float = typer.Option(0.05, "--static-tolerance", min=0.0, help="static band pressure: "
+                                                 "largest relative 95 % error bound"),
+          conclude_only: bool = typer.Option(False, "--conclude", help="run nothing: tables and figure from the "
+                                             "runs already in the folder")) -> None:
+    """Run time against error: each candidate setting (time step, stiffness, ranks) over --seeds fills, against
+    the reference (dt = t_c/50, full stiffness); errors with 95 % intervals, a Pareto figure and the fastest
+    profile within the tolerances."""
+    from .accuracy_bench import CANDIDATES, REFERENCE, conclude, run_bench
+    known = {c.name: c for c in CANDIDATES}
+    chosen = list(CANDIDATES)
+    if candidates:
+        names = [n.strip() for n in candidates.split(",") if n.strip()]
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            _fail(SiloflowError(f"--candidates: unknown {', '.join(unknown)}; known: {', '.join(known)}"))
+        chosen = [REFERENCE] + [known[n] for n in names if n != REFERENCE.name]
+    signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        if not conclude_only:
+            run_bench(case_file, output, seeds, chosen,
+                      report=lambda text: err.print(printable(text), markup=False, highlight=False))
+        table, rec = conclude(output, {"flow_rate": flow_tolerance, "static_pressure": static_tolerance})
+    except KeyboardInterrupt:
+        err.print(f"[yellow]interrupted: finished runs are in {output / 'runs.csv'}; run the same command to "
+                  "go on[/yellow]")
+        raise typer.Exit(130)
+    except SiloflowError as exc:
+        _fail(exc)
+    except ValueError as exc:
+        _fail(SiloflowError(str(exc)))
+    cols = ["candidate", "quantity", "n_cand", "speedup", "rel_error", "ci_lo", "ci_hi", "verdict"]
+    out.print(printable(table[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}")), markup=False,
+              highlight=False)
+    if rec is None:
+        out.print("no candidate meets the tolerances at 95 % confidence (not even the reference has the "
+                  "quantities); see comparison.csv")
+    else:
+        bounds = ", ".join(f"{q} <= {b:.1%}" for q, b in rec["error_bounds"].items())
+        out.print(printable(f"recommended fast profile: {rec['candidate']} (timestep_fraction "
+                            f"{rec['timestep_fraction']:g}, stiffness_scale {rec['stiffness_scale']:g}), "
+                            f"{rec['speedup']:.3g}x faster than the reference; 95 % error bounds: {bounds}"),
+                  markup=False, highlight=False)
+    out.print(f"tables and figure: {output} (comparison.csv, pareto.png, recommended_profile.json)")
+
+
 def _sweep_table_runs(table_file: Path) -> list[Path]:
     """The run folders of a sweep table's complete runs (its ``run`` column; a relative path is
     taken from the table's folder). Raises ``ReadError``."""

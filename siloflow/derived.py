@@ -11,7 +11,7 @@ from . import __version__
 from . import contact_physics as cp
 from .case import Case, HopperGeometry, PlanarGeometry
 from .errors import CaseError, SetupError
-from .plan import (FACES, WALL, Discharge, EngineChoice, Fill, InsertionRegion, Material, Opening, Outlet,
+from .plan import (FACES, WALL, Discharge, EngineChoice, Fill, Guard, Profile, InsertionRegion, Material, Opening, Outlet,
                    Outputs, PairParameters, RunPlan, Sensors, Settle, Silo, Species, SteadyStop, TimeStep, Wall)
 
 #: speed at which grains are inserted downwards, m/s (keeps batches clear of the region)
@@ -333,6 +333,9 @@ def derive(case: Case) -> RunPlan:
         when the case is valid on its own but cannot be run as stated (bed too high
         for the insertion region, opening too slow, ...), naming the field.
     """
+    from .profiles import effective_case, profile_settings
+    settings = profile_settings(case)
+    case = effective_case(case)            # the profile's time step and stiffness, applied once here
     g = case.geometry
     planar = isinstance(g, PlanarGeometry)
     p = case.particles
@@ -479,6 +482,11 @@ def derive(case: Case) -> RunPlan:
     plan = RunPlan(
         siloflow_version=__version__, name=case.name,
         engine=EngineChoice(name=case.engine.name, ranks=case.engine.ranks),
+        profile=Profile(name=settings["profile"], timestep_fraction=settings["timestep_fraction"],
+                        stiffness_scale=settings["stiffness_scale"], speedup=settings.get("speedup"),
+                        error_bounds=settings.get("error_bounds", {}), tolerances=settings.get("tolerances", {}),
+                        benchmark=settings.get("benchmark", "")),
+        guard=guard_limits(case, species, v_open, outlet_z - plate_travel),
         gravity=case.gravity, seed=case.seed, geometry=silo, species=species, materials=materials,
         contact_model=case.materials.model, contacts=contacts, pairs=pairs,
         timestep=TimeStep(dt=dt, fraction=case.engine.timestep_fraction, critical_time=t_crit,
@@ -518,6 +526,26 @@ def derive(case: Case) -> RunPlan:
                            sectors=plan.sensors.sectors)})
     plan._meshes = meshes
     return plan
+
+
+def guard_limits(case: Case, species: list, v_open: float, z_lowest: float) -> Guard:
+    """The instability guard's limits (``engine.guard``), SI. The fastest a grain can move in a silo
+    driven by gravity alone is its insertion speed plus the free fall from the top to the lowest
+    point it can reach (the plate's end), plus the plate's own speed: ``speed_factor`` times that
+    is energy from nowhere. Overlaps are measured against the smallest grain (dust included)."""
+    gs, g = case.engine.guard, case.geometry
+    top = g.hopper_height + g.height
+    fall = math.sqrt(INSERTION_SPEED ** 2 + 2.0 * case.gravity * (top - z_lowest))
+    r_min = min(sp.radius for sp in species)
+    margin = gs.escape_margin * 2.0 * case.particles.max_radius
+    planar = isinstance(g, PlanarGeometry)
+    return Guard(enabled=gs.enabled, max_speed=gs.speed_factor * (fall + v_open),
+                 max_overlap=gs.max_overlap * r_min, max_overlap_fraction=gs.max_overlap,
+                 energy_growth=gs.energy_growth,
+                 escape_radius=None if planar else g.half_width + margin,
+                 escape_half_x=g.half_width + margin if planar else None,
+                 escape_half_y=0.5 * g.thickness + margin if planar else None,
+                 escape_z=top + margin)
 
 
 #: depth of a pour's insertion layer at the top of the silo, grain diameters

@@ -274,6 +274,36 @@ class EngineChoice(Frozen):
     ranks: int
 
 
+class Profile(Frozen):
+    """The numerical profile the run used (``siloflow.profiles``): its settings, and for ``fast``
+    the accuracy benchmark's speed-up and 95 % error bounds {quantity: relative bound}."""
+
+    name: Literal["custom", "reference", "fast"] = "custom"
+    timestep_fraction: float = 0.15
+    stiffness_scale: float = 1.0
+    speedup: Optional[float] = None
+    error_bounds: dict[str, float] = {}
+    tolerances: dict[str, float] = {}
+    benchmark: str = ""
+
+
+class Guard(Frozen):
+    """The instability guard's limits (``siloflow.guard``), SI. The engine reports, at each thermo
+    output, the fastest grain's speed, the deepest pair overlap and the grains outside the walls;
+    the run stops when one passes its limit, when the kinetic energy grows by ``energy_growth``
+    in a stage without sources, or when a value is not finite."""
+
+    enabled: bool = True
+    max_speed: float                 # m/s
+    max_overlap: float               # m
+    max_overlap_fraction: float      # of the smallest grain radius
+    energy_growth: float
+    escape_radius: Optional[float] = None     # m from the axis (cylinder, hopper)
+    escape_half_x: Optional[float] = None     # m (planar slab)
+    escape_half_y: Optional[float] = None     # m (planar slab)
+    escape_z: float                  # m: above it a grain has left through the top
+
+
 class RunPlan(Frozen):
     """Everything an engine needs to run a case (SI), computed once by ``derive(case)``."""
 
@@ -281,6 +311,8 @@ class RunPlan(Frozen):
     siloflow_version: str
     name: str
     engine: EngineChoice
+    profile: Profile = Profile()
+    guard: Optional[Guard] = None
     gravity: float                  # m/s2, along -z
     seed: int                       # the case's seed; engines derive theirs from it
     geometry: Silo

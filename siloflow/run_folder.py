@@ -339,6 +339,7 @@ class RunRecord:
     fill_losses: int = 0                       # atoms that left the box during the fill (recorded, < 1 %)
     fill_cache: Optional[dict] = None          # {"key", "hit"}: the settled bed came from (or went to) the cache
     discharge_stop: Optional[dict] = None      # until_steady: why it stopped (steady, empty, max_time), rate error
+    guard: Optional[dict] = None               # the guard stopped the run: signal, stage, step, value, limit
 
     def to_json(self) -> dict:
         return asdict(self)

@@ -27,13 +27,15 @@ RESUME_DECK_NAME = LIGGGHTS_FILES["resume_deck"]
 #: The only commands a siloflow LIGGGHTS deck may contain (no shell, include, python, ...).
 ALLOWED_COMMANDS = frozenset("""
 atom_style atom_modify boundary newton communicate units processors region create_box neighbor
-neigh_modify hard_particles fix pair_style pair_coeff timestep compute variable thermo_style thermo
+neigh_modify hard_particles soft_particles fix pair_style pair_coeff timestep compute variable thermo_style thermo
 thermo_modify dump dump_modify print run unfix label next jump if set group read_restart write_restart
 """.split())
 
 #: LIGGGHTS' particletemplate/sphere refuses spheres smaller than its volume_limit (default 1e-12 m3,
 #: a radius of 62 um) with "Volume expectancy too small"
 LIGGGHTS_VOLUME_LIMIT = 1e-12
+#: Pa: LIGGGHTS 3.8 refuses a smaller youngsModulus in SI units without 'soft_particles yes'
+LIGGGHTS_SOFT_LIMIT = 5e6
 
 
 def check_deck(text: str) -> None:
@@ -142,12 +144,24 @@ def friction_restore(plan: RunPlan, enc: LiggghtsEncoding) -> dict | None:
             "particle_friction": plan.pairs["particle_particle"].friction}
 
 
+def guarded(plan: RunPlan) -> bool:
+    """Does the deck carry the instability guard's signals (``engine.guard.enabled``)?"""
+    return plan.guard is not None and plan.guard.enabled
+
+
+def pair_keywords(plan: RunPlan) -> list[str]:
+    """Keywords of the deck's one pair/gran/local compute (LIGGGHTS allows one): the dumped
+    contacts' and, with the guard, the overlap ``delta``; empty when the deck needs none."""
+    keys = list(CONTACT_KEYWORDS) if plan.outputs.contacts else []
+    return keys + ["delta"] if guarded(plan) else keys
+
+
 def contact_columns(plan: RunPlan, wall: bool = False) -> list[str]:
     """Column names of the pair-contact (or, with ``wall``, particle-wall contact) dump; empty
     when the run writes none."""
     if not plan.outputs.contacts:
         return []
-    return local_columns(WALL_CONTACT_KEYWORDS, wall=True) if wall else local_columns(CONTACT_KEYWORDS)
+    return local_columns(WALL_CONTACT_KEYWORDS, wall=True) if wall else local_columns(pair_keywords(plan))
 
 
 def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, resume: bool = False) -> dict:
@@ -158,7 +172,8 @@ def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, r
     radii = f.radii
     return {
         "name": plan.name, "box": enc.box, "skin": enc.skin,
-        "hard_particles": any(e > 1e9 for e in youngs),
+        # LIGGGHTS refuses moduli outside 5e6-1e9 Pa in SI units unless told (docs/engine_facts.md)
+        "hard_particles": any(e > 1e9 for e in youngs), "soft_particles": any(e < LIGGGHTS_SOFT_LIMIT for e in youngs),
         "properties": _properties(plan, enc, restored=resume),     # a resumed bed is past the fill
         "contact_model": "hertz" if plan.contact_model == "hertz" else "hooke/stiffness",   # hooke: kn, kt here
         "rolling": uses_rolling_friction(plan),
@@ -191,7 +206,8 @@ def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, r
         "thermo_every": plan.outputs.thermo_every, "sample_every": enc.sample_every,
         "sample_repeat": enc.sample_repeat, "sample_freq": enc.sample_freq,
         "dump_every": plan.outputs.dump_every, "vtk": plan.outputs.vtk,
-        "contact_keywords": list(CONTACT_KEYWORDS), "contact_columns": contact_columns(plan),
+        "pair_keywords": pair_keywords(plan), "contact_columns": contact_columns(plan),
+        "delta_column": local_columns(pair_keywords(plan)).index("delta") + 1 if guarded(plan) else 0,
         "wall_contact_keywords": list(WALL_CONTACT_KEYWORDS), "wall_contact_columns": contact_columns(plan, wall=True),
         "empty_mass": plan.discharge.empty_mass,
         "planned": plan.planned_steps(enc.open_steps), "fill_steps": f.steps,
@@ -200,6 +216,7 @@ def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, r
         "opening_speed": plan.opening.speed, "open_steps": enc.open_steps,
         "discharge_max_chunks": plan.discharge.max_chunks, "discharge_chunk_steps": plan.discharge.chunk_steps,
         "steady": plan.discharge.steady, "mobilise": plan.fill.mobilise,
+        "guard": plan.guard if guarded(plan) else None,
     }
 
 

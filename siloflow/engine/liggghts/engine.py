@@ -17,6 +17,7 @@ from ...errors import CaseError, EngineRunError, ReadError, SetupError, Siloflow
 from ...plan import RunPlan
 from ...run_folder import (LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree,
                            read_status, run_state, write_status)
+from ...guard import RunGuard
 from ..base import Engine, ProgressCallback, RunRecord
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
@@ -128,7 +129,8 @@ class LiggghtsEngine(Engine):
         self.check_deck_files(folder, resume)   # defence in depth: only siloflow's commands reach the engine
         cmd = self.command(plan.engine.ranks, deck, log)
         planned = plan.planned_steps(encode(plan).open_steps)
-        state = LogState()
+        state = LogState(guard=RunGuard(plan.guard, min(sp.radius for sp in plan.species))
+                         if plan.guard is not None else None, count_lost=not plan.has_clumps)
         tail: deque[str] = deque(maxlen=25)
         start = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
@@ -182,6 +184,14 @@ class LiggghtsEngine(Engine):
             message = str(os_error(exc, folder / RECORD_NAME))
             write_status(folder, "failed", reason=message)
             raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder, fix=DISK_FIX) from None
+        if state.guard_trip is not None:            # stopped by the guard: its own words
+            t = state.guard_trip
+            message = f"the run was stopped by siloflow's guard ({t.signal}): {t.message}"
+            record.guard = {"signal": t.signal, "stage": t.stage, "step": t.step, "value": t.value, "limit": t.limit}
+            RunFolder(folder).write_record(record)
+            write_status(folder, "failed", reason=message)
+            raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder,
+                                 cause=t.cause, fix=t.fix, log_tail="\n".join(tail))
         if returncode != 0 or state.errors:
             message, cause, fix = diagnose(state.errors, state.warnings, returncode, tuple(tail),
                                            folder=folder, files=(log, screen_name))

@@ -2,6 +2,7 @@
 and turning a failure into a message with its likely cause and fix."""
 from __future__ import annotations
 
+import math
 import re
 import signal
 from dataclasses import dataclass, field
@@ -10,6 +11,7 @@ from typing import Optional
 
 from .deck import LIGGGHTS_VOLUME_LIMIT
 from ...errors import ANSI_ESCAPES
+from ...guard import GuardTrip, RunGuard
 
 _STAGE = re.compile(r"^SILOFLOW_STAGE (\w+) (\d+)\s*$")
 _MARK = re.compile(r"^SILOFLOW_(INSERTED|SETTLED|NOT_SETTLED|DONE)\s*(\S*)\s*$")
@@ -25,6 +27,8 @@ _WARNING = re.compile(r"^(WARNING:.*)$")
 _TIMESTEP = re.compile(r"time-step is .* of (rayleigh|hertz) time", re.I)
 
 STAGE_ORDER = ("fill", "settle", "shrink", "static", "open", "discharge")
+#: thermo columns of a deck with the guard (step ... outlet_count, speed, overlap, escaped)
+THERMO_GUARD_COLUMNS = 11
 
 
 @dataclass
@@ -49,6 +53,9 @@ class LogState:
     errors: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     fatal: bool = False             # the run must be stopped (an error the engine itself does not end on)
+    guard: Optional[RunGuard] = None            # watches the thermo rows (siloflow.guard)
+    count_lost: bool = False                    # spheres: atoms gone without passing the outlet are lost
+    guard_trip: Optional[GuardTrip] = None
 
     def feed(self, line: str) -> bool:
         """Read one line; return True when the progress (step or stage) changed."""
@@ -57,6 +64,8 @@ class LogState:
         if m:
             self.step = int(m.group(1))
             self.atoms = int(m.group(3))
+            if self.guard is not None and self.guard_trip is None:
+                self._watch(line.split())
             return True
         m = _STAGE.match(line)
         if m:
@@ -99,6 +108,26 @@ class LogState:
         elif m and m.group(1) not in self.warnings and len(self.warnings) < 50:
             self.warnings.append(m.group(1).strip())
         return False
+
+    def _watch(self, cols: list[str]) -> None:
+        """Hand one thermo row (the deck's columns: step time atoms ke pe mass_silo outlet_mass
+        outlet_count speed overlap escaped) to the guard; a trip makes the run fatal."""
+        if len(cols) < THERMO_GUARD_COLUMNS:
+            return
+        try:
+            v = [float(c) for c in cols[3:THERMO_GUARD_COLUMNS]]
+        except ValueError:
+            return
+        ke, pe, _, _, out_count, speed, overlap, escaped = v
+        lost = None
+        if self.count_lost and self.inserted is not None and math.isfinite(out_count):
+            lost = int(self.inserted - self.atoms - round(out_count))
+        trip = self.guard.check(self.stage, self.step, ke, pe, speed=speed, overlap=overlap, escaped=escaped,
+                                lost=lost)
+        if trip is not None:
+            self.guard_trip = trip
+            self.errors.append(f"siloflow guard ({trip.signal}): {trip.message}")
+            self.fatal = True
 
     def total_steps(self, planned_all: dict[str, int]) -> int:
         """Upper bound of the run's total steps, given every stage's planned steps.
@@ -198,9 +227,9 @@ _KNOWN = [
     # before MPI_ABORT: on several ranks these errors end in an MPI abort too
     (re.compile(r"Volume expectancy too small", re.I), _volume_diagnosis, None),
     (re.compile(r"minimum angle of mesh element|minumum angle of mesh element|Bad mesh", re.I), _mesh_diagnosis, None),
-    (re.compile(r"youngsModulus <= 1e9", re.I),
-     "a Young's modulus above 1e9 Pa without 'hard_particles yes'",
-     "this is a siloflow bug (it writes hard_particles for such cases): report it with the case file"),
+    (re.compile(r"youngsModulus (<= 1e9|>= 5e6)", re.I),
+     "a Young's modulus above 1e9 Pa without 'hard_particles yes', or below 5e6 Pa without 'soft_particles yes'",
+     "this is a siloflow bug (it writes both flags for such cases): report it with the case file"),
     (re.compile(r"Lost atoms", re.I),
      "particles left the simulation box (through a wall): time step too large or walls too soft",
      "lower engine.timestep_fraction, or raise the wall stiffness"),

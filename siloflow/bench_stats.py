@@ -1,0 +1,227 @@
+"""Statistics of an accuracy-vs-speed benchmark of DEM settings ("candidates") against a reference.
+
+Each candidate is run with several seeds. ``compare`` turns the table of finished runs (columns
+``candidate``, ``seed``, ``wall_s`` in s, one float column per quantity in its SI unit, NaN for not
+measured) into relative errors with confidence intervals and speed-ups; ``recommend`` picks the
+fastest candidate whose 95 % error bound is inside the tolerances; ``pareto_figure`` draws them.
+"""
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+
+def _sample(x) -> np.ndarray:
+    """The finite values of ``x`` as a float array (NaN = not measured, dropped)."""
+    x = np.asarray(x, dtype=float).ravel()
+    return x[~np.isnan(x)]
+
+
+def _moments(x: np.ndarray) -> tuple[int, float, float]:
+    """(n, mean, sample standard deviation); NaN where undefined."""
+    n = len(x)
+    return n, float(x.mean()) if n else math.nan, float(x.std(ddof=1)) if n > 1 else math.nan
+
+
+def _t_half(parts, confidence: float) -> float:
+    """Half-width of the t interval of a sum of variance components ``[(var, dof), ...]``, with
+    the Welch-Satterthwaite degrees of freedom of that sum."""
+    var = sum(v for v, _ in parts)
+    if var == 0.0:
+        return 0.0
+    dof = var ** 2 / sum(v ** 2 / d for v, d in parts if v > 0)
+    return float(stats.t.ppf(0.5 + confidence / 2, dof)) * math.sqrt(var)
+
+
+def difference(ref, cand, confidence: float = 0.95) -> dict:
+    """Relative difference of the means, ``cand_mean / ref_mean - 1``, with a Welch t interval:
+    delta method for the ratio, ``se = sqrt(se_c**2/m_r**2 + m_c**2 se_r**2/m_r**4)``, and the
+    Welch-Satterthwaite dof of these two terms (Welch's dof when the means are equal). NaNs dropped.
+
+    Parameters
+    ----------
+    ref, cand : array_like
+        One value per run of the reference and of the candidate (any unit, the same for both).
+
+    Returns
+    -------
+    dict
+        ``n_ref, n_cand, ref_mean, cand_mean, ref_sd, cand_sd`` (input unit); ``rel_error, ci_lo,
+        ci_hi`` (relative, 0.1 = +10 %); ``bound = max(|ci_lo|, |ci_hi|)`` (inf when undefined);
+        ``resolved`` (the interval excludes 0); ``verdict`` (str).
+    """
+    n_r, m_r, s_r = _moments(_sample(ref))
+    n_c, m_c, s_c = _moments(_sample(cand))
+    out = dict(n_ref=n_r, n_cand=n_c, ref_mean=m_r, cand_mean=m_c, ref_sd=s_r, cand_sd=s_c,
+               rel_error=math.nan, ci_lo=math.nan, ci_hi=math.nan, bound=math.inf, resolved=False)
+    if m_r == 0.0:
+        return dict(out, verdict="reference mean is zero")
+    out["rel_error"] = rel = m_c / m_r - 1.0 if n_r and n_c else math.nan
+    if n_r < 2 or n_c < 2:
+        return dict(out, verdict="not resolved (n < 2)")
+    half = _t_half([(s_c ** 2 / n_c / m_r ** 2, n_c - 1),
+                    (m_c ** 2 * s_r ** 2 / n_r / m_r ** 4, n_r - 1)], confidence)
+    lo, hi = rel - half, rel + half
+    resolved = bool(lo > 0 or hi < 0)
+    verdict = f"{rel:+.1%} [{lo:+.1%}, {hi:+.1%}]" if resolved else "not resolved"
+    return dict(out, ci_lo=lo, ci_hi=hi, bound=max(abs(lo), abs(hi)), resolved=resolved, verdict=verdict)
+
+
+def speedup(ref_wall, cand_wall, confidence: float = 0.95) -> dict:
+    """Speed-up ``mean(ref_wall) / mean(cand_wall)`` with an interval on the log scale:
+    ``se_log = sqrt((se_r/m_r)**2 + (se_c/m_c)**2)``, t quantile with the Welch dof. A side with one
+    run borrows the relative spread of the other; with one run on both sides the interval is NaN.
+
+    Parameters
+    ----------
+    ref_wall, cand_wall : array_like
+        Engine wall times of the reference and of the candidate runs (s); NaNs are dropped.
+
+    Returns
+    -------
+    dict
+        ``speedup, lo, hi`` (dimensionless; > 1: the candidate is faster).
+    """
+    n_r, m_r, s_r = _moments(_sample(ref_wall))
+    n_c, m_c, s_c = _moments(_sample(cand_wall))
+    ratio = m_r / m_c if n_r and n_c and m_c > 0 else math.nan
+    if math.isnan(ratio) or (n_r < 2 and n_c < 2):
+        return dict(speedup=ratio, lo=math.nan, hi=math.nan)
+    cv_r, cv_c = (s_r / m_r if n_r > 1 else s_c / m_c), (s_c / m_c if n_c > 1 else s_r / m_r)
+    dof_r, dof_c = (n_r - 1 if n_r > 1 else n_c - 1), (n_c - 1 if n_c > 1 else n_r - 1)
+    half = _t_half([(cv_r ** 2 / n_r, dof_r), (cv_c ** 2 / n_c, dof_c)], confidence)
+    return dict(speedup=ratio, lo=ratio * math.exp(-half), hi=ratio * math.exp(half))
+
+
+def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidence: float = 0.95) -> pd.DataFrame:
+    """One row per (candidate, quantity): ``difference`` from the reference and ``speedup``.
+
+    Parameters
+    ----------
+    runs : pandas.DataFrame
+        One row per run: ``candidate``, ``seed``, ``wall_s`` (s), the quantities (SI; NaN = not measured).
+    reference : str
+        The candidate compared with; its own rows have rel_error 0, bound 0, speed-up 1 and
+        verdict "the reference". ValueError if it has no runs.
+    quantities : list of str
+        Columns of ``runs`` to compare.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``candidate, quantity``, the keys of ``difference``, ``speedup, speedup_lo,
+        speedup_hi`` (dimensionless) and ``wall_mean_s`` (s); the reference first.
+    """
+    missing = [c for c in ["candidate", "wall_s", *quantities] if c not in runs.columns]
+    if missing:
+        raise ValueError(f"runs has no column(s) {missing}")
+    groups = dict(list(runs.groupby("candidate", sort=False)))
+    if reference not in groups:
+        raise ValueError(f"the reference {reference!r} has no runs")
+    ref = groups[reference]
+    rows = []
+    for name in [reference, *(c for c in groups if c != reference)]:
+        grp = groups[name]
+        sp = (dict(speedup=1.0, lo=1.0, hi=1.0) if name == reference
+              else speedup(ref["wall_s"], grp["wall_s"], confidence))
+        for q in quantities:
+            d = difference(ref[q], grp[q], confidence)
+            if name == reference and d["n_ref"] > 0 and d["ref_mean"] != 0:
+                d.update(rel_error=0.0, ci_lo=0.0, ci_hi=0.0, bound=0.0, resolved=False,
+                         verdict="the reference")
+            rows.append(dict(candidate=name, quantity=q, **d, speedup=sp["speedup"], speedup_lo=sp["lo"],
+                             speedup_hi=sp["hi"], wall_mean_s=float(grp["wall_s"].mean())))
+    return pd.DataFrame(rows)
+
+
+def recommend(table: pd.DataFrame, tolerances: dict[str, float]) -> dict | None:
+    """The fastest candidate whose 95 % error bound is within the tolerance for every quantity.
+
+    Parameters
+    ----------
+    table : pandas.DataFrame
+        Output of ``compare``.
+    tolerances : dict
+        ``{quantity: tolerance}``, relative (0.05 = 5 %); a quantity without a row or runs
+        for a candidate disqualifies it.
+
+    Returns
+    -------
+    dict or None
+        ``candidate, speedup, speedup_lo, speedup_hi``, ``bounds``, ``rel_errors`` and
+        ``tolerances`` (per quantity, relative); None when no candidate qualifies.
+    """
+    ok = []
+    for name, grp in table.groupby("candidate", sort=False):
+        by_q = grp.set_index("quantity")
+        if all(q in by_q.index and by_q.at[q, "bound"] <= tol for q, tol in tolerances.items()):
+            ok.append((name, grp.iloc[0], by_q))
+    if not ok:
+        return None
+    name, row, by_q = max(ok, key=lambda c: np.nan_to_num(c[1]["speedup"], nan=-np.inf))  # first of ties
+    return dict(candidate=name, speedup=float(row["speedup"]), speedup_lo=float(row["speedup_lo"]),
+                speedup_hi=float(row["speedup_hi"]),
+                bounds={q: float(by_q.at[q, "bound"]) for q in tolerances},
+                rel_errors={q: float(by_q.at[q, "rel_error"]) for q in tolerances},
+                tolerances={q: float(t) for q, t in tolerances.items()})
+
+
+def best_bounds(table: pd.DataFrame, quantity: str) -> pd.DataFrame:
+    """For one quantity, the candidates sorted by speed-up (fastest first) with their relative
+    error, interval and 95 % bound (relative) and verdict."""
+    rows = table[table["quantity"] == quantity]
+    if rows.empty:
+        raise ValueError(f"no rows for quantity {quantity!r}")
+    cols = ["candidate", "speedup", "speedup_lo", "speedup_hi", "rel_error", "ci_lo", "ci_hi", "bound", "verdict"]
+    return rows[cols].sort_values("speedup", ascending=False, kind="stable").reset_index(drop=True)
+
+
+def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None) -> None:
+    """Relative error (%) against speed-up over the reference (log axis), one panel per quantity:
+    error bars are the intervals, filled markers resolved differences, the shaded band +/- the
+    relative tolerance where given. Written atomically to ``path`` (format from the suffix)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure          # no pyplot: no global figure state
+    from matplotlib.ticker import LogFormatter
+
+    tolerances = tolerances or {}
+    path = Path(path)
+    quantities = list(dict.fromkeys(table["quantity"]))
+    ncols = min(3, max(1, len(quantities)))
+    nrows = max(1, -(-len(quantities) // ncols))
+    fig = Figure(figsize=(4.8 * ncols, 3.8 * nrows))
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax, q in zip(axes, quantities):
+        rows = table[(table["quantity"] == q) & table["rel_error"].notna() & table["speedup"].notna()]
+        if q in tolerances:
+            ax.axhspan(-100 * tolerances[q], 100 * tolerances[q], color="tab:green", alpha=0.15, lw=0)
+        ax.axhline(0.0, color="k", lw=0.6)
+        for r in rows.itertuples():
+            x, y = r.speedup, 100 * r.rel_error
+            xerr = [[np.nan_to_num(x - r.speedup_lo)], [np.nan_to_num(r.speedup_hi - x)]]
+            yerr = [[np.nan_to_num(y - 100 * r.ci_lo)], [np.nan_to_num(100 * r.ci_hi - y)]]
+            ax.errorbar(x, y, xerr=xerr, yerr=yerr, fmt="o", color="tab:blue", capsize=2, lw=0.8,
+                        mfc="tab:blue" if r.resolved else "none")
+            ax.annotate(str(r.candidate), (x, y), xytext=(3, 3), textcoords="offset points", fontsize=7)
+        ax.set_xscale("log")
+        ax.xaxis.set_major_formatter(LogFormatter(labelOnlyBase=False))   # 2, not 2x10^0
+        ax.xaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
+        ax.set(title=q, xlabel="speed-up over the reference", ylabel="relative error (%)")
+    for ax in axes[len(quantities):]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fig.savefig(fh, format=path.suffix[1:].lower() or "png", dpi=130)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
