@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust golden paper-a-quick paper-b-quick paper-a paper-b clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-stability golden paper-a-quick paper-b-quick paper-a paper-b clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -73,6 +73,26 @@ bench-skip: install
 # twelve runs of the small test silo, resumable (benchmarks/results/fill_protocols/)
 bench-fill: install
 	$(PY) benchmarks/fill_protocols.py
+
+# run time against error (issue 16): siloflow bench on benchmarks/cases/accuracy_small.yaml (paper B's contact
+# law, 1000 grains): 10 candidates x 3 seeds against the reference (dt = t_c/50, full stiffness), then the
+# recommended profile with 3 new seeds; resumable (runs/bench_accuracy; about 1.5 h on 2 cores). The tables,
+# figure and recommendation go to benchmarks/results/accuracy/, the recommendation to siloflow/fast_profile.json
+ACCURACY = runs/bench_accuracy
+bench-accuracy: install
+	$(VENV)/bin/siloflow bench benchmarks/cases/accuracy_small.yaml -o $(ACCURACY) --seeds 3 --validate 3
+	mkdir -p benchmarks/results/accuracy
+	cp $(ACCURACY)/runs.csv $(ACCURACY)/comparison.csv $(ACCURACY)/pareto.png $(ACCURACY)/recommended_profile.json benchmarks/results/accuracy/
+	$(PY) benchmarks/publish_fast_profile.py
+
+# the numerical-stability envelope of the same case (siloflow stability, two seeds; resumable in runs/)
+STABILITY = runs/bench_stability
+bench-stability: install
+	$(VENV)/bin/siloflow stability benchmarks/cases/accuracy_small.yaml -o $(STABILITY)-s100 --seed 100
+	$(VENV)/bin/siloflow stability benchmarks/cases/accuracy_small.yaml -o $(STABILITY)-s101 --seed 101
+	mkdir -p benchmarks/results/stability
+	for s in 100 101; do for f in envelope.csv edges.json envelope.png; do \
+	  cp $(STABILITY)-s$$s/$$f benchmarks/results/stability/s$$s-$$f; done; done
 
 # rewrite tests/golden/ (the decks every shipped case renders) after a change that alters decks on
 # purpose; commit them with the change (tests/test_golden_decks.py compares)

@@ -218,6 +218,7 @@ def analyse(folder, measured_pressure=None) -> dict:
         "bands": table.to_dict(orient="records"),
         "pressure_statistics": pressure_stats,
         "engine_wall_time_s": run.record.wall_time,
+        "numerical_profile": run.plan.profile.model_dump(mode="json"),
         **({"discharge_stop": run.record.discharge_stop} if run.record.discharge_stop else {}),
         **({"fill_cache": run.record.fill_cache} if run.record.fill_cache else {}),
         "engine_warnings": run.record.warnings,
@@ -325,6 +326,19 @@ def janssen_lines(j: dict) -> list[str]:
             f"  - fitted values, not to be used as material data: {values}", hyd]
 
 
+def profile_line(p: dict | None) -> str:
+    """The report's line on the numerical profile (engine.profile) and the error bounds it carries."""
+    if not p:
+        return "- numerical profile: not recorded (rendered by an older siloflow)"
+    line = (f"- numerical profile {p['name']}: time step {_fmt(p['timestep_fraction'], 'g')} of the critical time, "
+            f"stiffness x {_fmt(p['stiffness_scale'], 'g')}")
+    if p["name"] == "fast":
+        bounds = ", ".join(f"{q} {b:.1%}" for q, b in (p.get("error_bounds") or {}).items())
+        line += (f"; 95 % error bounds against the papers' settings: {bounds} (siloflow bench, {p.get('benchmark')})"
+                 if bounds else "; its error bounds are not measured yet")
+    return line
+
+
 def report_text(summary: dict, run: RunOutputs) -> str:
     """A short human-readable report of a run's results (Markdown)."""
     fb, fr = summary["force_balance"], summary["flow_rate"]
@@ -340,6 +354,7 @@ def report_text(summary: dict, run: RunOutputs) -> str:
              f"- steady flow rate Wf = {_fmt(fr['rate'] * 1000)} +/- {_fmt(fr['stderr'] * 1000, '.2g')} g/s "
              f"(t = {_fmt(fr['t_start'], '.3g')}-{_fmt(fr['t_end'], '.3g')} s, r2 {_fmt(fr['r2'], '.4f')})",
              f"- discharged {_fmt(summary['discharged_mass_kg'] * 1000)} g; {_fmt(summary['mass_in_silo_end_kg'] * 1000)} g left"]
+    lines += [profile_line(summary.get("numerical_profile"))]
     steady = summary.get("steady_window_detected")
     if steady:
         lines += [f"- steady discharge detected: t = {_fmt(steady['t_start'], '.3g')}-{_fmt(steady['t_end'], '.3g')} s, "

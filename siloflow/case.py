@@ -565,7 +565,7 @@ class Guard(Strict):
                                "from nowhere")
     energy_growth: Real = Field(10.0, gt=1.0, le=1e6, allow_inf_nan=False,
                                 description="kinetic energy growth (factor) that trips the guard in a stage "
-                                "without sources (settling, static), once it is above 1e-3 of the "
+                                "without sources (settling, static), once it is above 1 % of the "
                                 "potential energy")
     escape_margin: Real = Field(1.0, ge=0.1, le=100, allow_inf_nan=False,
                                 description="grain diameters beyond the walls at which a grain counts "

@@ -111,6 +111,21 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
             out.print(line)
 
 
+def profile_note(p) -> str:
+    """One line on the numerical profile a run uses and the error bounds that come with it."""
+    what = f"profile {p.name}: time step {p.timestep_fraction:g} of the critical time, stiffness x {p.stiffness_scale:g}"
+    if p.name == "fast":
+        if p.error_bounds:
+            bounds = ", ".join(f"{q} within {b:.1%}" for q, b in p.error_bounds.items())
+            what += f"; against the reference, 95 % bounds: {bounds}"
+            what += f" ({p.speedup:.3g}x faster on {p.benchmark})" if p.speedup else ""
+        else:
+            what += "; its error bounds are not measured yet (siloflow bench)"
+    elif p.name == "reference":
+        what += " (the papers' settings)"
+    return what
+
+
 def clump_note(d) -> str:
     """A clump shape's union volume and mass (empty without clumps)."""
     from .contact_physics import sphere_volume
@@ -159,7 +174,10 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         allow_large_output: bool = typer.Option(False, help="run even if the estimated output exceeds the free disk"),
         cache: Optional[Path] = typer.Option(None, "--cache", envvar="SILOFLOW_CACHE",
                                              help="fill cache folder: start from a cached settled bed of the same "
-                                                  "fill, or cache this run's")) -> None:
+                                                  "fill, or cache this run's"),
+        profile: Optional[str] = typer.Option(None, "--profile", help="numerical profile for this run, over the "
+                                              "case's: reference (the papers': dt = t_c/50, full stiffness), fast "
+                                              "(the accuracy benchmark's, with its error bounds) or custom")) -> None:
     """Render, run LIGGGHTS with a progress bar, check the run, and compute first results."""
     from .derived import check_run_length
     from .disk_estimate import check_disk_space
@@ -174,6 +192,11 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         _fail(SiloflowError("give a case file and -o/--output (or --resume DIR)"))
     try:
         case = load_case(case_file)
+        if profile is not None:
+            from .profiles import with_profile
+            case, dropped = with_profile(case, profile)
+            if dropped:
+                out.print(f"--profile {profile} replaces the case's {', '.join(dropped)}")
         engine = get_engine(case.engine.name, executable=liggghts)
         check_case(case, engine)
         engine.command(case.engine.ranks)  # binary and launcher present before anything is written
@@ -185,6 +208,7 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
     _warn(derived)
+    out.print(profile_note(derived.profile))
     out.print(f"run folder: {folder} (expected output up to {sizes['total'] / 1e6:.0f} MB, "
               f"{sizes['frames']} dump frames)")
     if dust_note(derived):
@@ -482,11 +506,13 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
           static_tolerance: float = typer.Option(0.05, "--static-tolerance", min=0.0, help="static band pressure: "
                                                  "largest relative 95 % error bound"),
           conclude_only: bool = typer.Option(False, "--conclude", help="run nothing: tables and figure from the "
-                                             "runs already in the folder")) -> None:
+                                             "runs already in the folder"),
+          validate_seeds: int = typer.Option(0, "--validate", min=0, help="then run the recommended profile with "
+                                             "this many new seeds and check its errors stay in the bounds")) -> None:
     """Run time against error: each candidate setting (time step, stiffness, ranks) over --seeds fills, against
     the reference (dt = t_c/50, full stiffness); errors with 95 % intervals, a Pareto figure and the fastest
     profile within the tolerances."""
-    from .accuracy_bench import CANDIDATES, REFERENCE, conclude, run_bench
+    from .accuracy_bench import CANDIDATES, REFERENCE, conclude, run_bench, validate, validation
     known = {c.name: c for c in CANDIDATES}
     chosen = list(CANDIDATES)
     if candidates:
@@ -499,12 +525,18 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
     try:
         if not conclude_only:
             run_bench(case_file, output, seeds, chosen,
-                      report=lambda text: err.print(printable(text), markup=False, highlight=False))
-        table, rec = conclude(output, {"flow_rate": flow_tolerance, "static_pressure": static_tolerance})
+                      report=_note)
+        tolerances = {"flow_rate": flow_tolerance, "static_pressure": static_tolerance}
+        table, rec = conclude(output, tolerances)
+        checks = []
+        if rec is not None and validate_seeds and not conclude_only and rec["candidate"] != REFERENCE.name:
+            validate(case_file, output, rec["candidate"], validate_seeds,
+                     report=_note)
+            table, rec = conclude(output, tolerances)
+        if rec is not None:
+            checks = validation(table, rec)
     except KeyboardInterrupt:
-        err.print(f"[yellow]interrupted: finished runs are in {output / 'runs.csv'}; run the same command to "
-                  "go on[/yellow]")
-        raise typer.Exit(130)
+        _study_interrupted(output)
     except SiloflowError as exc:
         _fail(exc)
     except ValueError as exc:
@@ -517,11 +549,84 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
                   "quantities); see comparison.csv")
     else:
         bounds = ", ".join(f"{q} <= {b:.1%}" for q, b in rec["error_bounds"].items())
+        if not rec.get("meets_tolerances", True):
+            out.print("no candidate is proven within the tolerances at 95 % confidence with these runs (more "
+                      "seeds narrow the intervals: --seeds N resumes); the fastest without a resolved error follows, "
+                      "with the bounds it can prove")
         out.print(printable(f"recommended fast profile: {rec['candidate']} (timestep_fraction "
                             f"{rec['timestep_fraction']:g}, stiffness_scale {rec['stiffness_scale']:g}), "
                             f"{rec['speedup']:.3g}x faster than the reference; 95 % error bounds: {bounds}"),
                   markup=False, highlight=False)
+    for c in checks:
+        out.print(printable(f"new seeds ({c['n']} runs): {c['quantity']} error {c['rel_error']:+.1%} [{c['ci_lo']:+.1%}, "
+                            f"{c['ci_hi']:+.1%}]: {'inside' if c['inside'] else 'OUTSIDE'} the bound {c['bound']:.1%}"),
+                  markup=False, highlight=False)
     out.print(f"tables and figure: {output} (comparison.csv, pareto.png, recommended_profile.json)")
+
+
+def _note(text: str) -> None:
+    """One line of a study's progress (engine output stripped of escapes), on stderr."""
+    err.print(printable(text), markup=False, highlight=False)
+
+
+def _study_interrupted(output: Path) -> None:
+    err.print(f"[yellow]interrupted: the finished runs are in {output / 'runs.csv'}; the same command goes "
+              "on from there[/yellow]")
+    raise typer.Exit(130)
+
+
+def _numbers(text: str, option: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        _fail(SiloflowError(f"{option}: '{text}' is not a comma-separated list of numbers"))
+    if not values or not all(0 < v and v == v and v != float("inf") for v in values):
+        _fail(SiloflowError(f"{option}: every value must be a positive finite number, not '{text}'"))
+    return values
+
+
+@app.command()
+def stability(case_file: Path = typer.Argument(..., help="YAML case file"),
+              output: Path = typer.Option(..., "-o", "--output", help="study folder: runs/, runs.csv, envelope.csv, "
+                                          "edges.json, envelope.png (a second call resumes)"),
+              fractions: str = typer.Option("0.05,0.1,0.2,0.3,0.5,0.7,1.0", "--fractions",
+                                            help="time-step fractions of the critical time"),
+              stiffness: str = typer.Option("1,0.01,0.0001", "--stiffness", help="stiffness scales"),
+              dust: Optional[str] = typer.Option(None, "--dust", help="dust density scales (a case with dust)"),
+              seed: Optional[int] = typer.Option(None, "--seed", help="seed of every run (default: the case's)"),
+              burst: float = typer.Option(0.1, "--burst", min=1e-3, max=10.0, help="discharge burst, s")) -> None:
+    """The numerical-stability envelope: short runs (fill impacts, settled bed, a discharge burst) over time-step
+    fractions x stiffness scales with the instability guard on; the largest safe time step and its margin."""
+    from .stability import conclude, run_envelope
+    fr = _numbers(fractions, "--fractions")
+    if max(fr) > 1.0 or min(fr) < 1e-3:
+        _fail(SiloflowError(f"--fractions: time-step fractions must lie in [0.001, 1], not '{fractions}'"))
+    st = _numbers(stiffness, "--stiffness")
+    if max(st) > 1.0 or min(st) < 1e-8:
+        _fail(SiloflowError(f"--stiffness: stiffness scales must lie in [1e-8, 1], not '{stiffness}'"))
+    ds = _numbers(dust, "--dust") if dust else None
+    if ds and min(ds) < 1.0:
+        _fail(SiloflowError(f"--dust: dust density scales must be >= 1, not '{dust}'"))
+    signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        rows = run_envelope(case_file, output, fr, st, ds, seed, burst,
+                            report=_note)
+        edges = conclude(output, rows)
+    except KeyboardInterrupt:
+        _study_interrupted(output)
+    except SiloflowError as exc:
+        _fail(exc)
+    for e in edges:
+        what = f"stiffness x {e['stiffness_scale']:g}" + (f", dust x {e['dust_scale']:g}" if e["dust_scale"] else "")
+        if e["safe"] != e["safe"]:
+            line = f"{what}: no stable time step among {fractions}"
+        elif e["unstable"] != e["unstable"]:
+            line = f"{what}: stable up to {e['safe']:g} t_c (no unstable point: the edge lies beyond the grid)"
+        else:
+            line = (f"{what}: largest safe time step {e['safe']:g} t_c; unstable from {e['unstable']:g} t_c "
+                    f"({e['signal']}): margin x{e['margin']:.2g}")
+        out.print(printable(line), markup=False, highlight=False)
+    out.print(f"envelope: {output} (envelope.csv, edges.json, envelope.png)")
 
 
 def _sweep_table_runs(table_file: Path) -> list[Path]:

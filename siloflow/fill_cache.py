@@ -36,7 +36,8 @@ from .errors import SetupError
 
 #: plan fields that come after the fill (or only name or describe it): not in the key
 AFTER_FILL = ("name", "static_steps", "opening", "discharge", "outlet", "walls", "sensors", "outputs",
-              "analysis", "design", "warnings", "run_length_fields", "plan_version")
+              "analysis", "design", "warnings", "run_length_fields", "plan_version",
+              "guard", "profile")   # the guard watches a fill, the profile names it: neither makes another bed
 #: wall roles that make up a flat floor (the bed rests on the closed plate either way)
 FLOOR_ROLES = ("bottom", "plate")
 ENTRY_NAME = "entry.json"

@@ -97,3 +97,22 @@ def effective_case(case: Case) -> Case:
                           f"(stiffness x {scale:g}): {msg}") for field, msg in exc.problems]) from None
     # the effective case keeps the profile's name (the plan records it); its settings are now explicit
     return out.model_copy(update={"engine": out.engine.model_copy(update={"profile": s["profile"]})})
+
+
+def with_profile(case: Case, name: str) -> tuple[Case, list[str]]:
+    """The case run with the profile ``name`` (``siloflow run --profile``): a profile other than
+    custom replaces the case's ``engine.timestep_fraction`` and ``engine.stiffness_scale``; returns
+    the case and the fields it replaced. An unknown name is a ``CaseError`` naming the option."""
+    from .case import PROFILE_NAMES
+    from .case_file import case_from_dict
+    if name not in PROFILE_NAMES:
+        raise CaseError([("--profile", f"'{name}' is not a profile; choose one of {', '.join(PROFILE_NAMES)}")])
+    data = case.model_dump(mode="json")
+    dropped = []
+    if name != "custom":
+        for f in ("timestep_fraction", "stiffness_scale"):
+            if data["engine"].get(f) is not None:
+                dropped.append(f"engine.{f}")
+                data["engine"][f] = None
+    data["engine"]["profile"] = name
+    return case_from_dict(data, f"the case with --profile {name}"), dropped

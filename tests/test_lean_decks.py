@@ -36,15 +36,18 @@ def commands(text: str) -> set[str]:
     return out
 
 
-#: what each result adds to the flow-rate deck, as (command, style) pairs
+#: what each result adds to the flow-rate deck, as (command, style) pairs; the one pair/gran/local
+#: compute is in every deck with the guard (its overlaps), and the contact results widen its keywords
+CONTACT_RESULTS = ("coordination", "force_chains", "coarse_graining")
+GUARD_PAIRS = "compute         contacts all pair/gran/local delta"
 ADDS = {
     "force_balance": {"fix mesh/surface/stress", "fix ave/time wall_forces"},
     "wall_pressure": {"fix mesh/surface/stress", "fix ave/time wall_forces"},
     "porosity": {"dump custom"},
     "free_surface": {"dump custom"},
-    "coordination": {"dump custom", "compute pair/gran/local", "dump local", "compute wall/gran/local"},
-    "force_chains": {"dump custom", "compute pair/gran/local", "dump local", "compute wall/gran/local"},
-    "coarse_graining": {"dump custom", "compute pair/gran/local", "dump local", "compute wall/gran/local"},
+    "coordination": {"dump custom", "dump local", "compute wall/gran/local"},
+    "force_chains": {"dump custom", "dump local", "compute wall/gran/local"},
+    "coarse_graining": {"dump custom", "dump local", "compute wall/gran/local"},
     "vtk": {"dump custom", "dump custom/vtk"},
 }
 
@@ -53,7 +56,8 @@ def test_flow_rate_alone_is_the_leanest_deck(quick_dict):
     plan, text = deck(quick_dict, ["flow_rate"])
     assert [w.name for w in plan.walls] == ["wall", "bottom", "plate", "outlet"]      # one plain side wall
     assert "mesh/surface/stress" not in text and "ave/time 1" not in text.replace("flow all ave/time", "")
-    assert "wall_forces" not in text and "dump " not in text and "pair/gran/local" not in text
+    assert "wall_forces" not in text and "dump " not in text
+    assert [ln for ln in text.splitlines() if "pair/gran/local" in ln and not ln.startswith("#")] == [GUARD_PAIRS]     # the guard's only
     assert "fix             flow all ave/time" in text and "massflow/mesh" in text      # the flow rate itself
     full_plan, full = deck(quick_dict, None, dump_interval=0.1, vtk=True)
     assert len(text.splitlines()) < len(full.splitlines())
@@ -67,6 +71,11 @@ def test_each_result_adds_the_lines_it_needs(quick_dict, result):
     plan, text = deck(quick_dict, ["flow_rate", result])
     added = commands(text) - commands(lean)
     assert added == ADDS[result], f"{result} adds {sorted(added)}"
+    pairs = [ln for ln in text.splitlines() if "pair/gran/local" in ln and not ln.startswith("#")]
+    if result in CONTACT_RESULTS:      # the dumped contacts' keywords, and the guard's delta last
+        assert pairs == ["compute         contacts all pair/gran/local pos id force force_normal delta"]
+    else:
+        assert pairs == [GUARD_PAIRS]
     if result == "wall_pressure":
         assert sum(1 for w in plan.walls if w.role == "band") == 6 * 4           # bands x sectors
     else:
@@ -94,3 +103,11 @@ def test_a_result_listed_twice_or_unknown_is_refused(quick_dict):
         data["outputs"]["results"] = bad
         with pytest.raises(CaseError, match="outputs.results"):
             case_from_dict(data)
+
+
+def test_without_the_guard_the_leanest_deck_has_no_contact_compute(quick_dict):
+    data = copy.deepcopy(quick_dict)
+    data.setdefault("engine", {})["guard"] = {"enabled": False}
+    _, text = deck(data, ["flow_rate"])
+    assert "pair/gran/local" not in text and "guard_" not in text
+    assert "thermo_style    custom step time atoms c_ke c_pe c_mass_silo f_massflow[1] f_massflow[2]\n" in text

@@ -1,0 +1,193 @@
+"""The numerical-stability envelope of a case (``siloflow stability``): short runs over a grid of
+time-step fractions x stiffness scales (x dust density scales where the case has dust), each
+through the fill's impacts, a settled bed and a burst of discharge, with the instability guard on
+(``siloflow.guard``: speed, overlap, escapes, energy growth, NaN) and the engine's own failures.
+
+Each point is ``stable`` (the run completed), ``unstable`` (the guard or the engine stopped it for an
+instability: the signal is recorded) or ``inconclusive`` (it failed for another reason). Every run
+also reports the largest overlap and speed it reached against the guard's limits, so a stable
+point shows how near the edge it ran. Resumable through ``siloflow.run_table``.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import math
+import re
+from pathlib import Path
+from typing import Callable, Optional
+
+FRACTIONS = (0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 1.0)
+STIFFNESS = (1.0, 1e-2, 1e-4)
+#: kinetic/potential energy at which a burst's bed counts as settled enough to go on
+BURST_SETTLE_RATIO = 1e-3
+#: failures that are instabilities, by what the failure says (besides the guard's own)
+_UNSTABLE = [("escape", re.compile(r"left the box|Lost atoms|without passing the outlet|through a wall", re.I)),
+             ("timestep_check", re.compile(r"time-step is .* of (rayleigh|hertz)", re.I)),
+             ("crash", re.compile(r"SIGSEGV|segmentation", re.I))]
+_GUARD = re.compile(r"siloflow's guard \((\w+)\)")
+
+
+def burst_case(base: dict, fraction: float, stiffness: float, seed: int, burst: float,
+               dust_scale: Optional[float] = None) -> dict:
+    """The case fields of one envelope point: the case at this time-step fraction and stiffness,
+    the settling capped and loose, a short static window, ``burst`` s of discharge, the flow rate
+    its only result (the leanest deck), the guard on with the case's limits."""
+    data = copy.deepcopy(base)
+    engine = {k: v for k, v in data.get("engine", {}).items() if k not in ("profile", "timestep_fraction",
+                                                                           "stiffness_scale")}
+    guard = {**engine.get("guard", {}), "enabled": True}
+    engine.update(profile="custom", timestep_fraction=fraction, stiffness_scale=stiffness, guard=guard)
+    settle = dict(data["fill"].get("settle", {}))
+    interval = settle.get("check_interval", 0.02)
+    settle.update(ke_pe_ratio=max(settle.get("ke_pe_ratio", 1e-6), BURST_SETTLE_RATIO),
+                  max_time=min(settle.get("max_time", 1.0), 10 * interval))
+    data["fill"] = {**data["fill"], "settle": settle}
+    data["discharge"] = {k: v for k, v in data["discharge"].items() if k in ("opening", "empty_fraction")}
+    data["discharge"]["duration"] = burst
+    sample = min(data.get("outputs", {}).get("sample_interval", 0.01), burst / 4)
+    data["outputs"] = {"results": ["flow_rate"], "sample_interval": sample, "figures": False}
+    data["fill"]["settle"]["static_window"] = max(settle.get("static_window", 0.0), 2.5 * sample)
+    if dust_scale is not None:
+        data["particles"]["dust"] = {**data["particles"]["dust"], "density_scale": dust_scale}
+    tag = f"dt{fraction:g}-E{stiffness:g}" + (f"-dust{dust_scale:g}" if dust_scale is not None else "")
+    data.update(engine=engine, seed=seed, name=f"{base['name']}-{tag}-s{seed}")
+    return data
+
+
+def classify(reason: str) -> tuple[str, str]:
+    """(state, signal) of a failed point from its failure message."""
+    m = _GUARD.search(reason)
+    if m:
+        return "unstable", m.group(1)
+    for signal, pattern in _UNSTABLE:
+        if pattern.search(reason):
+            return "unstable", signal
+    return "inconclusive", ""
+
+
+def peaks(folder: Path) -> dict:
+    """The largest speed (m/s) and pair overlap (fraction of the smallest radius) a run's thermo rows
+    reached, each against the guard's limit (``speed_ratio``, ``overlap_ratio``: 1 = at the limit)."""
+    from .engine.liggghts.log import THERMO_GUARD_COLUMNS
+    from .run_folder import RunFolder
+    nan = float("nan")
+    out = {"max_speed": nan, "max_overlap_fraction": nan, "speed_ratio": nan, "overlap_ratio": nan}
+    try:
+        plan = RunFolder(folder).plan
+        text = (Path(folder) / "log.liggghts").read_text(errors="replace")
+    except Exception:                       # a run that never started has nothing to read
+        return out
+    speed = overlap = -math.inf
+    for line in text.splitlines():
+        cols = line.split()
+        if len(cols) == THERMO_GUARD_COLUMNS and cols[0].isdigit():
+            try:
+                speed, overlap = max(speed, float(cols[8])), max(overlap, float(cols[9]))
+            except ValueError:
+                continue
+    g, r_min = plan.guard, min(sp.radius for sp in plan.species)
+    if g is None or not math.isfinite(speed):
+        return out
+    overlap = max(overlap, 0.0)
+    return {"max_speed": speed, "max_overlap_fraction": overlap / r_min, "speed_ratio": speed / g.max_speed,
+            "overlap_ratio": overlap / g.max_overlap}
+
+
+def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIFFNESS, dust_scales=None,
+                 seed: Optional[int] = None, burst: float = 0.1,
+                 report: Callable[[str], None] = lambda s: None) -> list[dict]:
+    """Run every grid point not yet in ``out/runs.csv``; return all rows."""
+    from .case_file import case_from_dict, parse_case_yaml, read_case_bytes
+    from .run_table import PlannedRun, engine_wall_time, run_missing
+    base = parse_case_yaml(read_case_bytes(case_file), str(case_file))
+    case = case_from_dict(base, str(case_file))
+    seed = case.seed if seed is None else seed
+    has_dust = getattr(case.particles, "dust", None) is not None
+    dusts = list(dust_scales) if (has_dust and dust_scales) else [None]
+    planned = [PlannedRun(key={"timestep_fraction": f, "stiffness_scale": s, "dust_scale": ds, "seed": seed},
+                          case=burst_case(base, f, s, seed, burst, ds))
+               for ds in dusts for s in sorted(stiffness, reverse=True) for f in sorted(fractions)]
+
+    def measure(folder):
+        return {"signal": "", "wall_s": engine_wall_time(folder), **peaks(folder)}
+
+    def failed(folder, reason):
+        state, signal = classify(reason)
+        return {"signal": signal, "verdict": state, "wall_s": engine_wall_time(folder), **peaks(folder)}
+
+    rows = run_missing(out, planned, measure, failed, report)
+    for r in rows:
+        r["verdict"] = "stable" if r["state"] == "complete" else r.get("verdict") or classify(r["reason"])[0]
+    return rows
+
+
+def safe_edges(rows: list[dict]) -> list[dict]:
+    """Per stiffness (and dust) scale: the largest stable fraction below the smallest unstable one
+    (``safe``), that unstable fraction (``unstable``) and their ratio (``margin``: how far the step
+    can grow from the safe edge before it fails; NaN when no point was unstable)."""
+    import pandas as pd
+    df = pd.DataFrame(rows)
+    out = []
+    for (s, ds), g in df.groupby(["stiffness_scale", df["dust_scale"].fillna(-1)]):
+        unstable = g[g.verdict == "unstable"].timestep_fraction
+        first_bad = float(unstable.min()) if len(unstable) else math.nan
+        ok = g[(g.verdict == "stable") & ((g.timestep_fraction < first_bad) if len(unstable) else True)]
+        safe = float(ok.timestep_fraction.max()) if len(ok) else math.nan
+        out.append({"stiffness_scale": float(s), "dust_scale": None if ds == -1 else float(ds), "safe": safe,
+                    "unstable": first_bad, "margin": first_bad / safe if len(ok) and len(unstable) else math.nan,
+                    "signal": ",".join(sorted(set(g[g.verdict == "unstable"].signal.astype(str))))})
+    return out
+
+
+def conclude(out: Path, rows: list[dict]) -> list[dict]:
+    """``envelope.csv`` (every point), ``edges.json`` (:func:`safe_edges`) and ``envelope.png``."""
+    import pandas as pd
+    from .atomic_files import write_text
+    out = Path(out)
+    edges = safe_edges(rows)
+    write_text(out / "envelope.csv", pd.DataFrame(rows).to_csv(index=False))
+    clean = [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in e.items()} for e in edges]
+    write_text(out / "edges.json", json.dumps(clean, indent=1) + "\n")
+    envelope_figure(pd.DataFrame(rows), edges, out / "envelope.png")
+    return edges
+
+
+def envelope_figure(df, edges: list[dict], path: Path) -> None:
+    """Time-step fraction (x, log) against stiffness scale (y, log): stable points green circles sized by
+    how near the overlap limit they ran, unstable red crosses labelled with their signal, inconclusive
+    grey; the safe edge per stiffness as a bar."""
+    import os
+    import tempfile
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(6.5, 4.2))
+    ax = fig.add_subplot()
+    for verdict, style in (("stable", dict(marker="o", color="tab:green")),
+                           ("unstable", dict(marker="x", color="tab:red")),
+                           ("inconclusive", dict(marker="s", color="0.6"))):
+        d = df[df.verdict == verdict]
+        ax.scatter(d.timestep_fraction, d.stiffness_scale, s=60, label=verdict, **style)
+        if verdict == "unstable":
+            for r in d.itertuples():
+                ax.annotate(str(r.signal), (r.timestep_fraction, r.stiffness_scale), fontsize=7,
+                            xytext=(3, 4), textcoords="offset points")
+    for e in edges:
+        if math.isfinite(e["safe"]):
+            ax.plot([e["safe"]] * 2, [e["stiffness_scale"] / 1.6, e["stiffness_scale"] * 1.6], color="k", lw=2)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("time step / critical time")
+    ax.set_ylabel("stiffness scale")
+    ax.set_title("stability envelope (bar: largest safe time step)")
+    ax.legend(fontsize=8, loc="lower left")
+    fig.tight_layout()
+    fd, tmp = tempfile.mkstemp(suffix=".png", dir=path.parent)
+    os.close(fd)
+    try:
+        fig.savefig(tmp, dpi=120)
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise

@@ -1,0 +1,186 @@
+"""siloflow bench and siloflow stability (issue 16): candidate and burst cases, the resumable run
+table, the metrics read from a run, the envelope's safe edge; and one real envelope on the engine."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+from siloflow import accuracy_bench as ab
+from siloflow import stability as st
+from siloflow.case_file import case_from_dict
+from siloflow.derived import derive
+from siloflow.errors import EngineRunError
+from siloflow.run_table import PlannedRun, read_rows, run_missing
+
+from conftest import ROOT, SMALL
+
+SHIPPED = sorted((ROOT / "decks").glob("*quick*.yaml")) + sorted((ROOT / "tests" / "data").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_candidate_and_burst_cases_of_every_shipped_case_are_valid(path):
+    base = yaml.safe_load(path.read_text())
+    for cand in (ab.REFERENCE, ab.CANDIDATES[1]):
+        data = ab.candidate_case(base, cand, 7)
+        case = case_from_dict(data)
+        assert case.engine.profile == "custom" and case.seed == 7
+        assert case.engine.timestep_fraction == cand.timestep_fraction
+        assert case.engine.stiffness_scale == cand.stiffness_scale
+    burst = case_from_dict(st.burst_case(base, 1.0, 1e-2, 3, 0.05))
+    assert burst.outputs.results == ["flow_rate"] and burst.discharge.duration == 0.05
+    assert burst.engine.guard.enabled and burst.engine.timestep_fraction == 1.0
+    assert burst.fill.settle.max_time <= 10 * burst.fill.settle.check_interval + 1e-12
+
+
+def test_the_bench_reference_is_the_papers_settings():
+    assert (ab.REFERENCE.timestep_fraction, ab.REFERENCE.stiffness_scale) == (0.02, 1.0)
+    assert ab.CANDIDATES[0] is ab.REFERENCE and len({c.name for c in ab.CANDIDATES}) == len(ab.CANDIDATES)
+
+
+def fake_summary(folder: Path, rate=0.01, bands=(500.0, 400.0, 10.0, 0.0), dyn=600.0, phi=0.6, z=5.0, wall=3.0):
+    (folder / "results").mkdir(parents=True)
+    summary = {"engine_wall_time_s": wall, "flow_rate": {"rate": rate},
+               "bands": [{"band": k, "static_pressure": p, "dynamic_max_pressure": dyn} for k, p in enumerate(bands)],
+               "frame_analyses": {"bulk_solid_fraction": phi, "coordination_settled": {"z_mean": z}}}
+    (folder / "results" / "summary.json").write_text(json.dumps(summary))
+
+
+def test_run_metrics_reads_the_quantities_and_skips_unloaded_bands(tmp_path):
+    fake_summary(tmp_path)
+    m = ab.run_metrics(tmp_path)
+    assert m["flow_rate"] == 0.01 and m["wall_s"] == 3.0
+    assert m["static_pressure"] == pytest.approx(450.0)          # 10 Pa is under 5 % of 500: not loaded
+    assert m["dynamic_pressure_max"] == 600.0 and m["solid_fraction"] == 0.6 and m["coordination"] == 5.0
+
+
+def test_a_measurement_that_could_not_be_made_is_nan(tmp_path):
+    fake_summary(tmp_path)
+    s = json.loads((tmp_path / "results" / "summary.json").read_text())
+    s["frame_analyses"]["bulk_solid_fraction"] = {"error": "too shallow"}
+    (tmp_path / "results" / "summary.json").write_text(json.dumps(s))
+    assert math.isnan(ab.run_metrics(tmp_path)["solid_fraction"])
+
+
+def test_the_run_table_resumes_and_keeps_interrupted_folders(tmp_path, monkeypatch):
+    import siloflow.runs
+    calls = []
+
+    def fake_run(case, folder, **kw):
+        calls.append(case.name)
+        Path(folder).mkdir(parents=True)
+        if case.seed == 2:
+            raise EngineRunError("the run was stopped by siloflow's guard (speed): too fast")
+    monkeypatch.setattr(siloflow.runs, "run", fake_run)
+    base = yaml.safe_load(SMALL.read_text())
+    planned = [PlannedRun(key={"seed": s}, case={**base, "name": f"r{s}", "seed": s}) for s in (1, 2, 3)]
+    measure = lambda folder: {"x": 1.0}
+    failed = lambda folder, reason: {"x": float("nan")}
+    (tmp_path / "runs" / "r3").mkdir(parents=True)             # an interrupted run left its folder, no row
+    rows = run_missing(tmp_path, planned, measure, failed)
+    assert calls == ["r1", "r2", "r3"] and [r["state"] for r in rows] == ["complete", "failed", "complete"]
+    assert "guard (speed)" in rows[1]["reason"] and rows[2]["folder"] == "runs/r3-retry1"
+    assert (tmp_path / "runs" / "r3").is_dir()                  # kept as it was
+    assert run_missing(tmp_path, planned, measure, failed) and calls == ["r1", "r2", "r3"]   # nothing again
+    assert len(read_rows(tmp_path)) == 3
+
+
+@pytest.mark.parametrize("reason,verdict,signal", [
+    ("the run was stopped by siloflow's guard (overlap): two grains", "unstable", "overlap"),
+    ("12 of 600 atoms (spheres) left the box during the fill", "unstable", "escape"),
+    ("LIGGGHTS stopped with an error: ERROR: Lost atoms: original 600 current 590", "unstable", "escape"),
+    ("LIGGGHTS was killed by SIGSEGV", "unstable", "crash"),
+    ("the bed did not settle: kinetic/potential energy", "inconclusive", ""),
+])
+def test_failures_are_classified(reason, verdict, signal):
+    assert st.classify(reason) == (verdict, signal)
+
+
+def test_the_safe_edge_is_the_largest_stable_step_below_the_first_unstable():
+    rows = [{"timestep_fraction": f, "stiffness_scale": 1.0, "dust_scale": None, "verdict": v, "signal": s}
+            for f, v, s in ((0.1, "stable", ""), (0.2, "stable", ""), (0.5, "unstable", "speed"),
+                            (0.7, "stable", ""), (1.0, "unstable", "overlap"))]
+    rows += [{"timestep_fraction": 0.1, "stiffness_scale": 0.01, "dust_scale": None, "verdict": "stable", "signal": ""}]
+    edges = {e["stiffness_scale"]: e for e in st.safe_edges(rows)}
+    assert edges[1.0]["safe"] == 0.2 and edges[1.0]["unstable"] == 0.5 and edges[1.0]["margin"] == 2.5
+    assert edges[1.0]["signal"] == "overlap,speed"
+    assert edges[0.01]["safe"] == 0.1 and math.isnan(edges[0.01]["unstable"])
+
+
+def test_conclude_writes_the_table_figure_and_a_recommendation(tmp_path):
+    import numpy as np
+    rng = np.random.default_rng(3)
+    rows = []
+    for cand, (bias, wall) in {"reference": (0.0, 100.0), "E1e-4_dt0.2": (0.002, 1.0), "E1_dt0.1": (0.0, 20.0)}.items():
+        for seed in range(4):
+            rows.append({"candidate": cand, "seed": seed, "state": "complete", "reason": "",
+                         "timestep_fraction": 0.1, "stiffness_scale": 1.0, "ranks": 2,
+                         "wall_s": wall * (1 + 0.02 * rng.standard_normal()),
+                         "flow_rate": 0.01 * (1 + bias + 0.001 * rng.standard_normal()),
+                         "static_pressure": 500 * (1 + 0.002 * rng.standard_normal()),
+                         "dynamic_pressure_max": 600.0, "solid_fraction": 0.6, "coordination": 5.0})
+    rows.append({**rows[-1], "seed": 9, "state": "failed", "reason": "guard", "flow_rate": float("nan")})
+    pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)
+    table, rec = ab.conclude(tmp_path)
+    assert rec["candidate"] == "E1e-4_dt0.2" and rec["speedup"] == pytest.approx(100, rel=0.1)
+    assert set(rec["error_bounds"]) == {"flow_rate", "static_pressure"}
+    assert json.loads((tmp_path / "recommended_profile.json").read_text())["candidate"] == "E1e-4_dt0.2"
+    assert (tmp_path / "pareto.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    written = pd.read_csv(tmp_path / "comparison.csv")
+    assert int(written[written.candidate == "E1_dt0.1"].failed_runs.iloc[0]) == 1
+
+
+@pytest.mark.engine
+def test_the_envelope_flags_dt_tc_unstable_and_its_edge_repeats_with_another_seed(tmp_path):
+    """The small silo (400 grains, one rank) at 0.1 and 1.0 of the critical time: 1.0 is unstable
+    (velocity Verlet diverges above 0.64 contact times), 0.1 stable, with two seeds."""
+    base = yaml.safe_load(SMALL.read_text())
+    base["fill"]["count"] = 400
+    base["engine"] = {"ranks": 1}
+    case_file = tmp_path / "tiny.yaml"
+    case_file.write_text(yaml.safe_dump(base))
+    edges = []
+    for seed in (11, 12):
+        rows = st.run_envelope(case_file, tmp_path / f"env{seed}", fractions=(0.1, 1.0), stiffness=(1.0,),
+                               seed=seed, burst=0.05)
+        verdicts = {r["timestep_fraction"]: r["verdict"] for r in rows}
+        assert verdicts == {0.1: "stable", 1.0: "unstable"}, rows
+        stable = next(r for r in rows if r["verdict"] == "stable")
+        assert 0 < stable["overlap_ratio"] < 1 and 0 < stable["speed_ratio"] < 1     # ran inside the limits
+        edges.append(st.conclude(tmp_path / f"env{seed}", rows)[0])
+        assert (tmp_path / f"env{seed}" / "envelope.png").is_file()
+    assert edges[0]["safe"] == edges[1]["safe"] == 0.1 and edges[0]["unstable"] == edges[1]["unstable"] == 1.0
+
+
+def test_validation_says_whether_new_seeds_stay_in_the_bounds():
+    table = pd.DataFrame([{"candidate": "fast" + ab.VALIDATION, "quantity": "flow_rate", "rel_error": 0.01,
+                           "ci_lo": -0.01, "ci_hi": 0.03, "n_cand": 3},
+                          {"candidate": "fast" + ab.VALIDATION, "quantity": "static_pressure", "rel_error": -0.08,
+                           "ci_lo": -0.12, "ci_hi": -0.04, "n_cand": 3}])
+    rec = {"candidate": "fast", "error_bounds": {"flow_rate": 0.02, "static_pressure": 0.05}}
+    checks = {c["quantity"]: c for c in ab.validation(table, rec)}
+    assert checks["flow_rate"]["inside"] and not checks["static_pressure"]["inside"]
+    assert case_from_dict(ab.candidate_case(yaml.safe_load(SMALL.read_text()),
+                                            ab.Candidate("x" + ab.VALIDATION, 0.1), 5)).name.endswith("-s5")
+
+
+def test_without_a_proven_candidate_the_fastest_unresolved_one_is_recommended_and_says_so(tmp_path):
+    import numpy as np
+    rng = np.random.default_rng(5)
+    rows = []
+    for cand, (bias, noise, wall) in {"reference": (0.0, 0.05, 100.0), "slow_ok": (0.0, 0.05, 30.0),
+                                      "fast_biased": (0.5, 0.01, 1.0), "mid": (0.0, 0.05, 5.0)}.items():
+        for seed in range(3):
+            rows.append({"candidate": cand, "seed": seed, "state": "complete", "reason": "", "timestep_fraction": 0.1,
+                         "stiffness_scale": 1.0, "ranks": 2, "wall_s": wall,
+                         "flow_rate": 0.01 * (1 + bias + noise * rng.standard_normal()),
+                         "static_pressure": 500 * (1 + noise * rng.standard_normal()),
+                         "dynamic_pressure_max": 600.0, "solid_fraction": 0.6, "coordination": 5.0})
+    pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)
+    table, rec = ab.conclude(tmp_path)
+    assert rec["candidate"] == "mid" and rec["meets_tolerances"] is False      # 50 % off is resolved: not it
+    assert rec["error_bounds"]["flow_rate"] > 0.03                               # the bound it can prove
