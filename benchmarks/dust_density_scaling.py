@@ -64,7 +64,7 @@ def variant_data(base: dict, scale: float, seed: int, keep_dt: bool) -> dict:
     if keep_dt:
         true = variant_data(base, 1.0, seed, keep_dt=False)
         engine = data.setdefault("engine", {})
-        fraction = engine.get("timestep_fraction", case_from_dict(data).engine.timestep_fraction)
+        fraction = derive(case_from_dict(data)).timestep.fraction        # the case's, or the profile's
         engine["timestep_fraction"] = fraction * derive(case_from_dict(true)).dt / derive(case_from_dict(data)).dt
     return data
 

@@ -3,7 +3,9 @@ benchmark's recommendation, benchmarks/results/accuracy/recommended_profile.json
 
     python benchmarks/publish_fast_profile.py
 
-tests/test_profiles.py checks that the two agree.
+It refuses a recommendation that is the reference itself (nothing faster proven), that did not meet
+its tolerances, or whose check with new seeds (``siloflow bench --validate``) is missing or fell
+outside the bounds. tests/test_profiles.py checks that the two files agree.
 """
 from __future__ import annotations
 
@@ -13,20 +15,25 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE = ROOT / "benchmarks" / "results" / "accuracy" / "recommended_profile.json"
 TARGET = ROOT / "siloflow" / "fast_profile.json"
-KEEP = ("candidate", "timestep_fraction", "stiffness_scale", "speedup", "speedup_lo", "speedup_hi", "error_bounds",
-        "rel_errors", "tolerances", "confidence", "seeds", "reference_seeds", "ranks", "benchmark")
+KEEP = ("candidate", "timestep_fraction", "overlap_ratio", "stiffness_scale", "speedup", "speedup_lo", "speedup_hi",
+        "error_bounds", "rel_errors", "tolerances", "confidence", "seeds", "reference_seeds", "ranks", "validation")
 
 
 def main() -> None:
     rec = json.loads(SOURCE.read_text())
-    if rec is None:
-        raise SystemExit(f"{SOURCE} recommends nothing: no candidate met the tolerances")
+    if rec is None or rec.get("candidate") == "reference":
+        raise SystemExit(f"{SOURCE}: nothing faster than the reference is proven within the tolerances")
+    if not rec.get("meets_tolerances"):
+        raise SystemExit(f"{SOURCE}: the recommendation does not meet its tolerances")
+    checks = rec.get("validation") or []
+    if not checks or not all(c["inside"] for c in checks):
+        raise SystemExit(f"{SOURCE}: the recommendation was not confirmed with new seeds (siloflow bench --validate)")
     out = {k: rec[k] for k in KEEP if k in rec}
-    out["benchmark"] = (f"benchmarks/cases/accuracy_small.yaml ({rec.get('reference_seeds')} reference runs, "
-                        f"{rec.get('seeds')} of the profile; make bench-accuracy)")
+    out["benchmark"] = (f"benchmarks/cases/accuracy_small.yaml, {rec.get('reference_seeds')} reference runs and "
+                        f"{rec.get('seeds')} of the profile, confirmed with {checks[0]['n']} new seeds (make bench-accuracy)")
     TARGET.write_text(json.dumps(out, indent=1) + "\n")
-    print(f"{TARGET}: {out['candidate']} (timestep_fraction {out['timestep_fraction']}, stiffness_scale "
-          f"{out['stiffness_scale']})")
+    print(f"{TARGET}: {out['candidate']} (timestep_fraction {out['timestep_fraction']}, impact overlap "
+          f"{out['overlap_ratio']:.3g} of the radius)")
 
 
 if __name__ == "__main__":

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from .batch_means import batch_means_stderr
+
 
 @dataclass
 class LineFit:
@@ -75,6 +77,7 @@ class FlowRate:
     t_end: float
     n_samples: int
     r2: float
+    batch_stderr: float = float("nan")     # kg/s: batch means of the window's sample rates (autocorrelation kept)
 
 
 def steady_flow_rate(time, mass, t_open: float, skip: float = 0.2, min_remaining: float = 0.2,
@@ -97,7 +100,11 @@ def steady_flow_rate(time, mass, t_open: float, skip: float = 0.2, min_remaining
     if len(t) < 5:
         return FlowRate(float("nan"), float("nan"), start, t_end_data, int(len(t)), float("nan"))
     fit = straight_line_fit(t, m)
-    return FlowRate(fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples, fit.r2)
+    # the straight line's stderr treats the samples' residuals as independent; they are not (a run's
+    # rate fluctuates over many samples), so the batch means of the sample-to-sample rates say more
+    rates = np.diff(m) / np.diff(t)
+    batch_se, _ = batch_means_stderr(rates)
+    return FlowRate(fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples, fit.r2, batch_se)
 
 
 def discharge_table(flow: pd.DataFrame, timestep: float, t_open: float) -> pd.DataFrame:

@@ -18,6 +18,7 @@ from siloflow.errors import ReadError
 from siloflow.run_folder import RESULT_TABLES, SUMMARY_NAME, RunFolder
 
 from .discharge import discharge_table, steady_flow_rate
+from .batch_means import batch_means_stderr
 from .dump_results import MIN_STEADY_SAMPLES, analyse_dumps, steady_resolution
 from .flow_rate import rate_series, steady_window
 from .janssen import compare_with_measurement
@@ -60,23 +61,6 @@ def static_window(forces: pd.DataFrame, run: RunOutputs) -> pd.Series:
     return (forces.step > lo) & (forces.step <= hi)
 
 
-def batch_means_stderr(values, batches: int | None = None) -> tuple[float, int]:
-    """Standard error of the mean of an autocorrelated series by batch means; (stderr, batches).
-
-    The series is cut into b contiguous batches of m = n // b samples (the first n - b m samples
-    are dropped: a window's start is nearest its transient) and SE = std(batch means, ddof=1) /
-    sqrt(b). b = ``batches``, else 10 from 40 samples on and 5 from 10 to 39 samples; fewer than
-    10 samples (or fewer than 2 batches): (NaN, 0). Valid when a batch is much longer than the
-    series' correlation time (for an AR(1) series of coefficient phi, m >> (1 + phi) / (1 - phi))."""
-    x = np.asarray(values, float)
-    x = x[np.isfinite(x)]
-    n = len(x)
-    b = batches if batches is not None else (10 if n >= 40 else 5 if n >= MIN_STEADY_SAMPLES else 0)
-    if b < 2 or n < b:
-        return float("nan"), 0
-    m = n // b
-    means = x[n - b * m:].reshape(b, m).mean(axis=1)
-    return float(means.std(ddof=1) / np.sqrt(b)), int(b)
 
 
 def pressure_window(steady: dict | None, rate) -> dict | None:
@@ -218,7 +202,7 @@ def analyse(folder, measured_pressure=None) -> dict:
         "bands": table.to_dict(orient="records"),
         "pressure_statistics": pressure_stats,
         "engine_wall_time_s": run.record.wall_time,
-        "numerical_profile": run.plan.profile.model_dump(mode="json"),
+        "numerical_profile": run.plan.profile.model_dump(mode="json") if run.plan.profile is not None else None,
         **({"discharge_stop": run.record.discharge_stop} if run.record.discharge_stop else {}),
         **({"fill_cache": run.record.fill_cache} if run.record.fill_cache else {}),
         "engine_warnings": run.record.warnings,

@@ -18,6 +18,8 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from .errors import SetupError
+from .case import PROFILE_FIELDS
+from .run_table import run_name
 
 #: the quantities compared, from each run's results (SI): steady flow rate (kg/s), static band
 #: pressure and maximum dynamic band pressure (Pa, means over the bands the settled bed loads),
@@ -39,6 +41,7 @@ class Candidate:
     stiffness_scale: float = 1.0
     ranks: Optional[int] = None
     results: Optional[tuple[str, ...]] = None       # outputs.results (None: the case's); fewer: a leaner deck
+    profile: bool = True            # can be a profile (time step and stiffness only: not ranks or outputs)
 
 
 REFERENCE = Candidate("reference", 0.02, 1.0)
@@ -46,9 +49,9 @@ REFERENCE = Candidate("reference", 0.02, 1.0)
 CANDIDATES = (
     REFERENCE,
     Candidate("E1e-4_dt0.2", 0.2, 1e-4),
-    Candidate("E1e-4_dt0.2_1rank", 0.2, 1e-4, ranks=1),
+    Candidate("E1e-4_dt0.2_1rank", 0.2, 1e-4, ranks=1, profile=False),
     # the leanest deck (one plain side wall, no dumps): flow rate and force balance only
-    Candidate("E1e-4_dt0.2_lean", 0.2, 1e-4, results=("flow_rate", "force_balance")),
+    Candidate("E1e-4_dt0.2_lean", 0.2, 1e-4, results=("flow_rate", "force_balance"), profile=False),
     Candidate("E1e-4_dt0.1", 0.1, 1e-4),
     Candidate("E1e-3_dt0.1", 0.1, 1e-3),
     Candidate("E1e-4_dt0.02", 0.02, 1e-4),
@@ -63,15 +66,17 @@ def candidate_case(base: dict, cand: Candidate, seed: int) -> dict:
     """The case fields of one run: the base case with the candidate's settings (profile custom)
     and the seed; named ``<case>-<candidate>-s<seed>``."""
     data = copy.deepcopy(base)
-    engine = {k: v for k, v in data.get("engine", {}).items() if k not in ("profile", "timestep_fraction",
-                                                                           "stiffness_scale")}
+    engine = {k: v for k, v in data.get("engine", {}).items() if k not in PROFILE_FIELDS}
     engine.update(profile="custom", timestep_fraction=cand.timestep_fraction, stiffness_scale=cand.stiffness_scale)
     if cand.ranks is not None:
         engine["ranks"] = cand.ranks
     if cand.results is not None:
         data["outputs"] = {k: v for k, v in data.get("outputs", {}).items() if k not in ("dump_interval", "vtk")}
         data["outputs"]["results"] = list(cand.results)
-    data.update(engine=engine, seed=seed, name=f"{base['name']}-{cand.name}-s{seed}")
+    dust = data["particles"].get("dust")
+    if dust is not None:               # the bench compares time step and stiffness: the dust at its true
+        data["particles"]["dust"] = {**dust, "density_scale": 1.0}    # density (make bench-dust: its scaling)
+    data.update(engine=engine, seed=seed, name=run_name(base["name"], cand.name, f"s{seed}"))
     return data
 
 
@@ -82,7 +87,10 @@ def run_metrics(folder: Path) -> dict:
     nan = float("nan")
     out = {q: nan for q in QUANTITIES}
     out["wall_s"] = s.get("engine_wall_time_s", nan)
-    out["flow_rate"] = (s.get("flow_rate") or {}).get("rate", nan)
+    fr = s.get("flow_rate") or {}
+    out["flow_rate"] = fr.get("rate", nan)
+    out["flow_rate_fit_se"] = fr.get("stderr", nan)            # the straight line's (independent samples)
+    out["flow_rate_batch_se"] = fr.get("batch_stderr", nan)    # batch means of the sample rates
     bands = [b for b in s.get("bands") or [] if b.get("static_pressure") is not None]
     if bands:
         top = max(b["static_pressure"] for b in bands)
@@ -102,10 +110,8 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
               first_seed: Optional[int] = None) -> list[dict]:
     """Run every candidate x seed not yet in ``out/runs.csv`` (the case's seed, +1, ...); return
     all rows (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
-    from .case_file import case_from_dict, parse_case_yaml, read_case_bytes
-    from .run_table import PlannedRun, engine_wall_time, run_missing
-    base = parse_case_yaml(read_case_bytes(case_file), str(case_file))
-    case_from_dict(base, str(case_file))                      # the base case itself must be valid
+    from .run_table import PlannedRun, engine_wall_time, read_base_case, run_missing
+    base = read_base_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
         raise SetupError("the bench needs the reference candidate (the papers' settings) to compare with")
     first_seed = int(base.get("seed", 12345)) if first_seed is None else first_seed
@@ -132,8 +138,8 @@ def validate(case_file: Path, out: Path, recommended: str, seeds: int,
     that chose it), as the candidate ``<name>_new_seeds``; :func:`conclude` then compares them with
     the reference like any candidate, and :func:`validation` says whether they stay in the bounds."""
     from dataclasses import replace
-    from .case_file import parse_case_yaml, read_case_bytes
-    base = parse_case_yaml(read_case_bytes(case_file), str(case_file))
+    from .run_table import read_base_case
+    base = read_base_case(case_file)
     cand = next(c for c in CANDIDATES if c.name == recommended)
     return run_bench(case_file, out, seeds, [REFERENCE, replace(cand, name=cand.name + VALIDATION)], report,
                      skip_reference=True, first_seed=int(base.get("seed", 12345)) + VALIDATION_SEED_OFFSET)
@@ -154,10 +160,30 @@ def validation(table, rec: dict) -> list[dict]:
     return out
 
 
-def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95) -> tuple:
+def run_errors(runs):
+    """Per candidate: a run's own stated errors of the flow rate against the spread of its seeds, all
+    relative to the mean rate: the straight-line fit's standard error (``fit_se``), the batch-means
+    error (``batch_se``) and the seeds' standard deviation (``seed_sd``); ``batch_se / seed_sd`` near 1
+    says a single run's batch-means error can stand for the ensemble's spread."""
+    import pandas as pd
+    rows = []
+    for name, g in runs.groupby("candidate", sort=False):
+        mean = g.flow_rate.mean()
+        fit = (g.flow_rate_fit_se / g.flow_rate).mean() if "flow_rate_fit_se" in g else float("nan")
+        batch = (g.flow_rate_batch_se / g.flow_rate).mean() if "flow_rate_batch_se" in g else float("nan")
+        sd = g.flow_rate.std(ddof=1) / mean if len(g) > 1 else float("nan")
+        rows.append({"candidate": name, "runs": len(g), "fit_se": fit, "batch_se": batch, "seed_sd": sd,
+                     "batch_se_over_seed_sd": batch / sd if sd and sd == sd else float("nan")})
+    return pd.DataFrame(rows)
+
+
+def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
+             case_file: Optional[Path] = None) -> tuple:
     """From ``out/runs.csv``: ``comparison.csv`` (every candidate x quantity: errors with their
-    interval, speed-up), ``pareto.png`` and ``recommended_profile.json``; returns (table,
-    recommendation or None)."""
+    interval, speed-up), ``pareto.png`` and ``recommended_profile.json``: the fastest candidate
+    proven within the tolerances (the reference when none faster is), with its bounds, its softness
+    as the impact overlap ratio in ``case_file``'s case, and the new seeds' check (``validation``)
+    when :func:`validate` ran. Returns (table, recommendation)."""
     import pandas as pd
     from . import bench_stats
     from .atomic_files import write_text
@@ -170,27 +196,25 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95)
     failed = runs[runs.state != "complete"].groupby("candidate").size()
     table["failed_runs"] = table.candidate.map(failed).fillna(0).astype(int)
     write_text(out / "comparison.csv", table.to_csv(index=False))
+    write_text(out / "run_errors.csv", run_errors(ok).to_csv(index=False))
     bench_stats.pareto_figure(table, out / "pareto.png", tolerances)
-    choices = table[~table.candidate.str.endswith(VALIDATION)]
+    barred = {c.name for c in CANDIDATES if not c.profile}
+    choices = table[~table.candidate.str.endswith(VALIDATION) & ~table.candidate.isin(barred)]
     rec = bench_stats.recommend(choices, tolerances)
     if rec is not None:
-        rec["meets_tolerances"] = True
-    if rec is None or rec["candidate"] == REFERENCE.name:
-        # nothing faster is proven within the tolerances: the fastest candidate with no resolved error,
-        # whose proven bounds (wider than the tolerances) it carries; said so in the record
-        fallback = bench_stats.recommend(choices[choices.candidate != REFERENCE.name], tolerances,
-                                         unresolved_ok=True)
-        if fallback is not None:
-            rec = {**fallback, "meets_tolerances": False}
-    if rec is not None:
-        rec["benchmark"] = f"{out.name}: {int((ok.candidate == REFERENCE.name).sum())} reference runs"
         cand = next((c for c in CANDIDATES if c.name == rec["candidate"]), None)
         row = ok[ok.candidate == rec["candidate"]].iloc[0]
-        rec.update(timestep_fraction=float(row.timestep_fraction), stiffness_scale=float(row.stiffness_scale),
-                   confidence=confidence, error_bounds=rec.pop("bounds"),
+        rec.update(meets_tolerances=True, timestep_fraction=float(row.timestep_fraction),
+                   stiffness_scale=float(row.stiffness_scale), confidence=confidence, error_bounds=rec.pop("bounds"),
                    seeds=int((ok.candidate == rec["candidate"]).sum()),
                    reference_seeds=int((ok.candidate == REFERENCE.name).sum()),
-                   ranks=int(row.ranks) if cand is None or cand.ranks is None else cand.ranks)
+                   ranks=int(row.ranks) if cand is None or cand.ranks is None else cand.ranks,
+                   benchmark=f"{out.name}: {int((ok.candidate == REFERENCE.name).sum())} reference runs")
+        if case_file is not None:
+            from .case_file import load_case
+            from .profiles import impact_overlap_ratio
+            rec["overlap_ratio"] = impact_overlap_ratio(load_case(case_file), rec["stiffness_scale"])
+        rec["validation"] = validation(table, rec)
         rec = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in rec.items()}
     write_text(out / "recommended_profile.json", json.dumps(rec, indent=1) + "\n")
     return table, rec

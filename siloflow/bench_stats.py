@@ -140,10 +140,8 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
     return pd.DataFrame(rows)
 
 
-def recommend(table: pd.DataFrame, tolerances: dict[str, float], unresolved_ok: bool = False) -> dict | None:
-    """The fastest candidate whose 95 % error bound is within the tolerance for every quantity
-    (with ``unresolved_ok``: or whose difference is not resolved, from at least two runs a side:
-    the fallback when the ensemble is too small to prove any tolerance).
+def recommend(table: pd.DataFrame, tolerances: dict[str, float]) -> dict | None:
+    """The fastest candidate whose 95 % error bound is within the tolerance for every quantity.
 
     Parameters
     ----------
@@ -162,12 +160,7 @@ def recommend(table: pd.DataFrame, tolerances: dict[str, float], unresolved_ok: 
     ok = []
     for name, grp in table.groupby("candidate", sort=False):
         by_q = grp.set_index("quantity")
-        def fits(q, tol):
-            if q not in by_q.index:
-                return False
-            r = by_q.loc[q]
-            return r["bound"] <= tol or (unresolved_ok and not r["resolved"] and min(r["n_ref"], r["n_cand"]) >= 2)
-        if all(fits(q, tol) for q, tol in tolerances.items()):
+        if all(q in by_q.index and by_q.at[q, "bound"] <= tol for q, tol in tolerances.items()):
             ok.append((name, grp.iloc[0], by_q))
     if not ok:
         return None

@@ -113,7 +113,9 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
 
 def profile_note(p) -> str:
     """One line on the numerical profile a run uses and the error bounds that come with it."""
-    what = f"profile {p.name}: time step {p.timestep_fraction:g} of the critical time, stiffness x {p.stiffness_scale:g}"
+    what = f"profile {p.name}: time step {p.timestep_fraction:g} of the critical time, stiffness x {p.stiffness_scale:.3g}"
+    if p.name == "fast" and p.overlap_ratio is not None:
+        what += f" (impact overlap {p.overlap_ratio:.3g} of the radius)"
     if p.name == "fast":
         if p.error_bounds:
             bounds = ", ".join(f"{q} within {b:.1%}" for q, b in p.error_bounds.items())
@@ -186,6 +188,8 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     if resume is not None:
         if case_file is not None or output is not None:
             _fail(SiloflowError("--resume DIR takes no case file and no --output: the folder has both"))
+        if profile is not None:
+            _fail(SiloflowError("--resume DIR takes no --profile: a run resumes with the profile it started with"))
         _resume(resume, liggghts, post_process)
         return
     if case_file is None or output is None:
@@ -512,7 +516,8 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
     """Run time against error: each candidate setting (time step, stiffness, ranks) over --seeds fills, against
     the reference (dt = t_c/50, full stiffness); errors with 95 % intervals, a Pareto figure and the fastest
     profile within the tolerances."""
-    from .accuracy_bench import CANDIDATES, REFERENCE, conclude, run_bench, validate, validation
+    from .accuracy_bench import CANDIDATES, REFERENCE, conclude, run_bench, validate
+    from .bench_stats import best_bounds
     known = {c.name: c for c in CANDIDATES}
     chosen = list(CANDIDATES)
     if candidates:
@@ -527,37 +532,36 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
             run_bench(case_file, output, seeds, chosen,
                       report=_note)
         tolerances = {"flow_rate": flow_tolerance, "static_pressure": static_tolerance}
-        table, rec = conclude(output, tolerances)
-        checks = []
+        table, rec = conclude(output, tolerances, case_file=case_file)
         if rec is not None and validate_seeds and not conclude_only and rec["candidate"] != REFERENCE.name:
-            validate(case_file, output, rec["candidate"], validate_seeds,
-                     report=_note)
-            table, rec = conclude(output, tolerances)
-        if rec is not None:
-            checks = validation(table, rec)
+            validate(case_file, output, rec["candidate"], validate_seeds, report=_note)
+            table, rec = conclude(output, tolerances, case_file=case_file)
     except KeyboardInterrupt:
         _study_interrupted(output)
     except SiloflowError as exc:
         _fail(exc)
-    except ValueError as exc:
-        _fail(SiloflowError(str(exc)))
+    except (ValueError, KeyError) as exc:
+        _fail(SiloflowError(f"{output / 'runs.csv'} is not a bench table ({exc})"))
     cols = ["candidate", "quantity", "n_cand", "speedup", "rel_error", "ci_lo", "ci_hi", "verdict"]
     out.print(printable(table[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}")), markup=False,
               highlight=False)
     if rec is None:
-        out.print("no candidate meets the tolerances at 95 % confidence (not even the reference has the "
-                  "quantities); see comparison.csv")
+        out.print("the reference has none of the bounded quantities: nothing to recommend (see comparison.csv)")
+    elif rec["candidate"] == REFERENCE.name:
+        out.print("no candidate faster than the reference is proven within the tolerances at 95 % confidence with "
+                  "these runs (--seeds N resumes and narrows the intervals); the tightest bounds proven:")
+        for q in tolerances:
+            best = best_bounds(table[~table.candidate.isin([REFERENCE.name])], q)
+            best = best[best.bound < float("inf")].sort_values("bound").head(3)
+            out.print(printable(f"  {q}: " + "; ".join(f"{r.candidate} {r.bound:.1%} at {r.speedup:.3g}x"
+                                                       for r in best.itertuples())), markup=False, highlight=False)
     else:
         bounds = ", ".join(f"{q} <= {b:.1%}" for q, b in rec["error_bounds"].items())
-        if not rec.get("meets_tolerances", True):
-            out.print("no candidate is proven within the tolerances at 95 % confidence with these runs (more "
-                      "seeds narrow the intervals: --seeds N resumes); the fastest without a resolved error follows, "
-                      "with the bounds it can prove")
         out.print(printable(f"recommended fast profile: {rec['candidate']} (timestep_fraction "
-                            f"{rec['timestep_fraction']:g}, stiffness_scale {rec['stiffness_scale']:g}), "
-                            f"{rec['speedup']:.3g}x faster than the reference; 95 % error bounds: {bounds}"),
-                  markup=False, highlight=False)
-    for c in checks:
+                            f"{rec['timestep_fraction']:g}, stiffness_scale {rec['stiffness_scale']:g}, impact overlap "
+                            f"{rec.get('overlap_ratio') or float('nan'):.3g} of the radius), {rec['speedup']:.3g}x faster "
+                            f"than the reference; 95 % error bounds: {bounds}"), markup=False, highlight=False)
+    for c in (rec or {}).get("validation") or []:
         out.print(printable(f"new seeds ({c['n']} runs): {c['quantity']} error {c['rel_error']:+.1%} [{c['ci_lo']:+.1%}, "
                             f"{c['ci_hi']:+.1%}]: {'inside' if c['inside'] else 'OUTSIDE'} the bound {c['bound']:.1%}"),
                   markup=False, highlight=False)
@@ -616,6 +620,8 @@ def stability(case_file: Path = typer.Argument(..., help="YAML case file"),
         _study_interrupted(output)
     except SiloflowError as exc:
         _fail(exc)
+    except (ValueError, KeyError) as exc:
+        _fail(SiloflowError(f"{output / 'runs.csv'} is not a stability table ({exc})"))
     for e in edges:
         what = f"stiffness x {e['stiffness_scale']:g}" + (f", dust x {e['dust_scale']:g}" if e["dust_scale"] else "")
         if e["safe"] != e["safe"]:

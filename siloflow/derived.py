@@ -200,8 +200,9 @@ def _radius_field(case: Case) -> str:
     return "particles.radius" if p.kind == "spheres" else "particles.radii"
 
 
-def run_length_fields(case: Case, critical_source: str) -> dict[str, list[str]]:
-    """The case fields that set the time step (``"timestep"``) and each stage's length."""
+def run_length_fields(case: Case, critical_source: str, profile: str = "custom") -> dict[str, list[str]]:
+    """The case fields that set the time step (``"timestep"``) and each stage's length (``profile``:
+    the case's own; any but custom owns the time step)."""
     m, dusty = case.materials, "dust" in critical_source
     size = (["particles.dust.radius", "particles.dust.density", "particles.dust.density_scale"] if dusty
             else [_radius_field(case), "materials.particle.density"])
@@ -213,7 +214,8 @@ def run_length_fields(case: Case, critical_source: str) -> dict[str, list[str]]:
         stiffness += ["materials.wall.youngs_modulus"] if "wall" in critical_source else []
         stiffness += ["materials.characteristic_velocity"] if m.model == "hooke" else []
     dis = case.discharge
-    out = {"timestep": size + stiffness + ["engine.timestep_fraction"],
+    step = "engine.timestep_fraction" if profile == "custom" else "engine.profile"
+    out = {"timestep": size + stiffness + [step],
            "fill": ["fill.count" if case.fill.count is not None else "fill.height",
                     "fill.batch_volume_fraction", "geometry.height", "gravity"],
            "settle": ["fill.settle.max_time"], "shrink": ["fill.settle.max_time"],
@@ -335,7 +337,7 @@ def derive(case: Case) -> RunPlan:
     """
     from .profiles import effective_case, profile_settings
     settings = profile_settings(case)
-    case = effective_case(case)            # the profile's time step and stiffness, applied once here
+    case = effective_case(case, settings)  # the profile's time step and stiffness, applied once here
     g = case.geometry
     planar = isinstance(g, PlanarGeometry)
     p = case.particles
@@ -483,7 +485,8 @@ def derive(case: Case) -> RunPlan:
         siloflow_version=__version__, name=case.name,
         engine=EngineChoice(name=case.engine.name, ranks=case.engine.ranks),
         profile=Profile(name=settings["profile"], timestep_fraction=settings["timestep_fraction"],
-                        stiffness_scale=settings["stiffness_scale"], speedup=settings.get("speedup"),
+                        stiffness_scale=settings["stiffness_scale"], overlap_ratio=settings.get("overlap_ratio"),
+                        speedup=settings.get("speedup"),
                         error_bounds=settings.get("error_bounds", {}), tolerances=settings.get("tolerances", {}),
                         benchmark=settings.get("benchmark", "")),
         guard=guard_limits(case, species, v_open, outlet_z - plate_travel),
@@ -512,7 +515,7 @@ def derive(case: Case) -> RunPlan:
                         wall_pressure=needs["wall_pressure"], wall_forces=needs["wall_forces"]),
         total_mass=count * final_mass + (dust_count * dust.mass if dust is not None else 0.0),
         particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass,
-        analysis=case.analysis, design=case.design, run_length_fields=run_length_fields(case, source),
+        analysis=case.analysis, design=case.design, run_length_fields=run_length_fields(case, source, settings["profile"]),
     )
     from .meshes import silo_meshes
     meshes = silo_meshes(case, plan.outlet.z, plan.outlet.radius, sensors=needs["wall_pressure"])
@@ -532,11 +535,12 @@ def guard_limits(case: Case, species: list, v_open: float, z_lowest: float) -> G
     """The instability guard's limits (``engine.guard``), SI. The fastest a grain can move in a silo
     driven by gravity alone is its insertion speed plus the free fall from the top to the lowest
     point it can reach (the plate's end), plus the plate's own speed: ``speed_factor`` times that
-    is energy from nowhere. Overlaps are measured against the smallest grain (dust included)."""
+    is energy from nowhere. Overlaps are measured against the smallest grain (not the dust: a grain
+    pressing a dust sphere may overlap it by more than the dust's radius in a sound run)."""
     gs, g = case.engine.guard, case.geometry
     top = g.hopper_height + g.height
     fall = math.sqrt(INSERTION_SPEED ** 2 + 2.0 * case.gravity * (top - z_lowest))
-    r_min = min(sp.radius for sp in species)
+    r_min = min(sp.radius for sp in species if sp.stream == "grains")     # dust: watched by speed and escapes
     margin = gs.escape_margin * 2.0 * case.particles.max_radius
     planar = isinstance(g, PlanarGeometry)
     return Guard(enabled=gs.enabled, max_speed=gs.speed_factor * (fall + v_open),

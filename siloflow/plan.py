@@ -281,6 +281,7 @@ class Profile(Frozen):
     name: Literal["custom", "reference", "fast"] = "custom"
     timestep_fraction: float = 0.15
     stiffness_scale: float = 1.0
+    overlap_ratio: Optional[float] = None     # fast: the impact overlap / radius the stiffness was softened to
     speedup: Optional[float] = None
     error_bounds: dict[str, float] = {}
     tolerances: dict[str, float] = {}
@@ -311,7 +312,7 @@ class RunPlan(Frozen):
     siloflow_version: str
     name: str
     engine: EngineChoice
-    profile: Profile = Profile()
+    profile: Optional[Profile] = None          # None: a plan written before profiles existed
     guard: Optional[Guard] = None
     gravity: float                  # m/s2, along -z
     seed: int                       # the case's seed; engines derive theirs from it

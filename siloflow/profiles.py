@@ -6,40 +6,86 @@
   (default 1);
 - ``reference``: the papers' numerical settings: dt = t_c/50 (paper B), full stiffness, the dust at
   its true density;
-- ``fast``: the fastest combination ``siloflow bench`` found whose 95 % error bounds are within its
-  tolerances, read from ``fast_profile.json`` beside this module (written from the committed
-  benchmark, ``benchmarks/results/accuracy/``), with those bounds.
+- ``fast``: the setting ``siloflow bench`` recommended, with the 95 % error bounds it was proven to
+  (``fast_profile.json`` beside this module, written from the committed benchmark by
+  ``benchmarks/publish_fast_profile.py``). It is a time-step fraction and a softness: the contacts
+  are softened until two of the smallest grains meeting at the fill's impact speed overlap by
+  ``overlap_ratio`` of their radius, as the benchmark's recommended stiffness did in its case. A
+  case already that soft keeps its stiffness: the profile never stiffens, and never softens a soft
+  case further. A validated case asking for ``fast`` carries a copy (``engine.fast_profile``), so
+  its run folder resumes with the profile it started with.
 
-:func:`effective_case` applies a profile to a case before the run plan is derived; the plan records
-which profile ran, its settings and the error bounds that come with it (``RunPlan.profile``).
+:func:`effective_case` applies a profile before the run plan is derived; the plan records which
+profile ran, its settings and the bounds that come with it (``RunPlan.profile``).
 """
 from __future__ import annotations
 
 import json
+import math
 from functools import lru_cache
 from pathlib import Path
-from typing import Optional
 
-from .case import DEFAULT_TIMESTEP_FRACTION, Case
+from .case import DEFAULT_TIMESTEP_FRACTION, PROFILE_NAMES, Case
 from .errors import CaseError
 
-#: the fast profile as the accuracy benchmark recommended it (siloflow bench --publish)
+#: the fast profile as the accuracy benchmark recommended it (benchmarks/publish_fast_profile.py)
 FAST_PROFILE_FILE = Path(__file__).with_name("fast_profile.json")
 #: the papers' numerical settings: paper B's dt = t_c/50, full stiffness, true dust density
 REFERENCE = {"timestep_fraction": 0.02, "stiffness_scale": 1.0}
+#: the fields of fast_profile.json a case carries (``siloflow.case.PinnedProfile``)
+PINNED = ("timestep_fraction", "overlap_ratio", "error_bounds", "tolerances", "speedup", "benchmark")
 
 
 @lru_cache(maxsize=1)
 def fast_profile() -> dict:
-    """The fast profile's record: ``timestep_fraction``, ``stiffness_scale``, ``speedup`` (with
-    ``speedup_lo``/``speedup_hi``), ``error_bounds`` {quantity: relative 95 % bound},
-    ``tolerances``, ``benchmark`` (the case and command that measured it)."""
+    """The packaged fast profile's whole record (fast_profile.json)."""
     return json.loads(FAST_PROFILE_FILE.read_text())
+
+
+def packaged_fast_profile() -> dict:
+    """The packaged fast profile as a case carries it (``engine.fast_profile``)."""
+    return {k: fast_profile()[k] for k in PINNED if fast_profile().get(k) is not None}
+
+
+def impact_overlap_ratio(case: Case, stiffness_scale: float = 1.0) -> float:
+    """The deepest overlap of two of the smallest grains meeting head-on at the fill's impact speed
+    (free fall from the top of the silo after the insertion speed), as a fraction of their radius,
+    at the case's stiffness x ``stiffness_scale``, undamped: Hertz (15 m* v^2 / (16 Y* sqrt(R*)))^(2/5),
+    a linear spring (hooke, linear) v sqrt(m* / kn). A dimensionless softness, independent of the
+    time step."""
+    from . import contact_physics as cp
+    from .derived import INSERTION_SPEED, species_of
+    smallest = min((sp for sp in species_of(case) if sp.stream == "grains"), key=lambda sp: sp.radius)
+    m = case.materials
+    m_eff, r_eff = smallest.density * smallest.volume / 2.0, smallest.radius / 2.0
+    g = case.geometry
+    v = cp.free_fall_speed(g.hopper_height + g.height, case.gravity, INSERTION_SPEED)
+    if m.model in ("hertz", "hooke"):
+        e, nu = m.particle.youngs_modulus * stiffness_scale, m.particle.poisson_ratio
+        y_eff = cp.effective_modulus(e, nu, e, nu)
+        if m.model == "hertz":
+            delta = (15.0 * m_eff * v ** 2 / (16.0 * y_eff * math.sqrt(r_eff))) ** 0.4
+            return delta / smallest.radius
+        kn = cp.hooke_kn(m_eff, r_eff, y_eff, m.characteristic_velocity)
+    else:
+        kn = m.particle_particle.kn * stiffness_scale
+    return v * math.sqrt(m_eff / kn) / smallest.radius
+
+
+def softening_for(case: Case, overlap_ratio: float) -> float:
+    """The stiffness scale (<= 1) that brings the case's impact overlap to ``overlap_ratio``: the
+    overlap goes as the stiffness to the -2/5 (Hertz modulus, hooke's modulus) or -1/2 (linear kn)."""
+    now = impact_overlap_ratio(case)
+    if now >= overlap_ratio:
+        return 1.0
+    exponent = 2.0 if case.materials.model == "linear" else 2.5
+    return (now / overlap_ratio) ** exponent
 
 
 def profile_settings(case: Case) -> dict:
     """The numerical settings a case runs with: ``profile``, ``timestep_fraction``,
-    ``stiffness_scale``, and for ``fast`` the benchmark's ``speedup`` and ``error_bounds``."""
+    ``stiffness_scale``, and for ``fast`` its ``overlap_ratio``, ``speedup``, ``error_bounds``,
+    ``tolerances`` and ``benchmark``."""
     e = case.engine
     if e.profile == "custom":
         return {"profile": "custom",
@@ -47,14 +93,14 @@ def profile_settings(case: Case) -> dict:
                 "stiffness_scale": e.stiffness_scale if e.stiffness_scale is not None else 1.0}
     if e.profile == "reference":
         return {"profile": "reference", **REFERENCE}
-    fast = fast_profile()
-    return {"profile": "fast", "timestep_fraction": fast["timestep_fraction"],
-            "stiffness_scale": fast["stiffness_scale"], "speedup": fast.get("speedup"),
-            "error_bounds": fast.get("error_bounds", {}), "tolerances": fast.get("tolerances", {}),
-            "benchmark": fast.get("benchmark", "")}
+    fast = e.fast_profile
+    return {"profile": "fast", "timestep_fraction": fast.timestep_fraction,
+            "stiffness_scale": softening_for(case, fast.overlap_ratio), "overlap_ratio": fast.overlap_ratio,
+            "speedup": fast.speedup, "error_bounds": dict(fast.error_bounds), "tolerances": dict(fast.tolerances),
+            "benchmark": fast.benchmark}
 
 
-def _scaled(section: Optional[dict], keys: tuple[str, ...], scale: float) -> None:
+def _scaled(section, keys: tuple[str, ...], scale: float) -> None:
     if section is None:
         return
     for k in keys:
@@ -62,14 +108,14 @@ def _scaled(section: Optional[dict], keys: tuple[str, ...], scale: float) -> Non
             section[k] = section[k] * scale
 
 
-def effective_case(case: Case) -> Case:
-    """The case as it runs: the profile's time-step fraction written into ``engine.timestep_fraction``
-    and its stiffness scale applied to every Young's modulus (hertz, hooke) or spring (linear), then
-    validated again (a scaled modulus below the schema's floor is refused, naming
-    ``engine.stiffness_scale``). The reference profile runs dust at its true density: a case that
-    scales it is refused. ``engine.profile`` is kept; ``engine.stiffness_scale`` becomes 1 (applied)."""
+def effective_case(case: Case, settings: dict | None = None) -> Case:
+    """The case as it runs, as a ``custom`` case: the profile's time-step fraction written into
+    ``engine.timestep_fraction`` and its stiffness scale applied to every Young's modulus (hertz,
+    hooke) or spring (linear), then validated again (a scaled modulus below the schema's floor is
+    refused, naming ``engine.stiffness_scale``). Applying it twice changes nothing more. The
+    reference profile runs dust at its true density: a case that scales it is refused."""
     from .case_file import case_from_dict
-    s = profile_settings(case)
+    s = settings if settings is not None else profile_settings(case)
     dust = getattr(case.particles, "dust", None)
     if s["profile"] == "reference" and dust is not None and dust.density_scale != 1.0:
         raise CaseError([("particles.dust.density_scale", "profile 'reference' runs the dust at its true "
@@ -88,22 +134,19 @@ def effective_case(case: Case) -> Case:
             _scaled(d, moduli, scale)
             for pair in ("dust_dust", "dust_particle", "dust_wall"):
                 _scaled(d[pair], springs, scale)
-    data["engine"].update(timestep_fraction=s["timestep_fraction"], stiffness_scale=None,
-                          profile="custom")
+    data["engine"].update(profile="custom", timestep_fraction=s["timestep_fraction"], stiffness_scale=None,
+                          fast_profile=None)
     try:
-        out = case_from_dict(data, "the case with its profile applied")
+        return case_from_dict(data, "the case with its profile applied")
     except CaseError as exc:
         raise CaseError([("engine.stiffness_scale" if scale != 1.0 else field, f"{s['profile']} profile "
-                          f"(stiffness x {scale:g}): {msg}") for field, msg in exc.problems]) from None
-    # the effective case keeps the profile's name (the plan records it); its settings are now explicit
-    return out.model_copy(update={"engine": out.engine.model_copy(update={"profile": s["profile"]})})
+                          f"(stiffness x {scale:.3g}): {msg}") for field, msg in exc.problems]) from None
 
 
 def with_profile(case: Case, name: str) -> tuple[Case, list[str]]:
     """The case run with the profile ``name`` (``siloflow run --profile``): a profile other than
     custom replaces the case's ``engine.timestep_fraction`` and ``engine.stiffness_scale``; returns
     the case and the fields it replaced. An unknown name is a ``CaseError`` naming the option."""
-    from .case import PROFILE_NAMES
     from .case_file import case_from_dict
     if name not in PROFILE_NAMES:
         raise CaseError([("--profile", f"'{name}' is not a profile; choose one of {', '.join(PROFILE_NAMES)}")])
@@ -114,5 +157,7 @@ def with_profile(case: Case, name: str) -> tuple[Case, list[str]]:
             if data["engine"].get(f) is not None:
                 dropped.append(f"engine.{f}")
                 data["engine"][f] = None
+    if name != data["engine"]["profile"]:
+        data["engine"]["fast_profile"] = None
     data["engine"]["profile"] = name
     return case_from_dict(data, f"the case with --profile {name}"), dropped

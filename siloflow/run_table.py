@@ -4,6 +4,7 @@ it ends, so a stopped study goes on where it stopped. A run that fails (the guar
 row too, with its reason: an unstable setting is a result, not an error of the study."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -21,6 +22,38 @@ class PlannedRun:
     key: dict
     case: dict
     columns: dict = field(default_factory=dict)
+
+
+def key_text(value) -> str:
+    """A key column's value as text that survives the CSV round trip: None and NaN are "", numbers
+    their float's repr (a seed 7 and 7.0 read back are one key), text as it is."""
+    if value is None:
+        return ""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return "" if math.isnan(float(value)) else repr(float(value))
+    return str(value)
+
+
+def run_name(*parts) -> str:
+    """A run's case name from its parts joined by '-', within the 64 characters a name may have: the
+    first part (the case's name) is shortened when the whole would be longer."""
+    tail = "-".join(str(p) for p in parts[1:])
+    head = str(parts[0])[:max(0, 63 - len(tail))]
+    return (f"{head}-{tail}" if head else tail)[:64]
+
+
+def read_base_case(case_file: Path) -> dict:
+    """The case file's fields, checked as ``siloflow validate`` does, with its inserts' files made absolute
+    (relative to the case file's folder), so the study's runs find them wherever they are written."""
+    from .case_file import case_from_dict, parse_case_yaml, read_case_bytes
+    case_file = Path(case_file)
+    base = parse_case_yaml(read_case_bytes(case_file), str(case_file))
+    case_from_dict(base, str(case_file))
+    for ins in base.get("inserts") or []:
+        if isinstance(ins, dict) and "file" in ins:
+            path = Path(str(ins["file"]))
+            ins["file"] = str((path if path.is_absolute() else case_file.parent / path).resolve())
+    return base
 
 
 def read_rows(out: Path) -> list[dict]:
@@ -67,7 +100,7 @@ def run_missing(out: Path, planned: list[PlannedRun], measure: Callable[[Path], 
     rows = read_rows(out)
 
     def key_of(d: dict) -> tuple:
-        return tuple(sorted((k, str(d[k])) for k in planned[0].key)) if planned else ()
+        return tuple(sorted((k, key_text(d.get(k))) for k in planned[0].key)) if planned else ()
 
     done = {key_of(r) for r in rows}
     for p in planned:
@@ -82,6 +115,9 @@ def run_missing(out: Path, planned: list[PlannedRun], measure: Callable[[Path], 
             row.update(state="complete", reason="", **measure(folder))
         except SiloflowError as exc:
             reason = " ".join(str(exc).split())[:400]
+            if not folder.exists():          # refused before anything ran (the step cap, the disk, ...):
+                report(f"{name}: not run: {reason}")       # no result to keep; the next call tries again
+                continue
             row.update(state="failed", reason=reason, **failed(folder, reason))
         rows.append(row)
         _write_rows(rows, out)

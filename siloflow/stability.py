@@ -17,6 +17,9 @@ import re
 from pathlib import Path
 from typing import Callable, Optional
 
+from .case import PROFILE_FIELDS
+from .run_table import run_name
+
 FRACTIONS = (0.05, 0.1, 0.2, 0.3, 0.5, 0.7, 1.0)
 STIFFNESS = (1.0, 1e-2, 1e-4)
 #: kinetic/potential energy at which a burst's bed counts as settled enough to go on
@@ -34,8 +37,7 @@ def burst_case(base: dict, fraction: float, stiffness: float, seed: int, burst: 
     the settling capped and loose, a short static window, ``burst`` s of discharge, the flow rate
     its only result (the leanest deck), the guard on with the case's limits."""
     data = copy.deepcopy(base)
-    engine = {k: v for k, v in data.get("engine", {}).items() if k not in ("profile", "timestep_fraction",
-                                                                           "stiffness_scale")}
+    engine = {k: v for k, v in data.get("engine", {}).items() if k not in PROFILE_FIELDS}
     guard = {**engine.get("guard", {}), "enabled": True}
     engine.update(profile="custom", timestep_fraction=fraction, stiffness_scale=stiffness, guard=guard)
     settle = dict(data["fill"].get("settle", {}))
@@ -51,7 +53,7 @@ def burst_case(base: dict, fraction: float, stiffness: float, seed: int, burst: 
     if dust_scale is not None:
         data["particles"]["dust"] = {**data["particles"]["dust"], "density_scale": dust_scale}
     tag = f"dt{fraction:g}-E{stiffness:g}" + (f"-dust{dust_scale:g}" if dust_scale is not None else "")
-    data.update(engine=engine, seed=seed, name=f"{base['name']}-{tag}-s{seed}")
+    data.update(engine=engine, seed=seed, name=run_name(base["name"], tag, f"s{seed}"))
     return data
 
 
@@ -86,7 +88,7 @@ def peaks(folder: Path) -> dict:
                 speed, overlap = max(speed, float(cols[8])), max(overlap, float(cols[9]))
             except ValueError:
                 continue
-    g, r_min = plan.guard, min(sp.radius for sp in plan.species)
+    g, r_min = plan.guard, min(sp.radius for sp in plan.grains)
     if g is None or not math.isfinite(speed):
         return out
     overlap = max(overlap, 0.0)
@@ -98,13 +100,16 @@ def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIF
                  seed: Optional[int] = None, burst: float = 0.1,
                  report: Callable[[str], None] = lambda s: None) -> list[dict]:
     """Run every grid point not yet in ``out/runs.csv``; return all rows."""
-    from .case_file import case_from_dict, parse_case_yaml, read_case_bytes
-    from .run_table import PlannedRun, engine_wall_time, run_missing
-    base = parse_case_yaml(read_case_bytes(case_file), str(case_file))
+    from .case_file import case_from_dict
+    from .run_table import PlannedRun, engine_wall_time, read_base_case, run_missing
+    base = read_base_case(case_file)
     case = case_from_dict(base, str(case_file))
     seed = case.seed if seed is None else seed
     has_dust = getattr(case.particles, "dust", None) is not None
-    dusts = list(dust_scales) if (has_dust and dust_scales) else [None]
+    if dust_scales and not has_dust:
+        from .errors import CaseError
+        raise CaseError([("--dust", "the case has no dust (particles.dust) to scale")], str(case_file))
+    dusts = list(dust_scales) if dust_scales else [None]
     planned = [PlannedRun(key={"timestep_fraction": f, "stiffness_scale": s, "dust_scale": ds, "seed": seed},
                           case=burst_case(base, f, s, seed, burst, ds))
                for ds in dusts for s in sorted(stiffness, reverse=True) for f in sorted(fractions)]

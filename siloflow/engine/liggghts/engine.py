@@ -129,7 +129,7 @@ class LiggghtsEngine(Engine):
         self.check_deck_files(folder, resume)   # defence in depth: only siloflow's commands reach the engine
         cmd = self.command(plan.engine.ranks, deck, log)
         planned = plan.planned_steps(encode(plan).open_steps)
-        state = LogState(guard=RunGuard(plan.guard, min(sp.radius for sp in plan.species))
+        state = LogState(guard=RunGuard(plan.guard, min(sp.radius for sp in plan.grains))
                          if plan.guard is not None else None, count_lost=not plan.has_clumps)
         tail: deque[str] = deque(maxlen=25)
         start = time.perf_counter()

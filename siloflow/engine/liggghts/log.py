@@ -123,7 +123,7 @@ class LogState:
         if self.count_lost and self.inserted is not None and math.isfinite(out_count):
             lost = int(self.inserted - self.atoms - round(out_count))
         trip = self.guard.check(self.stage, self.step, ke, pe, speed=speed, overlap=overlap, escaped=escaped,
-                                lost=lost)
+                                lost=lost, atoms=self.atoms or 0)
         if trip is not None:
             self.guard_trip = trip
             self.errors.append(f"siloflow guard ({trip.signal}): {trip.message}")
