@@ -42,6 +42,7 @@ class Candidate:
     ranks: Optional[int] = None
     results: Optional[tuple[str, ...]] = None       # outputs.results (None: the case's); fewer: a leaner deck
     profile: bool = True            # can be a profile (time step and stiffness only: not ranks or outputs)
+    max_overlap: Optional[float] = None     # engine.guard.max_overlap (None: the case's): to measure past the guard
 
 
 REFERENCE = Candidate("reference", 0.02, 1.0)
@@ -53,6 +54,11 @@ CANDIDATES = (
     # the leanest deck (one plain side wall, no dumps): flow rate and force balance only
     Candidate("E1e-4_dt0.2_lean", 0.2, 1e-4, results=("flow_rate", "force_balance"), profile=False),
     Candidate("E1e-4_dt0.1", 0.1, 1e-4),
+    # the guard stops E = 1e-4 in the fill (impacts overlap 0.6-0.9 of a radius): what it would cost
+    Candidate("E1e-4_dt0.2_past_guard", 0.2, 1e-4, max_overlap=1.5, profile=False),
+    Candidate("E1e-3_dt0.3", 0.3, 1e-3),
+    Candidate("E1e-3_dt0.2", 0.2, 1e-3),
+    Candidate("E3e-4_dt0.2", 0.2, 3e-4),
     Candidate("E1e-3_dt0.1", 0.1, 1e-3),
     Candidate("E1e-4_dt0.02", 0.02, 1e-4),
     Candidate("E1e-2_dt0.1", 0.1, 1e-2),
@@ -70,6 +76,8 @@ def candidate_case(base: dict, cand: Candidate, seed: int) -> dict:
     engine.update(profile="custom", timestep_fraction=cand.timestep_fraction, stiffness_scale=cand.stiffness_scale)
     if cand.ranks is not None:
         engine["ranks"] = cand.ranks
+    if cand.max_overlap is not None:
+        engine["guard"] = {**engine.get("guard", {}), "max_overlap": cand.max_overlap}
     if cand.results is not None:
         data["outputs"] = {k: v for k, v in data.get("outputs", {}).items() if k not in ("dump_interval", "vtk")}
         data["outputs"]["results"] = list(cand.results)
