@@ -59,6 +59,8 @@ CANDIDATES = (
     Candidate("E1e-3_dt0.3", 0.3, 1e-3),
     Candidate("E1e-3_dt0.2", 0.2, 1e-3),
     Candidate("E3e-4_dt0.2", 0.2, 3e-4),
+    Candidate("E1e-3_dt0.2_1rank", 0.2, 1e-3, ranks=1, profile=False),
+    Candidate("E1e-3_dt0.2_lean", 0.2, 1e-3, results=("flow_rate", "force_balance"), profile=False),
     Candidate("E1e-3_dt0.1", 0.1, 1e-3),
     Candidate("E1e-4_dt0.02", 0.02, 1e-4),
     Candidate("E1e-2_dt0.1", 0.1, 1e-2),
