@@ -202,7 +202,7 @@ def analyse(folder, measured_pressure=None) -> dict:
         "bands": table.to_dict(orient="records"),
         "pressure_statistics": pressure_stats,
         "engine_wall_time_s": run.record.wall_time,
-        "numerical_profile": run.plan.profile.model_dump(mode="json") if run.plan.profile is not None else None,
+        "numerical_profile": _profile_record(run.plan),
         **({"discharge_stop": run.record.discharge_stop} if run.record.discharge_stop else {}),
         **({"fill_cache": run.record.fill_cache} if run.record.fill_cache else {}),
         "engine_warnings": run.record.warnings,
@@ -308,6 +308,12 @@ def janssen_lines(j: dict) -> list[str]:
         return [f"- Janssen fit of the settled profile ({how}: {values} (95 % intervals)", hyd]
     return [f"- Janssen fit of the settled profile ({how}: not resolved: {j['reason']}",
             f"  - fitted values, not to be used as material data: {values}", hyd]
+
+
+def _profile_record(plan) -> dict | None:
+    """The plan's numerical profile as a dict (None for a plan written before profiles existed)."""
+    profile = getattr(plan, "profile", None)
+    return profile.model_dump(mode="json") if profile is not None else None
 
 
 def profile_line(p: dict | None) -> str:
