@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import signal
+from contextlib import contextmanager
 import sys
 import time
 from pathlib import Path
@@ -527,21 +528,14 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
             _fail(SiloflowError(f"--candidates: unknown {', '.join(unknown)}; known: {', '.join(known)}"))
         chosen = [REFERENCE] + [known[n] for n in names if n != REFERENCE.name]
     signal.signal(signal.SIGTERM, _interrupt)
-    try:
+    tolerances = {"flow_rate": flow_tolerance, "static_pressure": static_tolerance}
+    with _study(output, "bench"):
         if not conclude_only:
-            run_bench(case_file, output, seeds, chosen,
-                      report=_note)
-        tolerances = {"flow_rate": flow_tolerance, "static_pressure": static_tolerance}
+            run_bench(case_file, output, seeds, chosen, report=_note)
         table, rec = conclude(output, tolerances, case_file=case_file)
         if rec is not None and validate_seeds and not conclude_only and rec["candidate"] != REFERENCE.name:
             validate(case_file, output, rec["candidate"], validate_seeds, report=_note)
             table, rec = conclude(output, tolerances, case_file=case_file)
-    except KeyboardInterrupt:
-        _study_interrupted(output)
-    except SiloflowError as exc:
-        _fail(exc)
-    except (ValueError, KeyError) as exc:
-        _fail(SiloflowError(f"{output / 'runs.csv'} is not a bench table ({exc})"))
     cols = ["candidate", "quantity", "n_cand", "speedup", "rel_error", "ci_lo", "ci_hi", "verdict"]
     out.print(printable(table[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}")), markup=False,
               highlight=False)
@@ -573,10 +567,20 @@ def _note(text: str) -> None:
     err.print(printable(text), markup=False, highlight=False)
 
 
-def _study_interrupted(output: Path) -> None:
-    err.print(f"[yellow]interrupted: the finished runs are in {output / 'runs.csv'}; the same command goes "
-              "on from there[/yellow]")
-    raise typer.Exit(130)
+@contextmanager
+def _study(output: Path, what: str):
+    """A resumable study's errors: Ctrl-C says where the finished runs are, a siloflow error is a message,
+    a runs.csv that is not the study's (a foreign or damaged table) says so."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        err.print(f"[yellow]interrupted: the finished runs are in {output / 'runs.csv'}; the same command goes "
+                  "on from there[/yellow]")
+        raise typer.Exit(130)
+    except SiloflowError as exc:
+        _fail(exc)
+    except (ValueError, KeyError) as exc:
+        _fail(SiloflowError(f"{output / 'runs.csv'} is not a {what} table ({exc})"))
 
 
 def _numbers(text: str, option: str) -> list[float]:
@@ -612,20 +616,16 @@ def stability(case_file: Path = typer.Argument(..., help="YAML case file"),
     if ds and min(ds) < 1.0:
         _fail(SiloflowError(f"--dust: dust density scales must be >= 1, not '{dust}'"))
     signal.signal(signal.SIGTERM, _interrupt)
-    try:
-        rows = run_envelope(case_file, output, fr, st, ds, seed, burst,
-                            report=_note)
+    with _study(output, "stability"):
+        rows = run_envelope(case_file, output, fr, st, ds, seed, burst, report=_note)
         edges = conclude(output, rows)
-    except KeyboardInterrupt:
-        _study_interrupted(output)
-    except SiloflowError as exc:
-        _fail(exc)
-    except (ValueError, KeyError) as exc:
-        _fail(SiloflowError(f"{output / 'runs.csv'} is not a stability table ({exc})"))
     for e in edges:
         what = f"stiffness x {e['stiffness_scale']:g}" + (f", dust x {e['dust_scale']:g}" if e["dust_scale"] else "")
         if e["safe"] != e["safe"]:
             line = f"{what}: no stable time step among {fractions}"
+            if e["signal"] == "overlap":
+                line += (" (every one stopped for overlap: the contacts are too soft for engine.guard.max_overlap, "
+                         "whatever the time step)")
         elif e["unstable"] != e["unstable"]:
             line = f"{what}: stable up to {e['safe']:g} t_c (no unstable point: the edge lies beyond the grid)"
         else:
