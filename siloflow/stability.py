@@ -159,15 +159,14 @@ def conclude(out: Path, rows: list[dict]) -> list[dict]:
 
 
 def envelope_figure(df, edges: list[dict], path: Path) -> None:
-    """Time-step fraction (x, log) against stiffness scale (y, log): stable points green circles sized by
-    how near the overlap limit they ran, unstable red crosses labelled with their signal, inconclusive
-    grey; the safe edge per stiffness as a bar."""
+    """Time-step fraction (x, log) against stiffness scale (y, log): stable points green circles, unstable
+    red crosses labelled with their signal, inconclusive grey squares; the safe edge per stiffness as a bar."""
     import os
     import tempfile
     import matplotlib
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
-    fig = Figure(figsize=(6.5, 4.2))
+    fig = Figure(figsize=(7.5, 4.2))
     ax = fig.add_subplot()
     for verdict, style in (("stable", dict(marker="o", color="tab:green")),
                            ("unstable", dict(marker="x", color="tab:red")),
@@ -186,7 +185,7 @@ def envelope_figure(df, edges: list[dict], path: Path) -> None:
     ax.set_xlabel("time step / critical time")
     ax.set_ylabel("stiffness scale")
     ax.set_title("stability envelope (bar: largest safe time step)")
-    ax.legend(fontsize=8, loc="lower left")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     fd, tmp = tempfile.mkstemp(suffix=".png", dir=path.parent)
     os.close(fd)
