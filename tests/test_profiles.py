@@ -196,3 +196,35 @@ def test_the_packaged_fast_profile_is_the_committed_benchmarks_proven_recommenda
     assert (fast["timestep_fraction"], fast["overlap_ratio"]) == (rec["timestep_fraction"], rec["overlap_ratio"])
     assert fast["error_bounds"] == rec["error_bounds"] and rec["meets_tolerances"] is True
     assert all(rec["error_bounds"][q] <= rec["tolerances"][q] for q in rec["tolerances"])
+
+
+@pytest.mark.engine
+def test_siloflow_run_profile_fast_runs_and_says_what_it_ran(tmp_path):
+    """`siloflow run --profile fast` on the small silo: the case's own time step is replaced (and said so),
+    its glass-soft grains (impact overlap 0.18 of a radius) are not softened further, the run completes,
+    and the run folder's case, plan, report and summary name the profile and its bounds; a second render of
+    the folder's case.yaml gives the same plan (the pinned profile), as a resume needs."""
+    from typer.testing import CliRunner
+    from siloflow.cli import app
+    from siloflow.run_folder import RunFolder
+    data = yaml.safe_load((ROOT / "tests" / "data" / "small_silo.yaml").read_text())
+    data.update(name="fast_small")
+    data["fill"]["count"] = 600
+    data["discharge"] = {"duration": 0.3}
+    data["outputs"] = {"sample_interval": 0.005, "results": ["flow_rate", "force_balance"]}
+    data["engine"] = {"ranks": 1, "timestep_fraction": 0.2}
+    case_file = tmp_path / "case.yaml"
+    case_file.write_text(yaml.safe_dump(data))
+    result = CliRunner().invoke(app, ["run", str(case_file), "-o", str(tmp_path / "run"), "--profile", "fast"])
+    assert result.exit_code == 0, result.output
+    assert "--profile fast replaces the case's engine.timestep_fraction" in result.output
+    run = RunFolder(tmp_path / "run")
+    plan = run.plan
+    assert plan.profile.name == "fast" and plan.profile.stiffness_scale == 1.0
+    assert plan.timestep.fraction == fast_profile()["timestep_fraction"]
+    report = (run.results / "report.md").read_text()
+    assert "numerical profile fast" in report and "95 % error bounds" in report
+    assert run.read_summary()["numerical_profile"]["error_bounds"] == fast_profile()["error_bounds"]
+    from siloflow.case_file import load_case
+    again = derive(load_case(run.case_file))
+    assert again.to_json() == plan.to_json()
