@@ -305,7 +305,9 @@ def physics_warnings(case: Case, d: RunPlan) -> list[str]:
                        f"compressed by about {1.5 * ratio:.1%} in volume and its solid fraction and wall "
                        f"pressures are shifted by as much; raise {remedy} if that matters")
     if case.engine.timestep_fraction > TIMESTEP_FRACTION_WARNING:
-        out.append(f"engine.timestep_fraction {case.engine.timestep_fraction} resolves the shortest contact "
+        owner = ("engine.timestep_fraction" if d.profile is None or d.profile.name == "custom"
+                 else f"engine.profile {d.profile.name}'s time step")
+        out.append(f"{owner} {case.engine.timestep_fraction} resolves the shortest contact "
                    f"({d.timestep.critical_time_source}) with only {1 / case.engine.timestep_fraction:.2g} steps: "
                    "velocity Verlet is unstable above 0.64 contact times and Hertz contacts stiffen during "
                    "impact, so contacts may gain energy; 0.1-0.2 is usual")

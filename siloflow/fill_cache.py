@@ -78,6 +78,8 @@ def fill_key_inputs(plan, engine) -> dict:
     if plan.geometry.hopper_height == 0:           # the orifice is closed by the plate during the fill
         geometry.pop("outlet_radius")
     data["geometry"] = geometry
+    # the guard's limits do not make another bed, but a bed settled unwatched is not one a watched run may take
+    data["guarded"] = plan.guard is not None and plan.guard.enabled
     data["walls_sha256"] = walls_digest(plan)
     data["engine"] = engine.fill_key_parts(plan)
     return data

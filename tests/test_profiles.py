@@ -228,3 +228,16 @@ def test_siloflow_run_profile_fast_runs_and_says_what_it_ran(tmp_path):
     from siloflow.case_file import load_case
     again = derive(load_case(run.case_file))
     assert again.to_json() == plan.to_json()
+
+
+def test_a_bed_settled_without_the_guard_is_not_taken_from_the_cache_by_a_guarded_run(quick_dict):
+    from siloflow.fill_cache import fill_key
+
+    class FakeEngine:
+        def fill_key_parts(self, plan):
+            return {"name": "fake"}
+    watched = plan_of(quick_dict)
+    loose = plan_of(with_engine(quick_dict, timestep_fraction=watched.timestep.fraction, guard={"max_overlap": 1.0}))
+    unwatched = plan_of(with_engine(quick_dict, timestep_fraction=watched.timestep.fraction, guard={"enabled": False}))
+    assert fill_key(watched, FakeEngine()) == fill_key(loose, FakeEngine())          # other limits: the same bed
+    assert fill_key(watched, FakeEngine()) != fill_key(unwatched, FakeEngine())
