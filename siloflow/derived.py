@@ -533,6 +533,17 @@ def derive(case: Case) -> RunPlan:
     return plan
 
 
+def own_overlap(species: Species) -> float:
+    """The deepest overlap of two spheres of one clump, m (0 for a sphere): LIGGGHTS lists a clump's own
+    overlapping spheres among the pair contacts (seen in a clump discharge: 3 mm for paper A's wheat),
+    so the guard's overlap limit stands on top of it."""
+    deepest = 0.0
+    for i, a in enumerate(species.spheres):
+        for b in species.spheres[i + 1:]:
+            deepest = max(deepest, a[3] + b[3] - math.dist(a[:3], b[:3]))
+    return deepest
+
+
 def guard_limits(case: Case, species: list, v_open: float, z_lowest: float) -> Guard:
     """The instability guard's limits (``engine.guard``), SI. The fastest a grain can move in a silo
     driven by gravity alone is its insertion speed plus the free fall from the top to the lowest
@@ -546,7 +557,8 @@ def guard_limits(case: Case, species: list, v_open: float, z_lowest: float) -> G
     margin = gs.escape_margin * 2.0 * case.particles.max_radius
     planar = isinstance(g, PlanarGeometry)
     return Guard(enabled=gs.enabled, max_speed=gs.speed_factor * (fall + v_open),
-                 max_overlap=gs.max_overlap * r_min, max_overlap_fraction=gs.max_overlap,
+                 max_overlap=gs.max_overlap * r_min + max(map(own_overlap, species)),
+                 max_overlap_fraction=gs.max_overlap,
                  energy_growth=gs.energy_growth,
                  escape_radius=None if planar else g.half_width + margin,
                  escape_half_x=g.half_width + margin if planar else None,

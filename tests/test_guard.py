@@ -161,9 +161,17 @@ def test_a_few_grains_straying_in_the_fill_are_left_to_the_run_check():
     assert guard().check("settle", 100, ke=1e-6, pe=1.0, escaped=1.0, atoms=1000).signal == "escape"
 
 
-def test_the_overlap_limit_is_a_fraction_of_the_smallest_grain_not_of_the_dust():
+def test_the_overlap_limit_is_a_fraction_of_the_smallest_grain_on_top_of_a_clumps_own_overlap():
+    """Not of the dust's radius; and a clump's own spheres overlap by design (wheat: 2 + 2 - 1 = 3 mm
+    for spheres of 2 mm radius 1 mm apart), which LIGGGHTS lists among the pair contacts."""
     data = yaml.safe_load((SMALL.parent / "clump_silo.yaml").read_text())
     plan = derive(case_from_dict(data))
-    r_grain = min(sp.radius for sp in plan.grains)
+    clump = plan.grains[0]
+    r_grain = clump.radius
     assert plan.dust is not None and plan.dust.radius < r_grain
-    assert plan.guard.max_overlap == pytest.approx(plan.guard.max_overlap_fraction * r_grain)
+    spheres = clump.spheres
+    own = max(a[3] + b[3] - math.dist(a[:3], b[:3]) for i, a in enumerate(spheres) for b in spheres[i + 1:])
+    assert own > r_grain
+    assert plan.guard.max_overlap == pytest.approx(plan.guard.max_overlap_fraction * r_grain + own)
+    spheres_plan = derive(case_from_dict(yaml.safe_load(SMALL.read_text())))
+    assert spheres_plan.guard.max_overlap == pytest.approx(0.5 * spheres_plan.grains[0].radius)

@@ -119,7 +119,7 @@ def test_post_on_the_run_dumps_as_foreign_files(small_run, tmp_path):
     case, folder, record, summary = small_run
     dumps = folder / "output" / "dumps"
     result = CliRunner().invoke(app, ["post", str(dumps / "dump.*.txt"), "--contacts", str(dumps / "contacts.*.txt"),
-                                      "--contact-keywords", "pos,id,force,force_normal", "-o", str(tmp_path / "p")])
+                                      "--contact-keywords", "pos,id,force,force_normal,delta", "-o", str(tmp_path / "p")])
     assert result.exit_code == 0, result.output
     s = json.loads((tmp_path / "p" / "summary.json").read_text())
     assert s["coordination_last"]["source"] == "dump_local"
