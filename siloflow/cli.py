@@ -107,7 +107,7 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
     t = d.timestep
     out.print(f"deck written to {folder}: {d.fill.count} particles, dt = {t.dt:.3g} s "
               f"({t.fraction} x {t.critical_time_source} {t.critical_time:.3g} s)")
-    for line in (clump_note(d), dust_note(d)):
+    for line in (clump_note(d), dust_note(d), profile_note(d.profile) if d.profile.name != "custom" else ""):
         if line:
             out.print(line)
 

@@ -193,3 +193,18 @@ def test_candidates_that_are_not_profiles_are_never_recommended(tmp_path):
             for c, w in (("reference", 100.0), ("E1e-4_dt0.2_1rank", 1.0), ("E1e-4_dt0.2", 2.0)) for k in range(3)]
     pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)
     assert ab.conclude(tmp_path)[1]["candidate"] == "E1e-4_dt0.2"
+
+
+def test_upscaling_keeps_the_bed_and_scales_the_grains():
+    base = yaml.safe_load((ROOT / "benchmarks" / "cases" / "accuracy_small.yaml").read_text())
+    cand = next(c for c in ab.CANDIDATES if c.upscale)
+    data = ab.candidate_case(base, cand, 3)
+    assert data["particles"]["radii"] == pytest.approx([r * cand.upscale for r in base["particles"]["radii"]])
+    assert data["fill"]["count"] == round(base["fill"]["count"] / cand.upscale ** 3)
+    fine, coarse = derive(case_from_dict(ab.candidate_case(base, ab.CANDIDATES[0], 3))), derive(case_from_dict(data))
+    assert coarse.total_mass == pytest.approx(fine.total_mass, rel=0.01)       # the same bed, fewer grains
+    assert not cand.profile
+    from siloflow.run_table import read_base_case
+    lin = read_base_case(ROOT / "decks" / "paper_a_spheres_quick.yaml")
+    up = ab.upscaled_case(lin, 2.0)
+    assert up["materials"]["particle_particle"]["kn"] == 2.0 * float(lin["materials"]["particle_particle"]["kn"])
