@@ -17,8 +17,8 @@ from siloflow.atomic_files import write_json, write_text
 from siloflow.errors import ReadError
 from siloflow.run_folder import RESULT_TABLES, SUMMARY_NAME, RunFolder
 
-from .discharge import discharge_table, steady_flow_rate
 from .batch_means import batch_means_stderr
+from .discharge import discharge_table, steady_flow_rate
 from .dump_results import MIN_STEADY_SAMPLES, analyse_dumps, steady_resolution
 from .flow_rate import rate_series, steady_window
 from .janssen import compare_with_measurement
@@ -59,8 +59,6 @@ def static_window(forces: pd.DataFrame, run: RunOutputs) -> pd.Series:
     lo = run.stage_steps["static"] + run.sample_steps
     hi = run.stage_steps["open"]
     return (forces.step > lo) & (forces.step <= hi)
-
-
 
 
 def pressure_window(steady: dict | None, rate) -> dict | None:

@@ -146,15 +146,14 @@ def run_metrics(folder: Path) -> dict:
 
 def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
               report: Callable[[str], None] = lambda s: None, skip_reference: bool = False,
-              first_seed: Optional[int] = None) -> list[dict]:
-    """Run every candidate x seed not yet in ``out/runs.csv`` (the case's seed, +1, ...); return
-    all rows (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
+              seed_offset: int = 0) -> list[dict]:
+    """Run every candidate x seed not yet in ``out/runs.csv`` (the case's seed + ``seed_offset``, +1,
+    ...); return all rows (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
     from .run_table import PlannedRun, engine_wall_time, read_base_case, run_missing
-    base = read_base_case(case_file)
+    base, case = read_base_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
         raise SetupError("the bench needs the reference candidate (the papers' settings) to compare with")
-    first_seed = int(base.get("seed", 12345)) if first_seed is None else first_seed
-    ranks = base.get("engine", {}).get("ranks", 1)
+    first_seed, ranks = case.seed + seed_offset, case.engine.ranks
     planned = [PlannedRun(key={"candidate": c.name, "seed": first_seed + k},
                           case=candidate_case(base, c, first_seed + k),
                           columns={"timestep_fraction": c.timestep_fraction, "stiffness_scale": c.stiffness_scale,
@@ -177,11 +176,9 @@ def validate(case_file: Path, out: Path, recommended: str, seeds: int,
     that chose it), as the candidate ``<name>_new_seeds``; :func:`conclude` then compares them with
     the reference like any candidate, and :func:`validation` says whether they stay in the bounds."""
     from dataclasses import replace
-    from .run_table import read_base_case
-    base = read_base_case(case_file)
     cand = next(c for c in CANDIDATES if c.name == recommended)
     return run_bench(case_file, out, seeds, [REFERENCE, replace(cand, name=cand.name + VALIDATION)], report,
-                     skip_reference=True, first_seed=int(base.get("seed", 12345)) + VALIDATION_SEED_OFFSET)
+                     skip_reference=True, seed_offset=VALIDATION_SEED_OFFSET)
 
 
 def validation(table, rec: dict) -> list[dict]:

@@ -558,7 +558,7 @@ def guard_limits(case: Case, species: list, v_open: float, z_lowest: float) -> G
     planar = isinstance(g, PlanarGeometry)
     return Guard(enabled=gs.enabled, max_speed=gs.speed_factor * (fall + v_open),
                  max_overlap=gs.max_overlap * r_min + max(map(own_overlap, species)),
-                 max_overlap_fraction=gs.max_overlap,
+                 max_overlap_fraction=gs.max_overlap, grain_radius=r_min,
                  energy_growth=gs.energy_growth,
                  escape_radius=None if planar else g.half_width + margin,
                  escape_half_x=g.half_width + margin if planar else None,

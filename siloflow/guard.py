@@ -49,11 +49,19 @@ class GuardTrip:
 class RunGuard:
     """Watches one run's thermo rows against the plan's :class:`~siloflow.plan.Guard` limits."""
 
-    def __init__(self, limits: Guard, radius: float):
+    def __init__(self, limits: Guard):
         self.limits = limits
-        self.radius = radius                  # the smallest grain radius, m (for the message)
         self._stage: Optional[str] = None
         self._ke_min = math.inf
+        #: the largest speed (m/s) and pair overlap (m) of the rows checked, whether or not the guard is on
+        self.peaks = {"speed": -math.inf, "overlap": -math.inf}
+
+    def peak_record(self) -> Optional[dict]:
+        """The peaks as the run record keeps them (``max_speed`` m/s, ``max_overlap`` m; no contact yet
+        reads 0), None when no row was checked."""
+        if not math.isfinite(self.peaks["speed"]):
+            return None
+        return {"max_speed": self.peaks["speed"], "max_overlap": max(self.peaks["overlap"], 0.0)}
 
     def check(self, stage: Optional[str], step: int, ke: float, pe: float, speed: Optional[float] = None,
               overlap: Optional[float] = None, escaped: Optional[float] = None,
@@ -63,6 +71,9 @@ class RunGuard:
         ``escaped``: grains beyond the walls; ``lost``: atoms gone without passing the outlet;
         ``atoms``: atoms in the box (in the fill, up to ``FILL_ESCAPES`` of them may stray)."""
         g = self.limits
+        for key, v in (("speed", speed), ("overlap", overlap)):
+            if v is not None and math.isfinite(v):
+                self.peaks[key] = max(self.peaks[key], v)
         if not g.enabled:
             return None
         stage = stage or "start"
@@ -80,7 +91,7 @@ class RunGuard:
         if overlap is not None and overlap > g.max_overlap:
             return trip("overlap", overlap, g.max_overlap,
                         f"two grains overlap by {overlap:.3g} m at step {step} ({stage} stage), "
-                        f"{overlap / self.radius:.2g} of the smallest radius (limit {g.max_overlap_fraction:g})",
+                        f"{overlap / g.grain_radius:.2g} of the smallest radius (limit {g.max_overlap_fraction:g})",
                         "contacts too soft for the load, or a time step too large to resolve the impacts",
                         f"{_STEP_FIX}; raise engine.stiffness_scale (or the Young's moduli / kn); or raise "
                         "engine.guard.max_overlap if such overlaps are intended")

@@ -298,6 +298,7 @@ class Guard(Frozen):
     max_speed: float                 # m/s
     max_overlap: float               # m
     max_overlap_fraction: float      # of the smallest grain radius
+    grain_radius: float              # m: the smallest grain radius (not the dust's)
     energy_growth: float
     escape_radius: Optional[float] = None     # m from the axis (cylinder, hopper)
     escape_half_x: Optional[float] = None     # m (planar slab)

@@ -111,8 +111,8 @@ def _scaled(section, keys: tuple[str, ...], scale: float) -> None:
 def effective_case(case: Case, settings: dict | None = None) -> Case:
     """The case as it runs, as a ``custom`` case: the profile's time-step fraction written into
     ``engine.timestep_fraction`` and its stiffness scale applied to every Young's modulus (hertz,
-    hooke) or spring (linear), then validated again (a scaled modulus below the schema's floor is
-    refused, naming ``engine.stiffness_scale``). Applying it twice changes nothing more. The
+    hooke) or spring (linear), then, when a modulus changed, validated again (a scaled modulus below
+    the schema's floor is refused, naming ``engine.stiffness_scale``). Applying it twice changes nothing more. The
     reference profile runs dust at its true density: a case that scales it is refused."""
     from .case_file import case_from_dict
     s = settings if settings is not None else profile_settings(case)
@@ -120,26 +120,28 @@ def effective_case(case: Case, settings: dict | None = None) -> Case:
     if s["profile"] == "reference" and dust is not None and dust.density_scale != 1.0:
         raise CaseError([("particles.dust.density_scale", "profile 'reference' runs the dust at its true "
                           "density: remove density_scale, or use profile: custom")])
-    data = case.model_dump(mode="json")
     scale = s["stiffness_scale"]
-    if scale != 1.0:
-        m = data["materials"]
-        moduli, springs = ("youngs_modulus",), ("kn", "kt")
-        for part in ("particle", "wall"):
-            _scaled(m[part], moduli, scale)
-        for pair in ("particle_particle", "particle_wall"):
-            _scaled(m[pair], springs, scale)
-        d = data["particles"].get("dust")
-        if d is not None:
-            _scaled(d, moduli, scale)
-            for pair in ("dust_dust", "dust_particle", "dust_wall"):
-                _scaled(d[pair], springs, scale)
-    data["engine"].update(profile="custom", timestep_fraction=s["timestep_fraction"], stiffness_scale=None,
-                          fast_profile=None)
+    engine = {"profile": "custom", "timestep_fraction": s["timestep_fraction"], "stiffness_scale": None,
+              "fast_profile": None}
+    if scale == 1.0:                   # no modulus changes: nothing the schema must check again
+        return case.model_copy(update={"engine": case.engine.model_copy(update=engine)})
+    data = case.model_dump(mode="json")
+    m = data["materials"]
+    moduli, springs = ("youngs_modulus",), ("kn", "kt")
+    for part in ("particle", "wall"):
+        _scaled(m[part], moduli, scale)
+    for pair in ("particle_particle", "particle_wall"):
+        _scaled(m[pair], springs, scale)
+    d = data["particles"].get("dust")
+    if d is not None:
+        _scaled(d, moduli, scale)
+        for pair in ("dust_dust", "dust_particle", "dust_wall"):
+            _scaled(d[pair], springs, scale)
+    data["engine"].update(engine)
     try:
         return case_from_dict(data, "the case with its profile applied")
     except CaseError as exc:
-        raise CaseError([("engine.stiffness_scale" if scale != 1.0 else field, f"{s['profile']} profile "
+        raise CaseError([("engine.stiffness_scale", f"{s['profile']} profile "
                           f"(stiffness x {scale:.3g}): {msg}") for field, msg in exc.problems]) from None
 
 

@@ -340,6 +340,7 @@ class RunRecord:
     fill_cache: Optional[dict] = None          # {"key", "hit"}: the settled bed came from (or went to) the cache
     discharge_stop: Optional[dict] = None      # until_steady: why it stopped (steady, empty, max_time), rate error
     guard: Optional[dict] = None               # the guard stopped the run: signal, stage, step, value, limit
+    guard_peaks: Optional[dict] = None         # the fastest grain (m/s) and deepest pair overlap (m) the guard saw
 
     def to_json(self) -> dict:
         return asdict(self)

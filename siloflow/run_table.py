@@ -42,18 +42,19 @@ def run_name(*parts) -> str:
     return (f"{head}-{tail}" if head else tail)[:64]
 
 
-def read_base_case(case_file: Path) -> dict:
-    """The case file's fields, checked as ``siloflow validate`` does, with its inserts' files made absolute
-    (relative to the case file's folder), so the study's runs find them wherever they are written."""
+def read_base_case(case_file: Path):
+    """(fields, validated ``Case``) of a study's case file, checked as ``siloflow validate`` does; the
+    fields' inserts are made absolute (relative to the case file's folder), so the study's runs find
+    them wherever they are written."""
     from .case_file import case_from_dict, parse_case_yaml, read_case_bytes
     case_file = Path(case_file)
     base = parse_case_yaml(read_case_bytes(case_file), str(case_file))
-    case_from_dict(base, str(case_file))
+    case = case_from_dict(base, str(case_file))
     for ins in base.get("inserts") or []:
         if isinstance(ins, dict) and "file" in ins:
             path = Path(str(ins["file"]))
             ins["file"] = str((path if path.is_absolute() else case_file.parent / path).resolve())
-    return base
+    return base, case
 
 
 def read_rows(out: Path) -> list[dict]:

@@ -69,30 +69,22 @@ def classify(reason: str) -> tuple[str, str]:
 
 
 def peaks(folder: Path) -> dict:
-    """The largest speed (m/s) and pair overlap (fraction of the smallest radius) a run's thermo rows
-    reached, each against the guard's limit (``speed_ratio``, ``overlap_ratio``: 1 = at the limit)."""
-    from .engine.liggghts.log import THERMO_GUARD_COLUMNS
+    """The largest speed (m/s) and pair overlap (fraction of the smallest grain radius) a run reached
+    (the guard's ``guard_peaks`` in its run record), each against the guard's limit (``speed_ratio``,
+    ``overlap_ratio``: 1 = at the limit); NaN for a run that never started."""
+    from .errors import SiloflowError
     from .run_folder import RunFolder
     nan = float("nan")
     out = {"max_speed": nan, "max_overlap_fraction": nan, "speed_ratio": nan, "overlap_ratio": nan}
     try:
-        plan = RunFolder(folder).plan
-        text = (Path(folder) / "log.liggghts").read_text(errors="replace")
-    except Exception:                       # a run that never started has nothing to read
+        run = RunFolder(folder)
+        g, seen = run.plan.guard, run.record.guard_peaks
+    except (SiloflowError, OSError, TypeError, ValueError):     # no plan or record: nothing ran
         return out
-    speed = overlap = -math.inf
-    for line in text.splitlines():
-        cols = line.split()
-        if len(cols) == THERMO_GUARD_COLUMNS and cols[0].isdigit():
-            try:
-                speed, overlap = max(speed, float(cols[8])), max(overlap, float(cols[9]))
-            except ValueError:
-                continue
-    g, r_min = plan.guard, min(sp.radius for sp in plan.grains)
-    if g is None or not math.isfinite(speed):
+    if g is None or not seen:
         return out
-    overlap = max(overlap, 0.0)
-    return {"max_speed": speed, "max_overlap_fraction": overlap / r_min, "speed_ratio": speed / g.max_speed,
+    speed, overlap = seen["max_speed"], seen["max_overlap"]
+    return {"max_speed": speed, "max_overlap_fraction": overlap / g.grain_radius, "speed_ratio": speed / g.max_speed,
             "overlap_ratio": overlap / g.max_overlap}
 
 
@@ -100,10 +92,8 @@ def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIF
                  seed: Optional[int] = None, burst: float = 0.1,
                  report: Callable[[str], None] = lambda s: None) -> list[dict]:
     """Run every grid point not yet in ``out/runs.csv``; return all rows."""
-    from .case_file import case_from_dict
     from .run_table import PlannedRun, engine_wall_time, read_base_case, run_missing
-    base = read_base_case(case_file)
-    case = case_from_dict(base, str(case_file))
+    base, case = read_base_case(case_file)
     seed = case.seed if seed is None else seed
     has_dust = getattr(case.particles, "dust", None) is not None
     if dust_scales and not has_dust:

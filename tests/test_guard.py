@@ -17,12 +17,12 @@ from siloflow.plan import Guard
 
 from conftest import SMALL
 
-LIMITS = Guard(max_speed=5.0, max_overlap=1e-4, max_overlap_fraction=0.1, energy_growth=10.0,
+LIMITS = Guard(max_speed=5.0, max_overlap=1e-4, max_overlap_fraction=0.1, grain_radius=1e-3, energy_growth=10.0,
                escape_radius=0.02, escape_z=0.2)
 
 
 def guard(**changes):
-    return RunGuard(LIMITS.model_copy(update=changes), radius=1e-3)
+    return RunGuard(LIMITS.model_copy(update=changes))
 
 
 def test_quiet_rows_pass():
@@ -175,3 +175,17 @@ def test_the_overlap_limit_is_a_fraction_of_the_smallest_grain_on_top_of_a_clump
     assert plan.guard.max_overlap == pytest.approx(plan.guard.max_overlap_fraction * r_grain + own)
     spheres_plan = derive(case_from_dict(yaml.safe_load(SMALL.read_text())))
     assert spheres_plan.guard.max_overlap == pytest.approx(0.5 * spheres_plan.grains[0].radius)
+
+
+def test_the_guard_keeps_the_largest_speed_and_overlap_it_saw():
+    """What the stability envelope reads from the run record (how near its limits a stable run ran)."""
+    g = guard()
+    assert g.peak_record() is None
+    g.check("fill", 0, ke=0.0, pe=0.0, speed=-1e20, overlap=-1e20)          # nothing inserted yet
+    g.check("fill", 10, ke=1.0, pe=1.0, speed=2.0, overlap=-1e20)           # no contact yet
+    assert g.peak_record() == {"max_speed": 2.0, "max_overlap": 0.0}
+    g.check("settle", 20, ke=1e-6, pe=1.0, speed=0.5, overlap=3e-5)
+    assert g.peak_record() == {"max_speed": 2.0, "max_overlap": 3e-5}
+    off = guard(enabled=False)
+    off.check("settle", 0, ke=1e-6, pe=1.0, speed=9.0, overlap=5e-4)
+    assert off.peak_record() == {"max_speed": 9.0, "max_overlap": 5e-4}

@@ -205,6 +205,6 @@ def test_upscaling_keeps_the_bed_and_scales_the_grains():
     assert coarse.total_mass == pytest.approx(fine.total_mass, rel=0.01)       # the same bed, fewer grains
     assert not cand.profile
     from siloflow.run_table import read_base_case
-    lin = read_base_case(ROOT / "decks" / "paper_a_spheres_quick.yaml")
+    lin, _ = read_base_case(ROOT / "decks" / "paper_a_spheres_quick.yaml")
     up = ab.upscaled_case(lin, 2.0)
     assert up["materials"]["particle_particle"]["kn"] == 2.0 * float(lin["materials"]["particle_particle"]["kn"])

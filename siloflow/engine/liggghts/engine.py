@@ -129,8 +129,8 @@ class LiggghtsEngine(Engine):
         self.check_deck_files(folder, resume)   # defence in depth: only siloflow's commands reach the engine
         cmd = self.command(plan.engine.ranks, deck, log)
         planned = plan.planned_steps(encode(plan).open_steps)
-        state = LogState(guard=RunGuard(plan.guard, min(sp.radius for sp in plan.grains))
-                         if plan.guard is not None else None, count_lost=not plan.has_clumps)
+        state = LogState(guard=RunGuard(plan.guard) if plan.guard is not None else None,
+                         count_lost=not plan.has_clumps)
         tail: deque[str] = deque(maxlen=25)
         start = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
@@ -172,7 +172,8 @@ class LiggghtsEngine(Engine):
         record = RunRecord(folder=str(folder), engine=self.name, command=cmd, returncode=returncode,
                            wall_time=wall, stage_steps=state.stage_steps, inserted=state.inserted,
                            settled_ke_pe=state.settled_ke_pe, completed=state.done,
-                           warnings=state.warnings)
+                           warnings=state.warnings, guard=state.guard_trip_record(),
+                           guard_peaks=state.guard.peak_record() if state.guard is not None else None)
         if disk_full:
             message = f"the disk is full ({disk_full}): the engine's outputs in {folder} are incomplete"
             write_status(folder, "failed", reason=message)
@@ -187,8 +188,6 @@ class LiggghtsEngine(Engine):
         if state.guard_trip is not None:            # stopped by the guard: its own words
             t = state.guard_trip
             message = f"the run was stopped by siloflow's guard ({t.signal}): {t.message}"
-            record.guard = {"signal": t.signal, "stage": t.stage, "step": t.step, "value": t.value, "limit": t.limit}
-            RunFolder(folder).write_record(record)
             write_status(folder, "failed", reason=message)
             raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder,
                                  cause=t.cause, fix=t.fix, log_tail="\n".join(tail))

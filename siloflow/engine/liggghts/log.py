@@ -129,6 +129,12 @@ class LogState:
             self.errors.append(f"siloflow guard ({trip.signal}): {trip.message}")
             self.fatal = True
 
+    def guard_trip_record(self) -> Optional[dict]:
+        """The guard's trip as the run record keeps it (None when it did not trip)."""
+        t = self.guard_trip
+        return None if t is None else {"signal": t.signal, "stage": t.stage, "step": t.step, "value": t.value,
+                                       "limit": t.limit}
+
     def total_steps(self, planned_all: dict[str, int]) -> int:
         """Upper bound of the run's total steps, given every stage's planned steps.
 
