@@ -71,7 +71,7 @@ TOP_LEVEL_FILES = frozenset({MANIFEST_NAME, STATUS_NAME, RECORD_NAME} | set(LIGG
 #: the engine's outputs as the deck names them (template in.liggghts.j2), relative to the folder
 ENGINE_OUTPUTS = re.compile(r"output/(flow|wall_forces)\.txt(\.before_resume)?|output/(flow|wall_forces)\.csv"
                             r"|output/dumps/(dump|contacts|wall_contacts)\.\d+\.txt"
-                            r"|output/vtk/particles_\d+\.vtk|output/restart/settled\.restart|output/lammps_state\.json")
+                            r"|output/vtk/particles_\d+\.vtk|output/restart/settled\.restart|output/lammps_state\.json|output/insertion\.data")
 #: an atomic write cut short: ``.{name}.{8 random characters}.tmp`` (tempfile.mkstemp)
 _TEMP = re.compile(r"(?P<dir>(?:.*/)?)\.(?P<name>[^/]+)\.[A-Za-z0-9_]{8}\.tmp")
 #: folders siloflow makes in a run folder (results/ may hold sub-folders, e.g. results/cg)

@@ -153,9 +153,10 @@ def box(plan: RunPlan, count_every: int) -> dict:
 
 
 def count_every(plan: RunPlan) -> int:
-    """Steps between the driver's looks at the run (outlet counting, wall-force samples, guard)."""
+    """The most steps between two of the driver's looks at the run (outlet counting, wall-force
+    samples, guard): it looks at every wall-force sample and thermo output."""
     out = plan.outputs
-    return max(1, math.gcd(out.sample_steps // out.samples_per_average, out.thermo_every))
+    return max(1, min(out.sample_steps // out.samples_per_average, out.thermo_every))
 
 
 def species_groups(plan: RunPlan, partner: str) -> list[tuple[str, list[int], str]]:

@@ -29,9 +29,10 @@ from scipy.spatial import cKDTree
 from ...guard import RunGuard
 from ...plan import RunPlan
 from ..liggghts.tables import FLOW_COLUMNS, wall_force_columns
-from .deck import count_every, deck_context, wall_kind
+from .deck import deck_context, wall_kind
 
 STATE_NAME = "output/lammps_state.json"
+INSERTION_FILE = "output/insertion.data"
 FLOW_FILE = "output/flow.txt"
 WALL_FORCES_FILE = "output/wall_forces.txt"
 #: the per-atom ``contacts`` array of fix wall/gran/region: [in contact, fx fy fz (on the particle),
@@ -78,17 +79,17 @@ class Driver:
         self.progress, self.rank = progress, rank
         self.state = DriverState()
         self.guard = RunGuard(plan.guard) if plan.guard is not None else None
-        self.every = count_every(plan)
         self.planned = plan.planned_steps(self._open_steps())
         self.total = sum(self.planned.values())
         self.rng = np.random.default_rng([plan.seed, 17])
-        self.next_id = 1
         self.expected_atoms = 0              # atoms that should be in the box (inserted - deleted)
         out = plan.outputs
         self.sample_every = out.sample_steps // out.samples_per_average
         self.samples: list[np.ndarray] = []
         self.sensors = _Sensors(plan, folder) if out.wall_forces else None
-        self.fixes = deck_context(plan)["wall_fixes"]       # the wall fixes in place ({id, kind, plate})
+        context = deck_context(plan)
+        self.fixes = context["wall_fixes"]                  # the wall fixes in place ({id, kind, plate})
+        self.box, self.n_types = context["box"], context["n_types"]
 
     # ------------------------------------------------------------------ plumbing
     def section(self, name: str) -> None:
@@ -134,11 +135,14 @@ class Driver:
             self.progress(self.state.stage, self.state.step, max(self.total, done))
 
     def advance(self, steps: int) -> None:
-        """Run ``steps`` steps in chunks ending on multiples of :func:`count_every`, looking after each."""
+        """Run ``steps`` steps in chunks ending at the next wall-force sample or thermo output (or the
+        end), looking after each."""
         end = self.state.step + steps
         setup = True
+        out = self.plan.outputs
         while self.state.step < end:
-            n = min(end, (self.state.step // self.every + 1) * self.every) - self.state.step
+            step = self.state.step
+            n = min(end, _next_multiple(step, self.sample_every), _next_multiple(step, out.thermo_every)) - step
             self.lmp.command(f"run {int(n)} pre {'yes' if setup else 'no'} post no")
             self.state.step += n
             setup = self.look()
@@ -254,7 +258,6 @@ class Driver:
             raise RuntimeError(f"the restart file is at step {self.state.step}, the first part's record at {step}")
         self.state.restart_step = step
         self.expected_atoms = int(self.lmp.get_natoms())
-        self.next_id = int(self.gather("id", INT, 1).max()) + 1 if self.expected_atoms else 1
 
     def _after_settling(self) -> None:
         self.begin("static")
@@ -325,22 +328,19 @@ class Driver:
         n = len(new_x)
         if n == 0:
             return 0
-        placed = sorted(range(n), key=lambda k: batch[k])       # consecutive ids per species
-        ids = list(range(self.next_id, self.next_id + n))
-        types = [batch[k] + 1 for k in placed]
-        pos = np.array([new_x[k] for k in placed])
-        vel = [0.0, 0.0, -float(plan.fill.insertion_speed)] * n
-        self.lmp.create_atoms(n, ids, types, pos.ravel().tolist(), vel)
-        start = 0
-        while start < n:
-            stop = start
-            while stop + 1 < n and types[stop + 1] == types[start]:
-                stop += 1
-            sp = plan.species[types[start] - 1]
-            self.lmp.command(f"set atom {ids[start]}*{ids[stop]} diameter {repr(2 * float(sp.radius))} "
-                             f"density {repr(float(sp.density))}")
-            start = stop + 1
-        self.next_id += n
+        # a data file, appended (LAMMPS' library create_atoms writes over the ghost atoms of a
+        # parallel run after its first run: measured, a segfault on 2 ranks)
+        lines = ["siloflow insertion batch", "", f"{n} atoms", f"{self.n_types} atom types",
+                 *(f"{self.box[a + 'lo']!r} {self.box[a + 'hi']!r} {a}lo {a}hi" for a in "xyz"), "", "Atoms # sphere", ""]
+        for k, p in enumerate(new_x):
+            sp = plan.species[batch[k]]
+            lines.append(f"{k + 1} {batch[k] + 1} {2 * float(sp.radius)!r} {float(sp.density)!r} "
+                         f"{float(p[0])!r} {float(p[1])!r} {float(p[2])!r}")
+        lines += ["", "Velocities", ""]
+        vz = -float(plan.fill.insertion_speed)
+        lines += [f"{k + 1} 0.0 0.0 {vz!r} 0.0 0.0 0.0" for k in range(n)]
+        self._write(INSERTION_FILE, "\n".join(lines) + "\n", mode="w")
+        self.lmp.command(f"read_data {INSERTION_FILE} add append")
         self.expected_atoms += n
         return n
 
@@ -428,6 +428,10 @@ class Driver:
     def _mass_silo(self) -> float:
         x, m = self.gather("x", DOUBLE, 3), self.gather("rmass", DOUBLE, 1)
         return float(m[x[:, 2] > 0].sum()) if len(m) else 0.0
+
+
+def _next_multiple(step: int, every: int) -> int:
+    return (step // every + 1) * every
 
 
 def _finite(x: float) -> Optional[float]:

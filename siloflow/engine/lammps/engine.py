@@ -146,7 +146,7 @@ class LammpsEngine(Engine):
     def _run_ranks(self, folder: Path, plan: RunPlan, ranks: int, progress, resume: bool):
         """Run the worker on ``ranks`` MPI ranks with the wheel's mpirun; (command, returncode, error)."""
         mpirun = venv_program("mpirun")
-        command = [mpirun, "-np", str(ranks), sys.executable, "-m", "siloflow.engine.lammps.worker", str(folder)]
+        command = [mpirun, "-np", str(ranks), sys.executable, "-m", "siloflow.engine.lammps.worker", str(folder.resolve())]
         if resume:
             command.append("--resume")
         env = {**os.environ, **mpi_environment()}
