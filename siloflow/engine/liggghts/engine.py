@@ -95,6 +95,9 @@ class LiggghtsEngine(Engine):
     def check_deck_files(self, folder: Path, resume: bool = False) -> None:
         check_deck_file(Path(folder) / (RESUME_DECK_NAME if resume else DECK_NAME), ALLOWED_COMMANDS)
 
+    def preflight(self, ranks: int) -> None:
+        self.command(ranks)
+
     def command(self, ranks: int, deck: str = DECK_NAME, log: str = LOG_NAME) -> list[str]:
         """The command line that runs the deck in its folder."""
         exe = self._which(self.profile.executable, "LIGGGHTS binary")
