@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-stability golden paper-a-quick paper-b-quick paper-a paper-b clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-stability bench-engines golden paper-a-quick paper-b-quick paper-a paper-b clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -61,6 +61,11 @@ bench: install
 	$(PY) benchmarks/dust_density_scaling.py
 
 # the dust time-step remedy alone (two real runs, about 10 minutes)
+# particle-steps per second of LIGGGHTS and LAMMPS (granular and gran/hertz/history), 1 and 2 ranks;
+# six runs of about a minute, resumable (benchmarks/results/engines/: throughput.csv, .png)
+bench-engines: install
+	$(PY) benchmarks/engine_throughput.py
+
 bench-dust: install
 	$(PY) benchmarks/dust_density_scaling.py
 

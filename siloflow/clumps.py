@@ -304,3 +304,25 @@ def union_area(centers, radii) -> float:
             total += 0.5 * (R * R * (p2 - p1) + x * R * (math.sin(p2) - math.sin(p1))
                             + y * R * (math.cos(p1) - math.cos(p2)))
     return float(total)
+
+
+def union_inertia(centers, radii, about, cells: int = 160) -> np.ndarray:
+    """Inertia tensor per unit density (m5; times the density: kg m2) of the union of spheres about
+    the point ``about`` (m): the second moments integrated on a grid of ``cells`` per side of the
+    bounding box, cell centres inside any sphere counted (a midpoint rule: relative error about
+    1e-4 at 160 cells for a wheat grain). Returns the 3x3 tensor int (|x|^2 I - x x^T) dV."""
+    c = np.asarray(centers, float) - np.asarray(about, float)
+    r = np.asarray(radii, float)
+    lo, hi = (c - r[:, None]).min(axis=0), (c + r[:, None]).max(axis=0)
+    h = (hi - lo) / cells
+    axes = [lo[k] + h[k] * (np.arange(cells) + 0.5) for k in range(3)]
+    out = np.zeros((3, 3))
+    yz = np.stack(np.meshgrid(axes[1], axes[2], indexing="ij"), axis=-1).reshape(-1, 2)
+    for x in axes[0]:                      # one slab of cells at a time: memory stays small
+        pts = np.column_stack([np.full(len(yz), x), yz])
+        inside = np.zeros(len(pts), bool)
+        for ci, ri in zip(c, r):
+            inside |= ((pts - ci) ** 2).sum(axis=1) <= ri * ri
+        p = pts[inside]
+        out += np.eye(3) * (p * p).sum() - p.T @ p
+    return out * float(np.prod(h))

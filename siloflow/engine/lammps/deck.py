@@ -31,17 +31,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import jinja2
+import numpy as np
 
 from ...atomic_files import write_text
 from ...case import Case
 from ...deck import DeckError, _num, check_commands, template_environment
 from ...meshes import write_stl
 from ...plan import FACES, WALL, RunPlan
-from ...run_folder import RESTART_FILE, DumpLayout, RunFolder
+from ...run_folder import LAMMPS_FILES, RESTART_FILE, DumpLayout, RunFolder
 from .contact_law import pair_coeff_args, wall_args
 
 DECK_NAME = "in.lammps"
-LOG_NAME = "log.lammps"
+LOG_NAME = LAMMPS_FILES["log"]
 
 #: The only commands a siloflow LAMMPS deck may contain (no shell, python, include, ...).
 ALLOWED_COMMANDS = frozenset("""
@@ -52,6 +53,8 @@ dump dump_modify set write_restart delete_atoms unfix molecule
 #: the commands the driver itself issues between sections (numbers it formats, never case text)
 DRIVER_COMMANDS = frozenset({"run"})
 
+#: what the deck's ``rigid/local`` compute reports of the clumps' bodies (kg, kg m2)
+BODY_QUANTITIES = ("mass", "inertiax", "inertiay", "inertiaz")
 _SECTION = re.compile(r"^# SILOFLOW_SECTION (\w+)\s*$")
 #: how far below z = 0 the centre of the floor's orifice sphere lies, in silo heights: far enough
 #: that its surface below the floor is out of the grains' reach, and its cap is the orifice
@@ -224,6 +227,7 @@ def deck_context(plan: RunPlan) -> dict:
     dust = plan.dust
     if dust is not None and plan.planar:
         groups["dust"] = [len(plan.species)]
+    clumps = [k + 1 for k, sp in enumerate(plan.species) if sp.kind == "clump"]
     seeds = [100003 + (plan.seed * 7919 + 104729 * (40 + k)) % 50_000_000 for k in range(len(radii))]
     every = count_every(plan)
     return {
@@ -238,7 +242,55 @@ def deck_context(plan: RunPlan) -> dict:
         "density": plan.grains[0].density,
         "shrink_classes": [{"diameter": 2 * r, "fraction": fr, "seed": seed, "type": radii.index(r) + 1}
                            for (r, fr), seed in zip(f.shrink_classes, seeds)],
+        "clumps": bool(clumps), "clump_types": clumps, "body_quantities": BODY_QUANTITIES,
+        "free_types": [k + 1 for k, sp in enumerate(plan.species) if sp.kind != "clump"],
+        "molecules": [{"id": f"clump{t}", "file": molecule_file(plan.species[t - 1].name)} for t in clumps],
     }
+
+
+def molecule_file(species: str) -> str:
+    """The run folder's molecule template of a clump species."""
+    return f"clump_{species}.mol"
+
+
+def molecule_text(plan: RunPlan, species_index: int) -> str:
+    """LAMMPS molecule template of a clump species: its spheres about the union's centroid, each
+    sphere carrying an equal share of the body's mass (the dumps' ``mass`` column sums to the body),
+    and a header with the body's mass, centre and inertia from the union of the spheres (not the
+    sum of the spheres, which counts their overlaps twice)."""
+    from ...clumps import union_centroid, union_inertia
+    sp = plan.species[species_index]
+    centers = np.array([s[:3] for s in sp.spheres])
+    radii = np.array([s[3] for s in sp.spheres])
+    centroid = union_centroid(centers, radii)
+    mass = sp.density * sp.volume
+    inertia = sp.density * union_inertia(centers, radii, centroid)
+    n = len(radii)
+    rel = centers - centroid
+    lines = [f"# siloflow clump {sp.name}: union volume {sp.volume!r} m3, density {sp.density!r} kg/m3", "",
+             f"{n} atoms", f"{mass!r} mass", "0.0 0.0 0.0 com",
+             " ".join(repr(float(v)) for v in (inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1],
+                                               inertia[0, 2], inertia[1, 2])) + " inertia",
+             "", "Coords", ""]
+    lines += [f"{k + 1} {float(x)!r} {float(y)!r} {float(z)!r}" for k, (x, y, z) in enumerate(rel)]
+    lines += ["", "Types", ""] + [f"{k + 1} {species_index + 1}" for k in range(n)]
+    lines += ["", "Diameters", ""] + [f"{k + 1} {2 * float(r)!r}" for k, r in enumerate(radii)]
+    lines += ["", "Masses", ""] + [f"{k + 1} {mass / n!r}" for k in range(n)]
+    return "\n".join(lines) + "\n"
+
+
+def insertion_radius(plan: RunPlan, species_index: int) -> float:
+    """The radius (m) of the sphere about the insertion point that holds a grain whatever its
+    orientation: a clump's farthest sphere surface from its centroid (or from its spheres' mean,
+    whichever is larger), a sphere's radius."""
+    sp = plan.species[species_index]
+    if sp.kind != "clump":
+        return sp.radius
+    from ...clumps import union_centroid
+    centers = np.array([s[:3] for s in sp.spheres])
+    radii = np.array([s[3] for s in sp.spheres])
+    return float(max((np.linalg.norm(centers - ref, axis=1) + radii).max()
+                     for ref in (union_centroid(centers, radii), centers.mean(axis=0))))
 
 
 def render_deck_text(plan: RunPlan) -> str:
@@ -262,6 +314,9 @@ def write_deck(plan: RunPlan, case: Case, folder: Path) -> None:
     for w in plan.meshes:
         write_stl(w, folder / "meshes" / f"{w.name}.stl")
     write_text(folder / DECK_NAME, text)
+    for k, sp in enumerate(plan.species):
+        if sp.kind == "clump":
+            write_text(folder / molecule_file(sp.name), molecule_text(plan, k))
     RunFolder(folder).write_dump_layout(DumpLayout(
         engine="lammps", types={k + 1: sp.name for k, sp in enumerate(plan.species)},
         contact_columns=[], wall_contact_columns=[], clump_mass="sum"))

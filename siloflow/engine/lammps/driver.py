@@ -29,7 +29,7 @@ from scipy.spatial import cKDTree
 from ...guard import RunGuard
 from ...plan import RunPlan
 from ..liggghts.tables import FLOW_COLUMNS, wall_force_columns
-from .deck import deck_context, wall_kind
+from .deck import BODY_QUANTITIES, deck_context, insertion_radius, wall_kind
 
 STATE_NAME = "output/lammps_state.json"
 INSERTION_FILE = "output/insertion.data"
@@ -67,6 +67,7 @@ class DriverState:
     lost: int = 0
     guard: Optional[dict] = None
     guard_peaks: Optional[dict] = None
+    bodies: Optional[dict] = None            # clumps: {quantity: [min, max]} over the bodies (kg, kg m2)
     warnings: list = field(default_factory=list)
 
 
@@ -90,6 +91,9 @@ class Driver:
         context = deck_context(plan)
         self.fixes = context["wall_fixes"]                  # the wall fixes in place ({id, kind, plate})
         self.box, self.n_types = context["box"], context["n_types"]
+        self.clumps = context["clumps"]
+        self.molecules = {t: m["id"] for t, m in zip(context["clump_types"], context["molecules"])}
+        self.reach = [insertion_radius(plan, k) for k in range(len(plan.species))]
 
     # ------------------------------------------------------------------ plumbing
     def section(self, name: str) -> None:
@@ -119,9 +123,11 @@ class Driver:
 
     def atoms(self) -> dict:
         """Every atom's id, type, position, velocity, radius and mass (the same on every rank)."""
-        return {"id": self.gather("id", INT, 1), "type": self.gather("type", INT, 1),
-                "x": self.gather("x", DOUBLE, 3), "v": self.gather("v", DOUBLE, 3),
-                "r": self.gather("radius", DOUBLE, 1), "m": self.gather("rmass", DOUBLE, 1)}
+        out = {"id": self.gather("id", INT, 1), "type": self.gather("type", INT, 1),
+               "x": self.gather("x", DOUBLE, 3), "v": self.gather("v", DOUBLE, 3),
+               "r": self.gather("radius", DOUBLE, 1), "m": self.gather("rmass", DOUBLE, 1)}
+        out["mol"] = self.gather("molecule", INT, 1) if self.clumps else np.zeros(len(out["id"]), np.int64)
+        return out
 
     # ------------------------------------------------------------------ stages
     def begin(self, stage: str) -> None:
@@ -155,9 +161,15 @@ class Driver:
         below = atoms["x"][:, 2] < self.plan.outlet.z if len(atoms["id"]) else np.zeros(0, bool)
         deleted = False
         if below.any():
-            self.state.discharged_mass += float(atoms["m"][below].sum())
-            self.state.discharged_count += int(below.sum())
-            self.expected_atoms -= int(below.sum())
+            # a clump leaves whole once one of its spheres passed (delete_atoms ... mol yes): its
+            # spheres' mass shares sum to the body's
+            mol = atoms["mol"]
+            bodies = np.unique(mol[below & (mol > 0)])
+            gone = below | np.isin(mol, bodies) & (mol > 0)
+            self.state.discharged_mass += float(atoms["m"][gone].sum())
+            self.state.discharged_count += int(len(bodies) + (below & (mol == 0)).sum())
+            self.expected_atoms -= int(gone.sum())
+            below = gone
             self.section("delete_outlet")
             atoms = {k: v[~below] for k, v in atoms.items()}
             deleted = True
@@ -192,7 +204,7 @@ class Driver:
         g = self.plan.guard
         x, r = atoms["x"], atoms["r"]
         speed = float(np.sqrt((atoms["v"] ** 2).sum(axis=1)).max()) if len(x) else 0.0
-        overlap = deepest_overlap(x, r)
+        overlap = deepest_overlap(x, r, atoms["mol"])
         if g.escape_radius is not None:
             out = (x[:, 0] ** 2 + x[:, 1] ** 2 > g.escape_radius ** 2)
         else:
@@ -234,8 +246,9 @@ class Driver:
             self.section("shrink")
             if not self.settle("shrink"):
                 raise Stop("not settled")
-        self.section("save")
-        self.state.restart_step = self.state.step
+        if not self.clumps:      # fix rigid/small's bodies are not rebuilt from a restart file the same way
+            self.section("save")
+            self.state.restart_step = self.state.step
 
     def _resume(self) -> None:
         before = json.loads((self.folder / STATE_NAME).read_text())
@@ -243,7 +256,7 @@ class Driver:
         for key in ("stage_steps", "inserted", "templates_inserted", "settled_ke_pe", "lost", "warnings"):
             setattr(self.state, key, before[key])
         self.state.stage_steps = {k: v for k, v in before["stage_steps"].items() if v <= step and k not in (
-            "static", "open", "discharge")}
+            "static", "open", "discharge")}     # the stages after the restart point are run again
         for rel in (FLOW_FILE, WALL_FORCES_FILE):       # the first part's rows up to the restart
             if self.rank == 0 and (self.folder / rel).is_file():
                 lines = (self.folder / rel).read_text().splitlines(keepends=True)
@@ -292,6 +305,10 @@ class Driver:
             self.advance(f.insert_every)
         self.state.templates_inserted = placed_total
         self.state.inserted = int(self.lmp.get_natoms())
+        if self.clumps:                  # the bodies as LAMMPS integrates them: mass and principal moments
+            self.lmp.command("run 0 post no")
+            self.state.bodies = {q: [float(self.lmp.extract_compute(f"body_{q}_{m}", 0, 0)) for m in ("min", "max")]
+                                 for q in BODY_QUANTITIES}
 
     def _fill_list(self) -> list[int]:
         """The species index of every grain and dust sphere to insert, shuffled (dust in its ratio)."""
@@ -314,7 +331,7 @@ class Driver:
         overlapping anything (random sequential addition); returns how many were placed (the first ones)."""
         plan, reg = self.plan, self.plan.fill.region
         atoms = self.atoms()
-        radii = [float(plan.species[k].radius) for k in batch]
+        radii = [float(self.reach[k]) for k in batch]
         rmax = max(max(radii), float(atoms["r"].max()) if len(atoms["r"]) else 0.0)
         near = atoms["x"][:, 2] > reg.z_min - 2 * rmax
         old_x, old_r = atoms["x"][near], atoms["r"][near]
@@ -328,13 +345,27 @@ class Driver:
         n = len(new_x)
         if n == 0:
             return 0
+        bodies = [k for k in range(n) if batch[k] + 1 in self.molecules]
+        for k in bodies:                 # clumps: one molecule each, at rest, in a random orientation
+            p = new_x[k]
+            self.lmp.command(f"create_atoms 0 single {float(p[0])!r} {float(p[1])!r} {float(p[2])!r} "
+                             f"mol {self.molecules[batch[k] + 1]} {int(self.rng.integers(1, 2**30))} units box")
+            self.expected_atoms += plan.species[batch[k]].n_spheres
+        spheres = [k for k in range(n) if batch[k] + 1 not in self.molecules]
+        if spheres:
+            self._read_spheres([batch[k] for k in spheres], [new_x[k] for k in spheres])
+        return n
+
+    def _read_spheres(self, kinds: list[int], centres: list) -> None:
+        """Add spheres (species indices ``kinds`` at ``centres``) at the insertion speed."""
+        plan, n = self.plan, len(kinds)
         # a data file, appended (LAMMPS' library create_atoms writes over the ghost atoms of a
         # parallel run after its first run: measured, a segfault on 2 ranks)
         lines = ["siloflow insertion batch", "", f"{n} atoms", f"{self.n_types} atom types",
                  *(f"{self.box[a + 'lo']!r} {self.box[a + 'hi']!r} {a}lo {a}hi" for a in "xyz"), "", "Atoms # sphere", ""]
-        for k, p in enumerate(new_x):
-            sp = plan.species[batch[k]]
-            lines.append(f"{k + 1} {batch[k] + 1} {2 * float(sp.radius)!r} {float(sp.density)!r} "
+        for k, p in enumerate(centres):
+            sp = plan.species[kinds[k]]
+            lines.append(f"{k + 1} {kinds[k] + 1} {2 * float(sp.radius)!r} {float(sp.density)!r} "
                          f"{float(p[0])!r} {float(p[1])!r} {float(p[2])!r}")
         lines += ["", "Velocities", ""]
         vz = -float(plan.fill.insertion_speed)
@@ -342,7 +373,6 @@ class Driver:
         self._write(INSERTION_FILE, "\n".join(lines) + "\n", mode="w")
         self.lmp.command(f"read_data {INSERTION_FILE} add append")
         self.expected_atoms += n
-        return n
 
     def _place(self, r, rmax, tree, old_x, old_r, new_x, radii, tries: int = 200) -> Optional[np.ndarray]:
         """A random centre for a sphere of radius ``r`` in the insertion region touching nothing (None: no
@@ -438,12 +468,15 @@ def _finite(x: float) -> Optional[float]:
     return x if math.isfinite(x) else None
 
 
-def deepest_overlap(x: np.ndarray, r: np.ndarray) -> float:
-    """The deepest overlap of two spheres (m; negative when none touch)."""
+def deepest_overlap(x: np.ndarray, r: np.ndarray, mol: Optional[np.ndarray] = None) -> float:
+    """The deepest overlap of two spheres (m; negative when none touch), a clump's own spheres
+    (the same ``mol`` > 0) excepted."""
     if len(x) < 2:
         return -1.0
     tree = cKDTree(x)
     pairs = tree.query_pairs(2 * float(r.max()), output_type="ndarray")
+    if mol is not None and len(pairs):
+        pairs = pairs[(mol[pairs[:, 0]] != mol[pairs[:, 1]]) | (mol[pairs[:, 0]] == 0)]
     if not len(pairs):
         return -1.0
     gap = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1) - r[pairs[:, 0]] - r[pairs[:, 1]]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import os
-import signal
+import shutil
 import subprocess
 import sys
 import time
@@ -17,8 +17,9 @@ from ...case import Case
 from ...deck import check_deck_file, verify_deck
 from ...errors import EngineRunError, ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
-from ...run_folder import RECORD_NAME, RunFolder, check_plain_tree, read_status, run_state, write_status
+from ...run_folder import RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree, run_state, write_status
 from ..base import Engine, ProgressCallback, RunRecord
+from ..processes import die_with_parent, read_plan, record_failure, stop
 from ..liggghts.tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 from . import deck as lammps_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME
@@ -27,6 +28,8 @@ from .module import load_lammps, mpi_environment, venv_program
 
 #: atoms that may leave the box during the fill (recorded) before the run counts as failed
 FILL_LOSS_LIMIT = 0.01
+#: the stages a run from the settled bed's restart file runs again
+AFTER_RESTART = ("static", "open", "discharge")
 PROGRESS = "SILOFLOW_PROGRESS "
 ERROR = "SILOFLOW_ERROR "
 
@@ -47,15 +50,16 @@ class LammpsEngine(Engine):
             lmp.close()
 
     def check(self, case: Case, plan: Optional[RunPlan] = None) -> list[tuple[str, str]]:
-        """What this engine cannot do (yet): STL inserts (LAMMPS has no mesh walls for grains),
-        clumps, a mobilised floor."""
+        """What this engine cannot do: STL inserts (LAMMPS has no mesh walls for grains), clumps in a
+        slab (rigid/small bodies cannot be held to a plane), a mobilised floor (not built)."""
         problems = []
         if case.inserts:
             problems.append(("inserts", "LAMMPS has no STL walls for grains (no mesh region): remove the "
                                         "inserts or use engine.name: liggghts"))
-        if case.particles.kind == "clumps":
-            problems.append(("particles.kind", "clumps are not yet run on LAMMPS (fix rigid/small): use "
-                                               "engine.name: liggghts"))
+        if case.particles.kind == "clumps" and case.geometry.kind == "planar":
+            problems.append(("geometry.kind", "clumps in a slab must stay in its plane, and LAMMPS' fix "
+                                              "rigid/small cannot hold a body's motion to a plane: use a cylinder "
+                                              "or hopper, or engine.name: liggghts"))
         if case.fill.mobilise is not None:
             problems.append(("fill.mobilise", "the LAMMPS engine does not lower the floor: remove fill.mobilise "
                                               "or use engine.name: liggghts"))
@@ -78,7 +82,7 @@ class LammpsEngine(Engine):
     # ------------------------------------------------------------------ run
     def execute(self, folder: Path, progress: Optional[ProgressCallback] = None, resume: bool = False) -> RunRecord:
         folder = Path(folder)
-        plan = _read_plan(folder)
+        plan = read_plan(folder)
         missing = [w.file for w in plan.walls if not (folder / w.file).is_file()]
         if missing or not (folder / DECK_NAME).is_file():
             raise SetupError(f"{folder} is incomplete: missing {', '.join(missing) or DECK_NAME}; "
@@ -156,7 +160,8 @@ class LammpsEngine(Engine):
             command.append("--resume")
         env = {**os.environ, **mpi_environment()}
         proc = subprocess.Popen(command, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, env=env, start_new_session=True)
+                                stdin=subprocess.DEVNULL, env=env, start_new_session=True,
+                                preexec_fn=die_with_parent)
         write_status(folder, "running", command=command, engine_pid=proc.pid)
         tail: deque[str] = deque(maxlen=25)
         error = ""
@@ -173,7 +178,7 @@ class LammpsEngine(Engine):
                         error = error or line[len(ERROR):]
             returncode = proc.wait()
         except BaseException:
-            _stop(proc)
+            stop(proc)
             write_status(folder, "interrupted")
             raise
         if returncode != 0 and not error:
@@ -189,10 +194,48 @@ class LammpsEngine(Engine):
             raise SetupError(f"{folder} is {state}: there is nothing to resume")
         verify_deck(folder)
         first = _read_state(folder)
-        if first.get("restart_step") is None or not (folder / "output/restart/settled.restart").is_file():
+        if first.get("restart_step") is None or not (folder / RESTART_FILE).is_file():
             self.execute(folder, progress)
         else:
             self.execute(folder, progress, resume=True)
+        return self.collect(folder)
+
+    # ------------------------------------------------------------------ fill cache
+    def fill_key_parts(self, plan: RunPlan) -> dict:
+        """What of this engine defines a fill (siloflow.fill_cache): its version, the box and the skin
+        (the restart file carries the box). Clumps have no restart point on LAMMPS: no cache."""
+        if plan.has_clumps:
+            raise SetupError("the LAMMPS engine writes no restart point for clumps (fix rigid/small's bodies), "
+                             "so it has no fill cache for them: run without --cache")
+        context = lammps_deck.deck_context(plan)
+        return {"name": self.name, "version": self.version(), "box": context["box"], "skin": context["skin"]}
+
+    def fill_files(self, folder: Path) -> dict[str, bytes]:
+        """The settled bed of a finished run as the files a later run starts from: the restart file,
+        the driver's state and the tables up to it (``SetupError`` if the run wrote none)."""
+        folder = Path(folder)
+        state = _read_state(folder)
+        step = state.get("restart_step")
+        if step is None or not (folder / RESTART_FILE).is_file():
+            raise SetupError(f"{folder} holds no settled bed to cache (no {RESTART_FILE})")
+        kept = {k: state[k] for k in ("inserted", "templates_inserted", "settled_ke_pe", "lost", "warnings",
+                                      "restart_step")}
+        kept["stage_steps"] = {k: v for k, v in state["stage_steps"].items() if k not in AFTER_RESTART}
+
+        def rows(rel):
+            lines = (folder / rel).read_text(errors="replace").splitlines(keepends=True)
+            return "".join(ln for ln in lines if ln.startswith("#") or (ln.endswith("\n") and int(ln.split()[0]) <= step))
+        return {"settled.restart": (folder / RESTART_FILE).read_bytes(), "lammps_state.json": json.dumps(kept).encode(),
+                "flow.txt": rows(FLOW_FILE).encode(), "wall_forces.txt": rows(WALL_FORCES_FILE).encode()}
+
+    def start_from_fill(self, folder: Path, files: dict, progress: Optional[ProgressCallback] = None) -> RunRecord:
+        """Run a rendered folder from a cached settled bed (``files``: :meth:`fill_files`' names ->
+        paths): the static, opening and discharge stages, as a resumed run."""
+        folder = Path(folder)
+        for name, target in (("settled.restart", RESTART_FILE), ("lammps_state.json", STATE_NAME),
+                             ("flow.txt", FLOW_FILE), ("wall_forces.txt", WALL_FORCES_FILE)):
+            shutil.copyfile(files[name], folder / target)
+        self.execute(folder, progress, resume=True)
         return self.collect(folder)
 
     def collect(self, folder: Path) -> RunRecord:
@@ -203,14 +246,14 @@ class LammpsEngine(Engine):
             return self._collect(folder)
         except OSError as exc:
             error = os_error(exc, f"the run record in {folder}")
-            _record_failure(folder, str(error))
+            record_failure(folder, str(error))
             raise error from None
         except SiloflowError as exc:
-            _record_failure(folder, str(exc).splitlines()[0])
+            record_failure(folder, str(exc).splitlines()[0])
             raise
 
     def _collect(self, folder: Path) -> RunRecord:
-        plan = _read_plan(folder)
+        plan = read_plan(folder)
         try:
             record = RunFolder(folder).record
         except ReadError as exc:
@@ -286,13 +329,6 @@ def diagnose(error: str) -> tuple[str, str, str]:
     return f"LAMMPS stopped: {first}", "", f"read {LOG_NAME} in the run folder"
 
 
-def _read_plan(folder: Path) -> RunPlan:
-    try:
-        return RunFolder(folder).plan
-    except ReadError as exc:
-        raise SetupError(f"{folder} is not a siloflow deck folder ({exc})") from None
-
-
 def _read_state(folder: Path) -> dict:
     try:
         return json.loads((Path(folder) / STATE_NAME).read_text(encoding="utf-8"))
@@ -308,24 +344,3 @@ def _log_tail(folder: Path, lines: int = 15) -> str:
     return ""
 
 
-def _record_failure(folder: Path, reason: str) -> None:
-    try:
-        if read_status(folder).get("state") == "failed":
-            return
-    except ReadError:
-        pass
-    write_status(folder, "failed", reason=reason)
-
-
-def _stop(proc: subprocess.Popen, grace: float = 10.0) -> None:
-    """SIGTERM the worker's process group, then SIGKILL it."""
-    for sig, wait in ((signal.SIGTERM, grace), (signal.SIGKILL, 5.0)):
-        try:
-            os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            return
-        try:
-            proc.wait(timeout=wait)
-            return
-        except subprocess.TimeoutExpired:
-            continue

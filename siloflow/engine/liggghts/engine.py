@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
 import subprocess
 import time
 from collections import deque
@@ -16,9 +15,10 @@ from ...deck import check_deck_file, verify_deck
 from ...errors import CaseError, EngineRunError, ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
 from ...run_folder import (LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree,
-                           read_status, run_state, write_status)
+                           run_state, write_status)
 from ...guard import RunGuard
 from ..base import Engine, ProgressCallback, RunRecord
+from ..processes import die_with_parent, read_plan, record_failure, stop
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
@@ -121,7 +121,7 @@ class LiggghtsEngine(Engine):
     # ------------------------------------------------------------------ run
     def execute(self, folder: Path, progress: Optional[ProgressCallback] = None, resume: bool = False) -> RunRecord:
         folder = Path(folder)
-        plan = _read_plan(folder)
+        plan = read_plan(folder)
         deck, log, screen_name = (RESUME_DECK_NAME, RESUME_LOG_NAME, RESUME_SCREEN_NAME) if resume else (
             DECK_NAME, LOG_NAME, SCREEN_NAME)
         missing = [w.file for w in plan.walls if not (folder / w.file).is_file()]
@@ -137,7 +137,7 @@ class LiggghtsEngine(Engine):
         tail: deque[str] = deque(maxlen=25)
         start = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, env=self.profile.environment(), start_new_session=True, preexec_fn=_die_with_parent)
+                                stdin=subprocess.DEVNULL, env=self.profile.environment(), start_new_session=True, preexec_fn=die_with_parent)
         write_status(folder, "running", command=cmd, engine_pid=proc.pid)     # siloflow's own pid: added there
         disk_full = None
         try:
@@ -151,23 +151,23 @@ class LiggghtsEngine(Engine):
                     if state.feed(line) and progress is not None:
                         progress(state.stage or "start", state.step, state.total_steps(planned))
                     if state.fatal:                  # nothing good comes of running on
-                        _stop(proc)
+                        stop(proc)
                         break
                     if time.monotonic() - checked > DISK_CHECK_SECONDS:
                         checked = time.monotonic()
                         disk_full = _disk_full(folder)
                         if disk_full:                # the engine's writes fail silently: stop it
-                            _stop(proc)
+                            stop(proc)
                             break
             returncode = proc.wait()
         except OSError as exc:                   # screen.txt could not be written: the disk is full
-            _stop(proc)
+            stop(proc)
             message = str(os_error(exc, f"the engine's output in {folder}"))
             write_status(folder, "failed", reason=message)
             raise EngineRunError(message, command=cmd, returncode=proc.returncode, folder=folder,
                                  fix=DISK_FIX, log_tail="\n".join(tail)) from None
         except BaseException:  # Ctrl-C or SIGTERM turned into an exception: stop the whole group
-            _stop(proc)
+            stop(proc)
             write_status(folder, "interrupted", step=state.step, stage=state.stage)
             raise
         wall = time.perf_counter() - start
@@ -226,7 +226,7 @@ class LiggghtsEngine(Engine):
             if (folder / name).is_file():
                 os.replace(folder / name, folder / (name + ".before_resume"))
         case = _load_folder_case(folder)
-        liggghts_deck.write_resume_deck(_read_plan(folder), case, folder)
+        liggghts_deck.write_resume_deck(read_plan(folder), case, folder)
         try:
             self.execute(folder, progress, resume=True)
         finally:
@@ -274,14 +274,14 @@ class LiggghtsEngine(Engine):
             return self._collect(folder)
         except OSError as exc:
             error = os_error(exc, f"the run record in {folder}")
-            _record_failure(folder, str(error))
+            record_failure(folder, str(error))
             raise error from None
         except SiloflowError as exc:
-            _record_failure(folder, str(exc).splitlines()[0])
+            record_failure(folder, str(exc).splitlines()[0])
             raise
 
     def _collect(self, folder: Path) -> RunRecord:
-        plan = _read_plan(folder)
+        plan = read_plan(folder)
         enc = encode(plan)
         try:
             text = _log_text(folder)
@@ -354,16 +354,6 @@ DISK_RESERVE = 1 << 20
 DISK_CHECK_SECONDS = 2.0
 DISK_FIX = ("free space on that disk (or choose a run folder on another one) and run again; "
             "'siloflow run' estimates a run's output before it starts unless --allow-large-output is given")
-
-
-def _record_failure(folder: Path, reason: str) -> None:
-    """Mark the run failed unless its status already says why (written by the check that failed)."""
-    try:
-        if read_status(folder).get("state") == "failed":
-            return
-    except ReadError:
-        pass
-    write_status(folder, "failed", reason=reason)
 
 
 def _disk_full(folder: Path) -> str:
@@ -443,40 +433,8 @@ def splice_table(before: Path, after: Path, step: int) -> None:
     before.unlink()
 
 
-def _read_plan(folder: Path) -> RunPlan:
-    try:
-        return RunFolder(folder).plan
-    except ReadError as exc:
-        raise SetupError(f"{folder} is not a siloflow deck folder ({exc})") from None
-
-
 def _load_folder_case(folder: Path) -> Case:
     from ...case_file import load_case
     return load_case(RunFolder(folder).case_file)
 
 
-def _die_with_parent() -> None:
-    """In the engine's child process: ask Linux to SIGTERM it when siloflow dies, even by SIGKILL,
-    so no engine is left running unattended. (Its output pipe closing also stops it at its next
-    write; this covers long silent stretches.) mpirun passes the signal on to its ranks."""
-    try:
-        import ctypes
-        libc = ctypes.CDLL(None, use_errno=True)
-        PR_SET_PDEATHSIG = 1
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-    except (OSError, AttributeError):  # not Linux: the SIGTERM/Ctrl-C handling still stops the engine
-        pass
-
-
-def _stop(proc: subprocess.Popen, grace: float = 10.0) -> None:
-    """SIGTERM the engine's process group, then SIGKILL it after ``grace`` seconds."""
-    for sig, wait in ((signal.SIGTERM, grace), (signal.SIGKILL, 5.0)):
-        try:
-            os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            return
-        try:
-            proc.wait(timeout=wait)
-            return
-        except subprocess.TimeoutExpired:
-            continue

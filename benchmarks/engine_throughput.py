@@ -1,0 +1,142 @@
+"""Engine throughput: particle-steps per second of LIGGGHTS and LAMMPS on the same case, at 1 and 2
+MPI ranks, and for LAMMPS with ``pair_style granular`` (what siloflow writes) and the older
+``gran/hertz/history`` (one set of coefficients for all pairs: monodisperse cases only).
+
+``make bench-engines`` (resumable: a variant already in the table is not run again; delete its row
+to re-run it). Case: decks/quick.yaml with 3000 spheres and a 0.3 s discharge (region walls on
+LAMMPS, 24 sensor meshes on LIGGGHTS). Each run's log gives, per ``run`` command, "Loop time of T
+on P procs for N steps with A atoms": the engine's own rate is sum(N A) / sum(T); the rate over
+the engine's wall time (run record) includes what siloflow does between chunks (LAMMPS: the
+driver's gathers, counting, sensors, guard; LIGGGHTS: its fix and output overhead outside the
+loop). Anchor: LAMMPS' own chute benchmark, 2.06e7 atom-steps/s on one core (bench/in.chute,
+32,000 grains, gran/hooke/history, 15 Jul 2025 log).
+
+Writes benchmarks/results/engines/throughput.csv and throughput.png.
+"""
+from __future__ import annotations
+
+import copy
+import re
+import sys
+from pathlib import Path
+
+import pandas as pd
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+OUT = ROOT / "benchmarks" / "results" / "engines"
+WORK = ROOT / "benchmarks" / "work" / "engines"
+LOOP = re.compile(r"^Loop time of (\S+) on (\d+) procs for (\d+) steps with (\d+) atoms")
+#: LAMMPS' published chute benchmark, atom-steps/s on one core
+CHUTE_ANCHOR = 2.06e7
+VARIANTS = [("liggghts", 1, "mesh walls"), ("liggghts", 2, "mesh walls"),
+            ("lammps", 1, "granular"), ("lammps", 2, "granular"),
+            ("lammps", 1, "gran/hertz/history"), ("lammps", 2, "gran/hertz/history")]
+
+
+def case(engine: str, ranks: int) -> dict:
+    data = yaml.safe_load((ROOT / "decks" / "quick.yaml").read_text())
+    data = copy.deepcopy(data)
+    data["fill"]["count"] = 3000
+    data["discharge"] = {"duration": 0.3}
+    data["outputs"] = {"sample_interval": 0.005}
+    data["engine"] = {**data["engine"], "name": engine, "ranks": ranks}
+    return data
+
+
+def classic_pair(folder: Path, plan) -> None:
+    """Swap the deck's ``pair_style granular`` for ``gran/hertz/history`` with the same stiffnesses
+    (Kn = 4/3 Y*, Kt = 8 G*, the LAMMPS Hertz scaling sqrt(R* delta)) and a damping giving the
+    pair's restitution at the mean impact overlap's stiffness: a throughput variant, not physics."""
+    from siloflow import contact_physics as cp
+    from siloflow.engine.lammps.contact_law import effective_shear_modulus
+    p = plan.pairs["particle_particle"]
+    m = plan.materials["particle"]
+    g = effective_shear_modulus(m.youngs_modulus, m.poisson_ratio, m.youngs_modulus, m.poisson_ratio)
+    kn, kt = 4.0 / 3.0 * p.y_eff, 8.0 * g
+    # gamma_n at the overlap of a grain resting on one other (its weight): damping is scaled like the spring
+    delta = (3 * p.m_eff * plan.gravity / (4 * p.y_eff * p.r_eff ** 0.5)) ** (2 / 3)
+    gamma = cp.linear_gamma(1.5 * kn * (p.r_eff * delta) ** 0.5, p.m_eff, p.restitution) / (p.r_eff * delta) ** 0.5
+    deck = folder / "in.lammps"
+    lines = []
+    for line in deck.read_text().splitlines():
+        if line.startswith("pair_style"):
+            line = f"pair_style      gran/hertz/history {kn!r} {kt!r} {gamma!r} {0.5 * gamma!r} {p.friction!r} 1"
+        elif line.startswith("pair_coeff"):
+            line = "pair_coeff      * *"
+        lines.append(line)
+    deck.write_text("\n".join(lines) + "\n")
+
+
+def loop_rate(log_text: str) -> tuple[float, float]:
+    """(atom-steps, loop seconds) summed over a log's ``run`` commands."""
+    steps = seconds = 0.0
+    for line in log_text.splitlines():
+        m = LOOP.match(line)
+        if m:
+            seconds += float(m.group(1))
+            steps += int(m.group(3)) * int(m.group(4))
+    return steps, seconds
+
+
+def run_variant(engine: str, ranks: int, pair: str) -> dict:
+    from siloflow.case_file import case_from_dict
+    from siloflow.derived import derive
+    from siloflow.engine import get_engine
+    name = f"{engine}_{ranks}_{pair.replace('/', '-').replace(' ', '-')}"
+    folder = WORK / name
+    c = case_from_dict(case(engine, ranks))
+    plan = derive(c)
+    eng = get_engine(engine)
+    eng.prepare(c, folder, force=True, plan=plan)
+    if pair == "gran/hertz/history":
+        classic_pair(folder, plan)
+    record = eng.execute(folder)
+    eng.collect(folder)
+    log = "log.liggghts" if engine == "liggghts" else "log.lammps"
+    atom_steps, loop = loop_rate((folder / log).read_text(errors="replace"))
+    return {"variant": name, "engine": engine, "ranks": ranks, "pair_style": pair, "atom_steps": atom_steps,
+            "loop_time_s": loop, "wall_time_s": record.wall_time, "loop_rate": atom_steps / loop,
+            "wall_rate": atom_steps / record.wall_time, "version": eng.version()}
+
+
+def figure(table: pd.DataFrame) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7, 3.8))
+    y = range(len(table))
+    ax.barh([k + 0.2 for k in y], table.loop_rate, height=0.4, label="engine loop")
+    ax.barh([k - 0.2 for k in y], table.wall_rate, height=0.4, label="whole run (wall time)")
+    ax.axvline(CHUTE_ANCHOR, color="k", ls="--", lw=1, label="LAMMPS chute benchmark, 1 core")
+    ax.set_yticks(list(y), [f"{e} {p}, {r} rank{'s' if r > 1 else ''}" for e, p, r in
+                            zip(table.engine, table.pair_style, table.ranks)])
+    ax.set_xscale("log")
+    ax.set_xlabel("particle-steps per second")
+    ax.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(OUT / "throughput.png", dpi=120)
+
+
+def main() -> None:
+    OUT.mkdir(parents=True, exist_ok=True)
+    WORK.mkdir(parents=True, exist_ok=True)
+    path = OUT / "throughput.csv"
+    table = pd.read_csv(path) if path.is_file() else pd.DataFrame()
+    for engine, ranks, pair in VARIANTS:
+        key = f"{engine}_{ranks}_{pair.replace('/', '-').replace(' ', '-')}"
+        if len(table) and key in set(table.variant):
+            continue
+        row = run_variant(engine, ranks, pair)
+        print(f"{key}: {row['loop_rate']:.3g} atom-steps/s in the loop, {row['wall_rate']:.3g} over the run", flush=True)
+        table = pd.concat([table, pd.DataFrame([row])], ignore_index=True)
+        table.to_csv(path, index=False)                 # kept after every run: the benchmark resumes
+    figure(table)
+    print(table[["variant", "loop_rate", "wall_rate"]].to_string(index=False))
+    print(f"anchor: LAMMPS chute benchmark {CHUTE_ANCHOR:.3g} atom-steps/s on one core")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,233 @@
+"""The LAMMPS engine (``siloflow.engine.lammps``): refusals, deck safety, failures explained, the
+guard, resume, and the three silo shapes' force balance. Each engine run is a few hundred grains
+and a few seconds, in this process (1 rank)."""
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from siloflow.case_file import case_from_dict
+from siloflow.derived import derive
+from siloflow.engine import get_engine
+from siloflow.engine.base import check_case
+from siloflow.engine.lammps.deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, render_deck_text, sections
+from siloflow.errors import CaseError, EngineRunError, SetupError
+from siloflow.run_folder import RunFolder, read_status
+
+ROOT = Path(__file__).resolve().parents[1]
+CROSS = ROOT / "tests" / "data" / "cross_engine.yaml"
+
+
+def tiny(**changes) -> dict:
+    """The cross-engine case on LAMMPS, 1 rank, smaller and shorter (a few seconds)."""
+    data = yaml.safe_load(CROSS.read_text())
+    data["engine"] = {**data["engine"], "name": "lammps", "ranks": 1}
+    data["fill"] = {**data["fill"], "count": 400}
+    data["discharge"] = {"duration": 0.1}
+    data["outputs"] = {"sample_interval": 0.005}
+    for key, value in changes.items():
+        data[key] = value if not isinstance(value, dict) else {**data.get(key, {}), **value}
+    return data
+
+
+def engine():
+    return get_engine("lammps")
+
+
+# ---------------------------------------------------------------- refusals and deck safety
+def test_validate_refuses_what_lammps_cannot_do_naming_the_field(quick_dict):
+    data = copy.deepcopy(quick_dict)
+    data["engine"]["name"] = "lammps"
+    data["fill"]["mobilise"] = {"drop": 0.002}
+    with pytest.raises(CaseError) as err:
+        check_case(case_from_dict(data), engine())
+    assert "fill.mobilise" in str(err.value)
+
+
+def test_validate_refuses_an_stl_insert_on_lammps_before_anything_runs(tmp_path):
+    from typer.testing import CliRunner
+    from siloflow.cli import app
+    from test_user_meshes import SLAB, baffle, write_user_stl
+    write_user_stl(tmp_path / "baffle.stl", baffle())
+    data = yaml.safe_load(SLAB.read_text())
+    data["inserts"] = [{"name": "baffle", "file": "baffle.stl"}]
+    data["engine"] = {**data.get("engine", {}), "name": "lammps"}
+    (tmp_path / "case.yaml").write_text(yaml.safe_dump(data))
+    result = CliRunner().invoke(app, ["validate", str(tmp_path / "case.yaml")])
+    assert result.exit_code != 0
+    assert "inserts" in result.output and "no STL walls" in result.output
+    result = CliRunner().invoke(app, ["run", str(tmp_path / "case.yaml"), "-o", str(tmp_path / "run")])
+    assert result.exit_code != 0 and not (tmp_path / "run").exists()
+
+
+def test_every_shipped_sphere_case_renders_only_allowed_commands():
+    for deck in ("quick.yaml", "paper_b_quick.yaml", "paper_a_spheres_quick.yaml"):
+        data = yaml.safe_load((ROOT / "decks" / deck).read_text())
+        data["engine"] = {**data.get("engine", {}), "name": "lammps"}
+        text = render_deck_text(derive(case_from_dict(data)))
+        for line in text.splitlines():
+            if line.strip() and not line.startswith("#"):
+                assert line.split()[0] in ALLOWED_COMMANDS, line
+        assert not any(w in text for w in ("shell", "python ", "include"))
+        assert {"box", "model", "save", "open", "opened", "delete_outlet"} <= set(sections(text))
+
+
+def test_a_folder_whose_deck_holds_a_shell_command_is_refused(tmp_path):
+    case = case_from_dict(tiny())
+    folder = engine().prepare(case, tmp_path / "run")
+    deck = folder / DECK_NAME
+    deck.write_text(deck.read_text().replace("# SILOFLOW_SECTION model", "# SILOFLOW_SECTION model\nshell touch x"))
+    with pytest.raises(SetupError, match="not a deck siloflow wrote"):
+        engine().execute(folder)
+    assert not (folder / "x").exists()
+
+
+# ---------------------------------------------------------------- failures explained
+def test_a_lammps_error_names_its_cause_and_keeps_the_log(tmp_path):
+    folder = engine().prepare(case_from_dict(tiny()), tmp_path / "run")
+    deck = folder / DECK_NAME
+    deck.write_text(deck.read_text().replace("pair_style      granular", "pair_style      granular/nonexistent"))
+    with pytest.raises(EngineRunError) as err:
+        engine().execute(folder)
+    text = str(err.value)
+    assert "LAMMPS stopped" in text and "granular/nonexistent" in text
+    assert "Traceback" not in text
+    assert (folder / LOG_NAME).is_file() and read_status(folder)["state"] == "failed"
+
+
+def test_the_guard_stops_a_time_step_far_too_large_in_seconds(tmp_path):
+    case = case_from_dict(tiny(engine={"timestep_fraction": 1.0}))
+    folder = engine().prepare(case, tmp_path / "run")
+    with pytest.raises(EngineRunError) as err:
+        engine().execute(folder)
+    text = str(err.value)
+    assert "guard" in text and "engine.timestep_fraction" in text
+    record = RunFolder(folder).record
+    assert record.guard["stage"] == "fill" and record.wall_time < 30
+
+
+# ---------------------------------------------------------------- runs
+@pytest.mark.engine
+@pytest.mark.parametrize("geometry", [
+    {"kind": "cylinder", "radius": 0.015, "height": 0.16, "orifice_radius": 0.008, "mesh_segments": 32},
+    {"kind": "hopper", "radius": 0.015, "height": 0.16, "outlet_radius": 0.008, "half_angle_deg": 30.0,
+     "mesh_segments": 32},
+    {"kind": "planar", "width": 0.05, "thickness": 0.0036, "height": 0.12, "outlet_width": 0.016,
+     "half_angle_deg": 60.0},
+], ids=["cylinder", "hopper", "slab"])
+def test_each_silo_shape_carries_the_bed(tmp_path, geometry):
+    """Static force balance within 2 % of the weight on the region walls of every silo shape, and
+    every grain either in the box or counted at the outlet."""
+    data = tiny()
+    data["geometry"] = geometry
+    run = get_engine("lammps").run(case_from_dict(data), tmp_path / "run")
+    folder = RunFolder(tmp_path / "run")
+    forces, flow = folder.wall_forces(), folder.flow()
+    st = run.stage_steps
+    static = forces[(forces.step > st["static"]) & (forces.step <= st["open"])]
+    load = -static.groupby("step").fz.sum().iloc[-1]
+    weight = float(flow[flow.step <= st["open"]].mass_total.iloc[-1]) * folder.plan.gravity
+    assert load == pytest.approx(weight, rel=0.02)
+    after = flow[flow.step > st["settle"]]
+    assert np.allclose(after.mass_total + after.discharged_mass, after.mass_total.iloc[0], rtol=1e-12)
+    assert after.discharged_mass.iloc[-1] > 0
+
+
+@pytest.mark.engine
+def test_resume_after_an_interruption_finishes_from_the_settled_bed(tmp_path):
+    eng = engine()
+    folder = eng.prepare(case_from_dict(tiny()), tmp_path / "run")
+
+    def stop_in_static(stage, step, total):
+        if stage == "open":
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        eng.execute(folder, progress=stop_in_static)
+    assert read_status(folder)["state"] == "interrupted"
+    record = eng.resume(folder)
+    flow = RunFolder(folder).flow()
+    assert record.completed and record.stage_steps["static"] >= record.stage_steps["settle"]
+    assert flow.step.is_monotonic_increasing and flow.step.is_unique
+    assert (folder / (LOG_NAME + ".resume")).is_file()
+
+
+@pytest.mark.engine
+def test_clumps_run_on_two_ranks_as_rigid_bodies_of_the_union(tmp_path):
+    """tests/data/clump_silo.yaml (600 wheat grains of three spheres, 60 dust balls) on LAMMPS with 2
+    MPI ranks (fix rigid/small): the walls carry the weight within 2 %; every body's mass is the
+    union volume x density within 0.5 % and its principal moments the union's within 1 % (the
+    sum of the spheres would be 1.72x the mass); siloflow post counts coordination per body."""
+    import json
+
+    import siloflow
+    from siloflow.clumps import union_centroid, union_inertia
+    data = yaml.safe_load((ROOT / "tests" / "data" / "clump_silo.yaml").read_text())
+    data["engine"] = {"name": "lammps", "ranks": 2}
+    data["discharge"] = {"duration": 0.2}
+    run = siloflow.run(data, tmp_path / "run")
+    summary = run.summary
+    assert summary["force_balance"]["ratio"] == pytest.approx(1.0, abs=0.02)
+    clump = RunFolder(run.folder).plan.grains[0]
+    bodies = json.loads((run.folder / "output" / "lammps_state.json").read_text())["bodies"]
+    for value in bodies["mass"]:
+        assert value == pytest.approx(clump.density * clump.volume, rel=0.005)
+    centers = np.array([s[:3] for s in clump.spheres])
+    radii = np.array([s[3] for s in clump.spheres])
+    moments = np.sort(np.linalg.eigvalsh(clump.density * union_inertia(centers, radii, union_centroid(centers, radii))))
+    measured = np.sort([bodies[q][0] for q in ("inertiax", "inertiay", "inertiaz")])
+    np.testing.assert_allclose(measured, moments, rtol=0.01)
+    fa = summary["frame_analyses"]
+    assert fa["coordination_convention"] == "per_body"
+    assert 3.0 < fa["coordination_settled"]["z_mean"] < 12.0
+
+
+@pytest.mark.engine
+def test_fill_cache_second_orifice_starts_from_the_cached_bed(tmp_path):
+    """A second case differing only after the fill (the orifice) starts from the first's settled bed."""
+    from siloflow.fill_cache import FillCache, run_with_cache
+    cache = FillCache(tmp_path / "cache")
+    eng = engine()
+    records = []
+    for k, orifice in enumerate((0.008, 0.007)):
+        case = case_from_dict(tiny(geometry={"orifice_radius": orifice}))
+        plan = derive(case)
+        folder = eng.prepare(case, tmp_path / f"run{k}", plan=plan)
+        records.append(run_with_cache(eng, folder, plan, cache))
+    first, second = records
+    assert (first.fill_cache["hit"], second.fill_cache["hit"]) == (False, True)
+    assert second.completed and second.stage_steps["settle"] == first.stage_steps["settle"]
+    flow = RunFolder(tmp_path / "run1").flow()
+    assert flow.discharged_mass.iloc[-1] > 0
+
+
+@pytest.mark.engine
+@pytest.mark.parametrize("protocol", ["insert", "shrink_after_settling"])
+def test_polydisperse_beds_have_the_planned_sizes(tmp_path, protocol):
+    """Three sizes in equal numbers, inserted as they are or (paper B) poured at the largest and
+    shrunk at random after settling: the settled bed holds each size in its share, and the walls
+    carry it."""
+    from postprocess.dumps import read_frames
+    data = tiny(outputs={"dump_interval": 0.05})
+    radii = [0.0015, 0.0013, 0.0011]
+    data["particles"] = {"kind": "polydisperse_spheres", "radii": radii, "fractions": [1 / 3] * 3,
+                         "basis": "number", "protocol": protocol}
+    run = get_engine("lammps").run(case_from_dict(data), tmp_path / "run")
+    folder = RunFolder(tmp_path / "run")
+    if protocol == "shrink_after_settling":
+        assert run.stage_steps["shrink"] > run.stage_steps["settle"]
+    frames = read_frames(sorted((tmp_path / "run" / "output" / "dumps").glob("dump.*.txt")))
+    settled = [f for f in frames if run.stage_steps["static"] <= f.timestep <= run.stage_steps["open"]][0]
+    r = settled.radii()
+    shares = [np.isclose(r, x, rtol=1e-6).mean() for x in radii]
+    assert sum(shares) == pytest.approx(1.0)
+    assert shares == pytest.approx([1 / 3] * 3, abs=0.08)
+    forces, flow = folder.wall_forces(), folder.flow()
+    st = run.stage_steps
+    static = forces[(forces.step > st["static"]) & (forces.step <= st["open"])]
+    weight = float(flow[flow.step <= st["open"]].mass_total.iloc[-1]) * folder.plan.gravity
+    assert -static.groupby("step").fz.sum().iloc[-1] == pytest.approx(weight, rel=0.02)
