@@ -48,7 +48,7 @@ LOG_NAME = LAMMPS_FILES["log"]
 ALLOWED_COMMANDS = frozenset("""
 atom_style atom_modify boundary newton comm_modify units processors region create_box read_restart
 neighbor neigh_modify pair_style pair_coeff timestep fix group variable thermo_style thermo thermo_modify
-dump dump_modify set write_restart delete_atoms unfix molecule
+dump dump_modify set write_restart delete_atoms unfix molecule compute
 """.split())
 #: the commands the driver itself issues between sections (numbers it formats, never case text)
 DRIVER_COMMANDS = frozenset({"run"})
@@ -242,10 +242,20 @@ def deck_context(plan: RunPlan) -> dict:
         "density": plan.grains[0].density,
         "shrink_classes": [{"diameter": 2 * r, "fraction": fr, "seed": seed, "type": radii.index(r) + 1}
                            for (r, fr), seed in zip(f.shrink_classes, seeds)],
-        "clumps": bool(clumps), "clump_types": clumps, "body_quantities": BODY_QUANTITIES,
+        "clumps": bool(clumps), "clump_types": clumps, "pour_region": pour_region(plan, clumps), "body_quantities": BODY_QUANTITIES,
         "free_types": [k + 1 for k, sp in enumerate(plan.species) if sp.kind != "clump"],
         "molecules": [{"id": f"clump{t}", "file": molecule_file(plan.species[t - 1].name)} for t in clumps],
     }
+
+
+def pour_region(plan: RunPlan, clump_types: list[int]) -> dict | None:
+    """Where ``fix pour`` may put a clump's centre so that the whole clump is inside the insertion
+    region (the region holds whole grains, as the spheres' insertion and LIGGGHTS' ``all_in``)."""
+    if not clump_types:
+        return None
+    reach = max(insertion_radius(plan, t - 1) for t in clump_types)
+    r = plan.fill.region
+    return {"radius": r.radius - reach, "z_min": r.z_min + reach, "z_max": r.z_max - reach}
 
 
 def molecule_file(species: str) -> str:

