@@ -87,6 +87,7 @@ def test_a_folder_whose_deck_holds_a_shell_command_is_refused(tmp_path):
 
 
 # ---------------------------------------------------------------- failures explained
+@pytest.mark.engine
 def test_a_lammps_error_names_its_cause_and_keeps_the_log(tmp_path):
     folder = engine().prepare(case_from_dict(tiny()), tmp_path / "run")
     deck = folder / DECK_NAME
@@ -99,6 +100,7 @@ def test_a_lammps_error_names_its_cause_and_keeps_the_log(tmp_path):
     assert (folder / LOG_NAME).is_file() and read_status(folder)["state"] == "failed"
 
 
+@pytest.mark.engine
 def test_the_guard_stops_a_time_step_far_too_large_in_seconds(tmp_path):
     case = case_from_dict(tiny(engine={"timestep_fraction": 1.0}))
     folder = engine().prepare(case, tmp_path / "run")
