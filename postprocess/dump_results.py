@@ -196,13 +196,21 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
         return ((across < R - 2 * d) & (p[:, 2] > g.hopper_height + 2 * d)
                 & (p[:, 2] < top - 2 * d))
 
-    if has_contacts:
-        coord = Coordination(select=core).run(read_frames(atoms_files), contact_frames())
+    def settled_coordination(coord) -> None:
         coord.save(out)
         row = coord.table[(coord.table.step == settled.timestep) & (coord.table.species == "all")]
         if not row.empty:
             summary["coordination_settled"] = {k: float(row[k].iloc[0]) for k in ("z_mean", "z_mech")}
             summary["coordination_convention"] = str(row.convention.iloc[0])
+            summary["coordination_source"] = str(row.source.iloc[0])
+
+    if not has_contacts:
+        # no contact dump (a LAMMPS run, or contacts not asked for): the settled bed's contacts are
+        # its overlapping spheres (a clump's own spheres excepted: counted per body)
+        settled_coordination(Coordination(select=core).run(read_frames(atoms_files, steps=[settled.timestep])))
+    if has_contacts:
+        coord = Coordination(select=core).run(read_frames(atoms_files), contact_frames())
+        settled_coordination(coord)
         with_contacts = set(int(k) for k in coord.table.step.unique())
         after = [int(k) for k in steps if k > open_step and k in with_contacts]
         last = next(read_frames(atoms_files, steps=[max(after)])) if after else None

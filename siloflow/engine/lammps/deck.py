@@ -228,6 +228,11 @@ def deck_context(plan: RunPlan) -> dict:
     if dust is not None and plan.planar:
         groups["dust"] = [len(plan.species)]
     clumps = [k + 1 for k, sp in enumerate(plan.species) if sp.kind == "clump"]
+    if clumps:
+        groups["clumps"] = clumps
+        free = [k + 1 for k, sp in enumerate(plan.species) if sp.kind != "clump"]
+        if free:
+            groups["free"] = free
     seeds = [100003 + (plan.seed * 7919 + 104729 * (40 + k)) % 50_000_000 for k in range(len(radii))]
     every = count_every(plan)
     return {

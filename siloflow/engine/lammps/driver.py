@@ -248,6 +248,7 @@ class Driver:
             raise Stop("not settled")
         if self.plan.fill.shrink_classes:
             self.section("shrink")
+            self.section("regroup")
             if not self.settle("shrink"):
                 raise Stop("not settled")
         if not self.clumps:      # fix rigid/small's bodies are not rebuilt from a restart file the same way
@@ -268,6 +269,7 @@ class Driver:
                 self._write(rel, "".join(kept), mode="w")
         self.section("resume_box")
         self.section("model")
+        self.section("regroup")
         self.section("restore_friction")
         self.section("dump_first")
         self.state.step = int(self.lmp.get_thermo("step"))
@@ -378,6 +380,7 @@ class Driver:
 
         def done() -> int:
             self.lmp.command("unfix siloflow_pour")
+            self.section("regroup")
             placed = (int(self.lmp.get_natoms()) - before) // n_spheres
             self.expected_atoms += placed * n_spheres
             return placed
@@ -399,6 +402,7 @@ class Driver:
         lines += [f"{k + 1} 0.0 0.0 {vz!r} 0.0 0.0 0.0" for k in range(n)]
         self._write(INSERTION_FILE, "\n".join(lines) + "\n", mode="w")
         self.lmp.command(f"read_data {INSERTION_FILE} add append")
+        self.section("regroup")
         self.expected_atoms += n
 
     def _place(self, r, rmax, tree, old_x, old_r, new_x, radii, tries: int = 200) -> Optional[np.ndarray]:

@@ -50,17 +50,16 @@ class LammpsEngine(Engine):
             lmp.close()
 
     def check(self, case: Case, plan: Optional[RunPlan] = None) -> list[tuple[str, str]]:
-        """What this engine cannot do: STL inserts (LAMMPS has no mesh walls for grains), clumps (not
-        yet), a mobilised floor (not built)."""
+        """What this engine cannot do: STL inserts (LAMMPS has no mesh walls for grains), clumps in a
+        slab (rigid/small bodies cannot be held to a plane), a mobilised floor (not built)."""
         problems = []
         if case.inserts:
             problems.append(("inserts", "LAMMPS has no STL walls for grains (no mesh region): remove the "
                                         "inserts or use engine.name: liggghts"))
-        if case.particles.kind == "clumps":
-            # the deck and driver hold the rigid/small bodies (molecule template of the union, fix pour),
-            # but a 600-grain fill still throws bodies through the wall (siloflow's guard: issue 17's notes)
-            problems.append(("particles.kind", "clumps do not run on the LAMMPS engine yet (fix rigid/small "
-                                               "bodies leave the silo during the fill): use engine.name: liggghts"))
+        if case.particles.kind == "clumps" and case.geometry.kind == "planar":
+            problems.append(("geometry.kind", "clumps in a slab must stay in its plane, and LAMMPS' fix "
+                                              "rigid/small cannot hold a body's motion to a plane: use a cylinder "
+                                              "or hopper, or engine.name: liggghts"))
         if case.fill.mobilise is not None:
             problems.append(("fill.mobilise", "the LAMMPS engine does not lower the floor: remove fill.mobilise "
                                               "or use engine.name: liggghts"))
