@@ -14,7 +14,8 @@ from siloflow.case_file import case_from_dict
 from siloflow.derived import derive
 from siloflow.engine import get_engine
 from siloflow.engine.base import check_case
-from siloflow.engine.lammps.deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, render_deck_text, sections
+from siloflow.engine.lammps.deck import (ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, RESUME_LOG_NAME, render_deck_text,
+                                        sections)
 from siloflow.errors import CaseError, EngineRunError, SetupError
 from siloflow.run_folder import RunFolder, read_status
 
@@ -155,7 +156,7 @@ def test_resume_after_an_interruption_finishes_from_the_settled_bed(tmp_path):
     flow = RunFolder(folder).flow()
     assert record.completed and record.stage_steps["static"] >= record.stage_steps["settle"]
     assert flow.step.is_monotonic_increasing and flow.step.is_unique
-    assert (folder / (LOG_NAME + ".resume")).is_file()
+    assert (folder / RESUME_LOG_NAME).is_file()
 
 
 def test_clumps_in_a_slab_are_refused_naming_the_field():

@@ -43,6 +43,7 @@ from .contact_law import pair_coeff_args, wall_args
 
 DECK_NAME = "in.lammps"
 LOG_NAME = LAMMPS_FILES["log"]
+RESUME_LOG_NAME = LAMMPS_FILES["resume_log"]
 
 #: The only commands a siloflow LAMMPS deck may contain (no shell, python, include, ...).
 ALLOWED_COMMANDS = frozenset("""

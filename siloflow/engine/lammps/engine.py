@@ -17,12 +17,12 @@ from ...case import Case
 from ...deck import check_deck_file, verify_deck
 from ...errors import EngineRunError, ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
-from ...run_folder import RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree, run_state, write_status
+from ...run_folder import LAMMPS_FILES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree, run_state, write_status
 from ..base import Engine, ProgressCallback, RunRecord
 from ..processes import die_with_parent, read_plan, record_failure, stop
 from ..liggghts.tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 from . import deck as lammps_deck
-from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME
+from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, RESUME_LOG_NAME
 from .driver import FLOW_FILE, STATE_NAME, WALL_FORCES_FILE
 from .module import load_lammps, mpi_environment, venv_program
 
@@ -136,7 +136,7 @@ class LammpsEngine(Engine):
         os.chdir(folder)             # the deck names its files relative to the run folder
         lmp = None
         try:
-            lmp = lammps.lammps(cmdargs=["-log", LOG_NAME + (".resume" if resume else ""), "-screen", "none",
+            lmp = lammps.lammps(cmdargs=["-log", RESUME_LOG_NAME if resume else LOG_NAME, "-screen", "none",
                                          "-nocite"])
             Driver(lmp, plan, lammps_deck.sections(text), Path("."), progress).run(resume=resume)
             return ""
@@ -166,7 +166,7 @@ class LammpsEngine(Engine):
         tail: deque[str] = deque(maxlen=25)
         error = ""
         try:
-            with open(folder / "screen.lammps.txt", "ab") as screen:
+            with open(folder / LAMMPS_FILES["screen"], "ab") as screen:
                 for raw in proc.stdout:
                     screen.write(raw)
                     line = raw.decode("utf-8", "replace").rstrip()
@@ -337,7 +337,7 @@ def _read_state(folder: Path) -> dict:
 
 
 def _log_tail(folder: Path, lines: int = 15) -> str:
-    for name in (LOG_NAME + ".resume", LOG_NAME):
+    for name in (RESUME_LOG_NAME, LOG_NAME):
         path = Path(folder) / name
         if path.is_file():
             return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])

@@ -13,7 +13,7 @@ def main(argv: list[str]) -> int:
     folder = Path(argv[0]).resolve()
     resume = "--resume" in argv[1:]
     from ...run_folder import RunFolder
-    from .deck import DECK_NAME, LOG_NAME, sections
+    from .deck import DECK_NAME, LOG_NAME, RESUME_LOG_NAME, sections
     from .driver import Driver
     from .engine import ERROR, PROGRESS
     from .module import load_lammps
@@ -21,7 +21,7 @@ def main(argv: list[str]) -> int:
     plan = RunFolder(folder).plan
     text = (folder / DECK_NAME).read_text(encoding="utf-8")
     os.chdir(folder)
-    lmp = lammps.lammps(cmdargs=["-log", LOG_NAME + (".resume" if resume else ""), "-screen", "none", "-nocite"])
+    lmp = lammps.lammps(cmdargs=["-log", RESUME_LOG_NAME if resume else LOG_NAME, "-screen", "none", "-nocite"])
     rank = int(lmp.extract_setting("world_rank"))
 
     def progress(stage: str, step: int, total: int) -> None:
@@ -35,7 +35,7 @@ def main(argv: list[str]) -> int:
         lmp.close()
         return 1
     lmp.close()
-    lmp.finalize() if hasattr(lmp, "finalize") else None
+    lmp.finalize()              # MPI_Finalize: the ranks end together
     return 0
 
 
