@@ -199,6 +199,7 @@ def analyse(folder, measured_pressure=None) -> dict:
         "mass_in_silo_end_kg": float(dis.mass_in_silo.iloc[-1]),
         "bands": table.to_dict(orient="records"),
         "pressure_statistics": pressure_stats,
+        "engine": {"name": run.record.engine, "ranks": run.plan.engine.ranks},
         "engine_wall_time_s": run.record.wall_time,
         "numerical_profile": _profile_record(run.plan),
         **({"discharge_stop": run.record.discharge_stop} if run.record.discharge_stop else {}),
@@ -342,6 +343,9 @@ def report_text(summary: dict, run: RunOutputs) -> str:
              f"- steady flow rate Wf = {_fmt(fr['rate'] * 1000)} +/- {_fmt(fr['stderr'] * 1000, '.2g')} g/s "
              f"(t = {_fmt(fr['t_start'], '.3g')}-{_fmt(fr['t_end'], '.3g')} s, r2 {_fmt(fr['r2'], '.4f')})",
              f"- discharged {_fmt(summary['discharged_mass_kg'] * 1000)} g; {_fmt(summary['mass_in_silo_end_kg'] * 1000)} g left"]
+    engine = summary.get("engine")
+    if engine:
+        lines += [f"- engine: {engine['name']} on {engine['ranks']} MPI rank(s), {_fmt(summary['engine_wall_time_s'], '.3g')} s"]
     lines += [profile_line(summary.get("numerical_profile"))]
     steady = summary.get("steady_window_detected")
     if steady:
