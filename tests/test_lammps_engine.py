@@ -135,6 +135,13 @@ def test_each_silo_shape_carries_the_bed(tmp_path, geometry):
     load = -static.groupby("step").fz.sum().iloc[-1]
     weight = float(flow[flow.step <= st["open"]].mass_total.iloc[-1]) * folder.plan.gravity
     assert load == pytest.approx(weight, rel=0.02)
+    # every loaded sensor is pushed outward, along its own facing direction: contacts went to the
+    # right band and sector, with the right sign
+    last = static[static.step == static.step.max()].set_index("wall")
+    sensors = [w for w in folder.plan.walls if w.role == "band" and w.normal is not None]
+    pushes = [last.loc[w.name, "fx"] * w.normal[0] + last.loc[w.name, "fy"] * w.normal[1] for w in sensors]
+    loaded = [p for p in pushes if abs(p) > 1e-9]
+    assert len(loaded) >= 2 and all(p > 0 for p in loaded), pushes
     after = flow[flow.step > st["settle"]]
     assert np.allclose(after.mass_total + after.discharged_mass, after.mass_total.iloc[0], rtol=1e-12)
     assert after.discharged_mass.iloc[-1] > 0
