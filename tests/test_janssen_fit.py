@@ -375,8 +375,9 @@ class FakeRun:
                                     grains=[SimpleNamespace(density=2500.0)],
                                     pairs={"particle_particle": SimpleNamespace(friction=0.5),
                                            "particle_wall": SimpleNamespace(friction=0.5)},
-                                    geometry=SimpleNamespace(kind="planar"))   # EN 1991-4: not computed
-        self.record = SimpleNamespace(inserted=5000, fill_losses=0, settled_ke_pe=1e-6, wall_time=1.0,
+                                    geometry=SimpleNamespace(kind="planar"),   # EN 1991-4: not computed
+                                    engine=SimpleNamespace(name="liggghts", ranks=1))
+        self.record = SimpleNamespace(engine="liggghts", inserted=5000, fill_losses=0, settled_ke_pe=1e-6, wall_time=1.0,
                                       discharge_stop=None, fill_cache=None, warnings=[])
 
     def stage_time(self, stage):

@@ -12,6 +12,10 @@ from ..plan import RunPlan
 from ..run_folder import RunFolder, read_status, write_status
 
 
+#: atoms that may leave the box during the fill (recorded) before the run counts as failed
+FILL_LOSS_LIMIT = 0.01
+
+
 def read_plan(folder: Path) -> RunPlan:
     """The folder's plan (``SetupError`` when it is not a siloflow deck folder)."""
     try:

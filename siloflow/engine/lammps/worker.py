@@ -5,6 +5,7 @@ its standard output, which the engine reads."""
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from pathlib import Path
 
@@ -27,13 +28,17 @@ def main(argv: list[str]) -> int:
     def progress(stage: str, step: int, total: int) -> None:
         print(f"{PROGRESS}{stage} {step} {total}", flush=True)
 
+    def interrupted(signum, frame):
+        raise KeyboardInterrupt      # the engine's stop (SIGTERM): the driver writes its state on the way out
+    signal.signal(signal.SIGTERM, interrupted)
     try:
         Driver(lmp, plan, sections(text), Path("."), progress if rank == 0 else None, rank=rank).run(resume=resume)
-    except Exception as exc:         # LAMMPS' error: reported once, and the ranks end together
-        if rank == 0:
-            print(f"{ERROR}{' '.join(str(exc).split())}", flush=True)
-        lmp.close()
-        return 1
+    except (Exception, KeyboardInterrupt) as exc:
+        # an error may be raised on one rank only (LAMMPS' error->one): whichever rank has it says so,
+        # and ends the job at once rather than wait for the others in a collective call
+        if not isinstance(exc, KeyboardInterrupt):
+            print(f"{ERROR}{' '.join(str(exc).split())} (MPI rank {rank})", flush=True)
+        os._exit(1)
     lmp.close()
     lmp.finalize()              # MPI_Finalize: the ranks end together
     return 0

@@ -18,7 +18,7 @@ from ...run_folder import (LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RESTART
                            run_state, write_status)
 from ...guard import RunGuard
 from ..base import Engine, ProgressCallback, RunRecord
-from ..processes import die_with_parent, read_plan, record_failure, stop
+from ..processes import FILL_LOSS_LIMIT, die_with_parent, read_plan, record_failure, stop
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
@@ -366,8 +366,6 @@ def _disk_full(folder: Path) -> str:
     free = (fs.f_bfree if os.geteuid() == 0 else fs.f_bavail) * fs.f_frsize
     return f"{free} bytes free" if free < DISK_RESERVE else ""
 
-#: atoms that may leave the box during the fill (recorded) before the run counts as failed
-FILL_LOSS_LIMIT = 0.01
 
 
 def restart_mark(lines: list[str]) -> Optional[tuple[int, int]]:
