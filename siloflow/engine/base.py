@@ -95,9 +95,27 @@ class Engine(ABC):
     def resume(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
         """Finish an interrupted run in ``folder`` from its last restart point; return its record."""
 
-    @abstractmethod
     def collect(self, folder: Path) -> RunRecord:
-        """Read a finished run's folder and check it completed; raise ``EngineRunError`` if not."""
+        """Read a finished run's folder and check it completed (:meth:`_collect`); raise
+        ``EngineRunError`` if not. Any failure to read or write the folder is recorded as ``failed``
+        with its reason."""
+        from ..atomic_files import os_error
+        from ..errors import SiloflowError
+        from .processes import record_failure
+        folder = Path(folder)
+        try:
+            return self._collect(folder)
+        except OSError as exc:
+            error = os_error(exc, f"the run record in {folder}")
+            record_failure(folder, str(error))
+            raise error from None
+        except SiloflowError as exc:
+            record_failure(folder, str(exc).splitlines()[0])
+            raise
+
+    @abstractmethod
+    def _collect(self, folder: Path) -> RunRecord:
+        """The engine's checks of a finished run and its engine-neutral tables (see :meth:`collect`)."""
 
     @abstractmethod
     def version(self) -> str:

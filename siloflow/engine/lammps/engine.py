@@ -19,7 +19,7 @@ from ...errors import EngineRunError, ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
 from ...run_folder import LAMMPS_FILES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree, run_state, write_status
 from ..base import Engine, ProgressCallback, RunRecord
-from ..processes import FILL_LOSS_LIMIT, die_with_parent, read_plan, record_failure, stop
+from ..processes import FILL_LOSS_LIMIT, die_with_parent, read_plan, stop
 from ..liggghts.tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 from . import deck as lammps_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, RESUME_LOG_NAME
@@ -239,21 +239,9 @@ class LammpsEngine(Engine):
         self.execute(folder, progress, resume=True)
         return self.collect(folder)
 
-    def collect(self, folder: Path) -> RunRecord:
+    def _collect(self, folder: Path) -> RunRecord:
         """Check the run: every stage reached, every grain inserted, no grain lost through a wall;
         write the engine-neutral tables."""
-        folder = Path(folder)
-        try:
-            return self._collect(folder)
-        except OSError as exc:
-            error = os_error(exc, f"the run record in {folder}")
-            record_failure(folder, str(error))
-            raise error from None
-        except SiloflowError as exc:
-            record_failure(folder, str(exc).splitlines()[0])
-            raise
-
-    def _collect(self, folder: Path) -> RunRecord:
         plan = read_plan(folder)
         try:
             record = RunFolder(folder).record

@@ -12,13 +12,13 @@ from typing import Optional
 from ...atomic_files import os_error, write_text
 from ...case import Case
 from ...deck import check_deck_file, verify_deck
-from ...errors import CaseError, EngineRunError, ReadError, SetupError, SiloflowError
+from ...errors import CaseError, EngineRunError, ReadError, SetupError
 from ...plan import RunPlan
 from ...run_folder import (LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree,
                            run_state, write_status)
 from ...guard import RunGuard
 from ..base import Engine, ProgressCallback, RunRecord
-from ..processes import FILL_LOSS_LIMIT, die_with_parent, read_plan, record_failure, stop
+from ..processes import FILL_LOSS_LIMIT, die_with_parent, read_plan, stop
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
@@ -266,21 +266,8 @@ class LiggghtsEngine(Engine):
             shutil.copyfile(files[name], folder / target)
         return self.resume(folder, progress)
 
-    def collect(self, folder: Path) -> RunRecord:
-        """Check the run: every stage reached, insertion complete, no particle lost through a wall.
-        Any failure to read or write the folder is recorded as ``failed`` with its reason."""
-        folder = Path(folder)
-        try:
-            return self._collect(folder)
-        except OSError as exc:
-            error = os_error(exc, f"the run record in {folder}")
-            record_failure(folder, str(error))
-            raise error from None
-        except SiloflowError as exc:
-            record_failure(folder, str(exc).splitlines()[0])
-            raise
-
     def _collect(self, folder: Path) -> RunRecord:
+        """Check the run: every stage reached, insertion complete, no particle lost through a wall."""
         plan = read_plan(folder)
         enc = encode(plan)
         try:
