@@ -94,14 +94,18 @@ def sections(text: str) -> dict[str, list[str]]:
 
 @dataclass(frozen=True)
 class LammpsWall:
-    """One wall surface as LAMMPS regions: ``region`` is the region the wall fix uses (the last of
-    ``regions``); ``kind`` names which of the plan's walls it carries (see :func:`wall_kind`)."""
+    """One wall surface as LAMMPS regions (the wall fix uses the last of ``regions``); ``kind``
+    names which of the plan's walls it carries (see :func:`wall_kind`)."""
 
     kind: str
-    region: str
     regions: list = field(default_factory=list)     # [(id, style, [args])]
     partner: str = WALL                              # "wall" or "faces": whose contact parameters
     plate: bool = False
+
+    @property
+    def region(self) -> str:
+        """The region the wall fix uses."""
+        return self.regions[-1][0]
 
 
 def wall_kind(role: str) -> str:
@@ -125,48 +129,48 @@ def walls(plan: RunPlan) -> list[LammpsWall]:
     out = []
     if g.kind == "planar":
         half_y = g.half_depth
-        out.append(LammpsWall("side", "side", [("side", "block", [_n(-R), _n(R), _n(-half_y - d), _n(half_y + d),
+        out.append(LammpsWall("side", [("side", "block", [_n(-R), _n(R), _n(-half_y - d), _n(half_y + d),
                                                                _n(hh), _n(top), "open", "3", "open", "4",
                                                                "open", "5", "open", "6"])]))
         # the faces go on below the orifice to the box's floor: a falling grain stays in the slab
         floor = plan.outlet.z - plan.opening.travel - 10 * d
-        out.append(LammpsWall("faces", "faces", [("faces", "block", [_n(-R - d), _n(R + d), _n(-half_y), _n(half_y),
+        out.append(LammpsWall("faces", [("faces", "block", [_n(-R - d), _n(R + d), _n(-half_y), _n(half_y),
                                                                   _n(floor), _n(top), "open", "1", "open", "2",
                                                                   "open", "5", "open", "6"])], partner=FACES))
         length = math.hypot(R - ro, hh)
         nx, nz = hh / length, (R - ro) / length       # the left wall's normal, into the silo
         for side, sign in (("left", -1.0), ("right", 1.0)):
             rid = f"hopper_{side}"
-            out.append(LammpsWall("hopper", rid, [
+            out.append(LammpsWall("hopper", [
                 (f"{rid}_plane", "plane", [_n(sign * ro), _n(0.0), _n(0.0), _n(-sign * nx), _n(0.0), _n(nz)]),
                 (f"{rid}_below", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(-1.0)]),
                 (rid, "union", ["2", f"{rid}_plane", f"{rid}_below"])]))
         # the orifice's edges (a union keeps faces, not the edges where they meet): the two sides of a
         # vanishingly thin block across the orifice, open above and below, touched from outside
-        out.append(LammpsWall("hopper", "rim", [("rim", "block", [_n(-ro), _n(ro), _n(-half_y - d), _n(half_y + d),
+        out.append(LammpsWall("hopper", [("rim", "block", [_n(-ro), _n(ro), _n(-half_y - d), _n(half_y + d),
                                                                _n(-RIM_THICKNESS * d), _n(0.0), "open", "3",
                                                                "open", "4", "open", "5", "open", "6",
                                                                "side", "out"])]))
-        out.append(LammpsWall("plate", "plate", [("plate", "block", [_n(-ro), _n(ro), _n(-half_y - d), _n(half_y + d),
+        out.append(LammpsWall("plate", [("plate", "block", [_n(-ro), _n(ro), _n(-half_y - d), _n(half_y + d),
                                                                   _n(-thick), _n(0.0), "side", "out"])], plate=True))
         return out
-    out.append(LammpsWall("side", "side", [("side", "cylinder", ["z", _n(0.0), _n(0.0), _n(R), _n(hh), _n(top),
+    out.append(LammpsWall("side", [("side", "cylinder", ["z", _n(0.0), _n(0.0), _n(R), _n(hh), _n(top),
                                                                  "open", "1", "open", "2"])]))
     if g.kind == "hopper":
-        out.append(LammpsWall("hopper", "cone", [("cone", "cone", ["z", _n(0.0), _n(0.0), _n(ro), _n(R), _n(0.0),
+        out.append(LammpsWall("hopper", [("cone", "cone", ["z", _n(0.0), _n(0.0), _n(ro), _n(R), _n(0.0),
                                                                    _n(hh), "open", "1", "open", "2"])]))
     else:
         depth = HOLE_SPHERE_DEPTH * top
-        out.append(LammpsWall("bottom", "bottom", [
+        out.append(LammpsWall("bottom", [
             ("bottom_plane", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(1.0)]),
             ("bottom_hole", "sphere", [_n(0.0), _n(0.0), _n(-depth), _n(math.sqrt(depth * depth + ro * ro))]),
             ("bottom", "union", ["2", "bottom_plane", "bottom_hole"])]))
     # the orifice's edge (a union keeps faces, not the edges where they meet): the side of a vanishingly
     # thin cylinder in the orifice, open above and below, touched from outside
-    out.append(LammpsWall("bottom" if g.kind == "cylinder" else "hopper", "rim", [
+    out.append(LammpsWall("bottom" if g.kind == "cylinder" else "hopper", [
         ("rim", "cylinder", ["z", _n(0.0), _n(0.0), _n(ro), _n(-RIM_THICKNESS * d), _n(0.0), "open", "1", "open", "2",
                              "side", "out"])]))
-    out.append(LammpsWall("plate", "plate", [("plate", "cylinder", ["z", _n(0.0), _n(0.0), _n(ro), _n(-thick),
+    out.append(LammpsWall("plate", [("plate", "cylinder", ["z", _n(0.0), _n(0.0), _n(ro), _n(-thick),
                                                                     _n(0.0), "side", "out"])], plate=True))
     return out
 
@@ -202,6 +206,17 @@ def species_groups(plan: RunPlan, partner: str) -> list[tuple[str, list[int], st
     return [(f"{partner}_group{n + 1}", types, args) for n, (args, types) in enumerate(by_args.items())]
 
 
+def poured_species(plan: RunPlan) -> int:
+    """The index of the species paper B's fill pours (the largest grain), to shrink after settling."""
+    return max((k for k, sp in enumerate(plan.species) if sp.stream == "grains"), key=lambda k: plan.species[k].radius)
+
+
+def clump_spheres(plan: RunPlan, species_index: int) -> tuple[np.ndarray, np.ndarray]:
+    """A clump species' sphere centres (n, 3) and radii (n,) in its body frame, m."""
+    spheres = np.array(plan.species[species_index].spheres, float)
+    return spheres[:, :3], spheres[:, 3]
+
+
 def deck_context(plan: RunPlan) -> dict:
     """Everything the LAMMPS template places, already computed and checked."""
     f = plan.fill
@@ -216,7 +231,7 @@ def deck_context(plan: RunPlan) -> dict:
         # one more atom type marks the grains being assigned a size class while shrinking (as the
         # LIGGGHTS deck uses its wall type); no step runs with it, but LAMMPS wants its coefficients
         n_types += 1
-        poured = max(plan.grains, key=lambda sp: sp.radius)
+        poured = plan.species[poured_species(plan)]
         for i, a in enumerate(plan.species + [poured]):
             p = plan.pair(a.name, poured.name)
             pairs.append({"i": i + 1, "j": n_types, "args": pair_coeff_args(plan, p),
@@ -236,9 +251,9 @@ def deck_context(plan: RunPlan) -> dict:
     if dust is not None and plan.planar:
         groups["dust"] = [len(plan.species)]
     clumps = [k + 1 for k, sp in enumerate(plan.species) if sp.kind == "clump"]
+    free = [k + 1 for k, sp in enumerate(plan.species) if sp.kind != "clump"]
     if clumps:
         groups["clumps"] = clumps
-        free = [k + 1 for k, sp in enumerate(plan.species) if sp.kind != "clump"]
         if free:
             groups["free"] = free
     seeds = [100003 + (plan.seed * 7919 + 104729 * (40 + k)) % 50_000_000 for k in range(len(radii))]
@@ -250,13 +265,13 @@ def deck_context(plan: RunPlan) -> dict:
         "wall_fixes": fixes, "dust_in_plane": dust is not None and plan.planar, "dust_group": "dust",
         "outlet_z": plan.outlet.z, "dump_every": plan.outputs.dump_every, "restart_file": RESTART_FILE,
         "opening_speed": plan.opening.speed,
-        "pour_type": radii.index(plan.particle_radius) + 1 if f.shrink_classes else 1,
+        "pour_type": poured_species(plan) + 1 if f.shrink_classes else 1,
         "mark_type": n_types,
         "density": plan.grains[0].density,
         "shrink_classes": [{"diameter": 2 * r, "fraction": fr, "seed": seed, "type": radii.index(r) + 1}
                            for (r, fr), seed in zip(f.shrink_classes, seeds)],
         "clumps": bool(clumps), "clump_types": clumps, "pour_region": pour_region(plan, clumps), "body_quantities": BODY_QUANTITIES,
-        "free_types": [k + 1 for k, sp in enumerate(plan.species) if sp.kind != "clump"],
+        "free_types": free,
         "molecules": [{"id": f"clump{t}", "file": molecule_file(plan.species[t - 1].name)} for t in clumps],
     }
 
@@ -283,8 +298,7 @@ def molecule_text(plan: RunPlan, species_index: int) -> str:
     sum of the spheres, which counts their overlaps twice)."""
     from ...clumps import union_centroid, union_inertia
     sp = plan.species[species_index]
-    centers = np.array([s[:3] for s in sp.spheres])
-    radii = np.array([s[3] for s in sp.spheres])
+    centers, radii = clump_spheres(plan, species_index)
     centroid = union_centroid(centers, radii)
     mass = sp.density * sp.volume
     inertia = sp.density * union_inertia(centers, radii, centroid)
@@ -310,8 +324,7 @@ def insertion_radius(plan: RunPlan, species_index: int) -> float:
     if sp.kind != "clump":
         return sp.radius
     from ...clumps import union_centroid
-    centers = np.array([s[:3] for s in sp.spheres])
-    radii = np.array([s[3] for s in sp.spheres])
+    centers, radii = clump_spheres(plan, species_index)
     return float(max((np.linalg.norm(centers - ref, axis=1) + radii).max()
                      for ref in (union_centroid(centers, radii), centers.mean(axis=0))))
 

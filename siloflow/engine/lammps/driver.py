@@ -30,7 +30,7 @@ from ...atomic_files import write_text
 from ...guard import RunGuard
 from ...plan import RunPlan
 from ..liggghts.tables import FLOW_COLUMNS, wall_force_columns
-from .deck import BODY_QUANTITIES, deck_context, wall_kind
+from .deck import BODY_QUANTITIES, deck_context, poured_species, wall_kind
 
 STATE_NAME = "output/lammps_state.json"
 #: the stages a run from the settled bed's restart file runs again
@@ -90,6 +90,7 @@ class Driver:
         self.total = sum(self.planned.values())
         self.rng = np.random.default_rng([plan.seed, 17])
         self.expected_atoms = 0              # atoms that should be in the box (inserted - deleted)
+        self.ke = self.pe = self.mass_silo = 0.0    # J, J, kg: at the last look
         out = plan.outputs
         self.sample_every = out.sample_steps // out.samples_per_average
         self.samples: list[np.ndarray] = []
@@ -195,10 +196,10 @@ class Driver:
         m, x, v = atoms["m"], atoms["x"], atoms["v"]
         ke = float(0.5 * (m * (v * v).sum(axis=1)).sum()) if n_now else 0.0
         pe = float((m * self.plan.gravity * x[:, 2]).sum()) if n_now else 0.0
+        self.mass_silo = float(m[x[:, 2] > 0].sum()) if n_now else 0.0
         if step % out.sample_steps == 0:
-            mass_silo = float(m[x[:, 2] > 0].sum()) if n_now else 0.0
             s = self.state
-            row = [step, n_now, float(m.sum()), mass_silo, s.discharged_mass, s.discharged_count,
+            row = [step, n_now, float(m.sum()), self.mass_silo, s.discharged_mass, s.discharged_count,
                    s.discharged_mass, s.discharged_count, ke, pe]
             self._write(FLOW_FILE, " ".join(repr(float(c)) if isinstance(c, float) else str(c) for c in row) + "\n")
         if step % out.thermo_every == 0 or lost > 0:
@@ -293,7 +294,6 @@ class Driver:
         self.section("opened")
         self.fixes = [f for f in self.fixes if not f["plate"]]
         self.discharge()
-        self.state.completed = True
 
     # ------------------------------------------------------------------ fill
     def fill(self) -> None:
@@ -332,8 +332,7 @@ class Driver:
         """The species index of every grain and dust sphere to insert, shuffled (dust in its ratio)."""
         f, plan = self.plan.fill, self.plan
         if f.shrink_classes:          # paper B: all poured at the largest size, shrunk after settling
-            poured = max(range(len(plan.species)), key=lambda k: plan.species[k].radius)
-            grains = [poured] * f.count
+            grains = [poured_species(plan)] * f.count
         else:
             idx = [k for k, sp in enumerate(plan.species) if sp.stream == "grains"]
             counts = np.floor(np.array([plan.species[k].number_fraction for k in idx]) * f.count).astype(int)
@@ -468,7 +467,7 @@ class Driver:
         for chunk in range(1, d.max_chunks + 1):
             before = self.state.discharged_mass
             self.advance(d.chunk_steps)
-            empty = self.expected_atoms == 0 or self._mass_silo() < d.empty_mass
+            empty = self.expected_atoms == 0 or self.mass_silo < d.empty_mass
             if d.steady is not None:
                 st = d.steady
                 if chunk > st.skip_chunks:
@@ -490,10 +489,6 @@ class Driver:
                 return
         if d.steady is not None:
             self.state.discharge_stop = {"reason": "max_time", "relative_error": _finite(rel_err)}
-
-    def _mass_silo(self) -> float:
-        x, m = self.gather("x", DOUBLE, 3), self.gather("rmass", DOUBLE, 1)
-        return float(m[x[:, 2] > 0].sum()) if len(m) else 0.0
 
 
 def rows_up_to(path: Path, step: int) -> str:
