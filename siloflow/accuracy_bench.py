@@ -34,7 +34,7 @@ LOADED_BAND = 0.05
 @dataclass(frozen=True)
 class Candidate:
     """One set of numerical settings: time-step fraction of the critical time, stiffness scale
-    (Young's moduli or springs), MPI ranks (None: the case's)."""
+    (Young's moduli or springs), MPI ranks and engine (None: the case's)."""
 
     name: str
     timestep_fraction: float
@@ -44,6 +44,7 @@ class Candidate:
     profile: bool = True            # can be a profile (time step and stiffness only: not ranks or outputs)
     max_overlap: Optional[float] = None     # engine.guard.max_overlap (None: the case's): to measure past the guard
     upscale: Optional[float] = None         # coarse-grained DEM: grains x this size (upscaled_case)
+    engine: Optional[str] = None            # engine.name (None: the case's): the other engine's cost
 
 
 REFERENCE = Candidate("reference", 0.02, 1.0)
@@ -63,6 +64,12 @@ CANDIDATES = (
     Candidate("E1e-3_dt0.2_1rank", 0.2, 1e-3, ranks=1, profile=False),
     Candidate("E1e-3_dt0.2_lean", 0.2, 1e-3, results=("flow_rate", "force_balance"), profile=False),
     Candidate("E1e-3_dt0.1", 0.1, 1e-3),
+    # the fast profile's stiffness at longer steps, and on the LAMMPS engine (a case's engine is its
+    # user's choice, and LAMMPS refuses some cases: measured, never a profile)
+    Candidate("E1e-2_dt0.3", 0.3, 1e-2),
+    Candidate("E1e-2_dt0.2", 0.2, 1e-2),
+    Candidate("E1e-2_dt0.2_lammps", 0.2, 1e-2, engine="lammps", profile=False),
+    Candidate("E1e-2_dt0.1_lammps", 0.1, 1e-2, engine="lammps", profile=False),
     # particle upscaling on top of the fast profile (a different grain size: never a profile)
     Candidate("E1e-2_dt0.1_up1.25", 0.1, 1e-2, upscale=1.25, profile=False),
     Candidate("E1e-4_dt0.02", 0.02, 1e-4),
@@ -81,6 +88,8 @@ def candidate_case(base: dict, cand: Candidate, seed: int) -> dict:
     engine.update(profile="custom", timestep_fraction=cand.timestep_fraction, stiffness_scale=cand.stiffness_scale)
     if cand.ranks is not None:
         engine["ranks"] = cand.ranks
+    if cand.engine is not None:
+        engine["name"] = cand.engine
     if cand.max_overlap is not None:
         engine["guard"] = {**engine.get("guard", {}), "max_overlap": cand.max_overlap}
     if cand.results is not None:
@@ -149,7 +158,7 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
               seed_offset: int = 0) -> list[dict]:
     """Run every candidate x seed not yet in ``out/runs.csv`` (the case's seed + ``seed_offset``, +1,
     ...); return all rows (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
-    from .run_table import PlannedRun, engine_wall_time, read_base_case, run_missing
+    from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing
     base, case = read_base_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
         raise SetupError("the bench needs the reference candidate (the papers' settings) to compare with")
@@ -157,11 +166,12 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
     planned = [PlannedRun(key={"candidate": c.name, "seed": first_seed + k},
                           case=candidate_case(base, c, first_seed + k),
                           columns={"timestep_fraction": c.timestep_fraction, "stiffness_scale": c.stiffness_scale,
-                                   "ranks": c.ranks or ranks})
+                                   "ranks": c.ranks or ranks, "engine": c.engine or case.engine.name})
                for c in candidates for k in range(seeds) if not (skip_reference and c is REFERENCE)]
     return run_missing(out, planned, run_metrics,
                        lambda folder, reason: {"wall_s": engine_wall_time(folder),
-                                               **{q: float("nan") for q in QUANTITIES}}, report)
+                                               **{q: float("nan") for q in QUANTITIES}}, report,
+                       case_digest(case))
 
 
 #: a candidate re-run with new seeds to check the recommendation is named ``<candidate>_new_seeds``

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from .errors import SiloflowError
+from .errors import SetupError, SiloflowError
 
 TABLE_NAME = "runs.csv"
 
@@ -80,6 +80,27 @@ def _free_folder(folder: Path) -> Path:
     return path
 
 
+def case_digest(case) -> str:
+    """SHA-256 (16 hex digits) of a study's validated base case without its ``name`` and ``seed``:
+    the rows of one ``runs.csv`` must all come from one case (a study resumed on an edited case file
+    would mix two)."""
+    import hashlib
+    import json
+    fields = case.model_dump(mode="json", exclude={"name", "seed"})
+    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def machine_id() -> str:
+    """Which machine, as booted, ran a study's runs (``<hostname>-<boot id prefix>``): wall times
+    compare only between runs of one machine (a fresh machine may be twice as fast or slow)."""
+    import socket
+    try:
+        boot = Path("/proc/sys/kernel/random/boot_id").read_text().strip()[:8]
+    except OSError:
+        boot = ""
+    return f"{socket.gethostname()}-{boot}" if boot else socket.gethostname()
+
+
 def engine_wall_time(folder: Path) -> float:
     """The engine's wall time of a run folder, s (NaN when it recorded none)."""
     from .run_folder import RunFolder
@@ -90,15 +111,23 @@ def engine_wall_time(folder: Path) -> float:
 
 
 def run_missing(out: Path, planned: list[PlannedRun], measure: Callable[[Path], dict],
-                failed: Callable[[Path, str], dict], report: Callable[[str], None] = lambda s: None) -> list[dict]:
+                failed: Callable[[Path, str], dict], report: Callable[[str], None] = lambda s: None,
+                case_sha: str = "") -> list[dict]:
     """Run every planned run whose ``key`` is not yet a row of ``out/runs.csv`` (``siloflow.run``
     into ``out/runs/<case name>``); its row is the key, the columns, ``state``, ``reason``,
-    ``folder`` and ``measure(folder)`` (complete) or ``failed(folder, reason)``. Returns all rows."""
+    ``folder``, ``machine`` (:func:`machine_id`), ``case_sha`` (:func:`case_digest` of the study's
+    case) and ``measure(folder)`` (complete) or ``failed(folder, reason)``. Returns all rows.
+    ``SetupError`` before anything runs when the table holds rows of another case (rows written
+    before the column existed are taken as they are)."""
     from .case_file import case_from_dict
     from .runs import run
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rows = read_rows(out)
+    other = sorted({str(r.get("case_sha")) for r in rows if key_text(r.get("case_sha")) not in ("", case_sha)})
+    if case_sha and other:
+        raise SetupError(f"{out / TABLE_NAME} holds runs of another case (case_sha {', '.join(other)}, this case "
+                         f"{case_sha}): the case file changed since; write this study to a new folder (-o)")
 
     def key_of(d: dict) -> tuple:
         return tuple(sorted((k, key_text(d.get(k))) for k in planned[0].key)) if planned else ()
@@ -109,7 +138,8 @@ def run_missing(out: Path, planned: list[PlannedRun], measure: Callable[[Path], 
             continue
         name = p.case["name"]
         folder = _free_folder(out / "runs" / name)
-        row = {**p.key, **p.columns, "folder": str(folder.relative_to(out))}
+        row = {**p.key, **p.columns, "folder": str(folder.relative_to(out)), "machine": machine_id(),
+               "case_sha": case_sha}
         report(f"{name}: running")
         try:
             run(case_from_dict(p.case, name), folder)

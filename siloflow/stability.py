@@ -92,7 +92,7 @@ def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIF
                  seed: Optional[int] = None, burst: float = 0.1,
                  report: Callable[[str], None] = lambda s: None) -> list[dict]:
     """Run every grid point not yet in ``out/runs.csv``; return all rows."""
-    from .run_table import PlannedRun, engine_wall_time, read_base_case, run_missing
+    from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing
     base, case = read_base_case(case_file)
     seed = case.seed if seed is None else seed
     has_dust = getattr(case.particles, "dust", None) is not None
@@ -111,7 +111,7 @@ def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIF
         state, signal = classify(reason)
         return {"signal": signal, "verdict": state, "wall_s": engine_wall_time(folder), **peaks(folder)}
 
-    rows = run_missing(out, planned, measure, failed, report)
+    rows = run_missing(out, planned, measure, failed, report, case_digest(case))
     for r in rows:
         r["verdict"] = "stable" if r["state"] == "complete" else r.get("verdict") or classify(r["reason"])[0]
     return rows

@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from siloflow.bench_stats import best_bounds, compare, difference, pareto_figure, recommend, speedup
+from siloflow.bench_stats import best_bounds, compare, difference, paired_difference, pareto_figure, recommend, speedup
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -130,3 +130,62 @@ def test_pareto_figure_writes_a_png_atomically(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["pareto.png"]
     import matplotlib.pyplot as plt
     assert plt.get_fignums() == []
+
+
+def _paired_runs(rng, n, corr, shift=0.0):
+    """Reference and candidate values of ``n`` seeds sharing a seed effect of correlation ``corr``
+    (both sd 1 around 10; the candidate shifted by ``shift``)."""
+    common = rng.standard_normal(n)
+    own = rng.standard_normal((2, n))
+    ref = 10.0 + np.sqrt(corr) * common + np.sqrt(1 - corr) * own[0]
+    cand = 10.0 + shift + np.sqrt(corr) * common + np.sqrt(1 - corr) * own[1]
+    return ref, cand
+
+
+@pytest.mark.parametrize("corr", [0.0, 0.8])
+def test_paired_interval_covers_the_truth_at_any_correlation(corr):
+    rng = np.random.default_rng(3)
+    truth, hits, trials = 0.5 / 10.0, 0, 2000
+    for _ in range(trials):
+        hits += (lambda d: d["ci_lo"] <= truth <= d["ci_hi"])(paired_difference(*_paired_runs(rng, 6, corr, 0.5)))
+    assert 0.93 <= hits / trials <= 0.97
+
+
+def test_pairing_by_seed_narrows_the_bound_when_seeds_share_their_fill():
+    rng = np.random.default_rng(4)
+    ref, cand = _paired_runs(rng, 8, 0.8)
+    paired, welch = paired_difference(ref, cand), difference(ref, cand)
+    assert paired["pair_corr"] > 0.5 and paired["bound"] < 0.8 * welch["bound"]
+    assert paired["rel_error"] == pytest.approx(welch["rel_error"])
+    with pytest.raises(ValueError, match="length"):
+        paired_difference([1.0, 2.0], [1.0])
+    d = paired_difference([1.0, np.nan, 1.2, 0.8], [1.1, 1.5, np.nan, 0.9])   # pairs with a NaN dropped
+    assert d["n_ref"] == d["n_cand"] == 2 and d["rel_error"] == pytest.approx(2.0 / 1.8 - 1)
+
+
+def test_compare_pairs_only_candidates_whose_seeds_the_reference_ran():
+    rng = np.random.default_rng(5)
+    ref, cand = _paired_runs(rng, 6, 0.8)
+    runs = pd.DataFrame([dict(candidate="ref", seed=s, wall_s=100.0, q=v) for s, v in enumerate(ref)]
+                        + [dict(candidate="same", seed=s, wall_s=10.0, q=v) for s, v in enumerate(cand)]
+                        + [dict(candidate="new", seed=100 + s, wall_s=10.0, q=v) for s, v in enumerate(cand)]
+                        + [dict(candidate="two", seed=s, wall_s=10.0, q=v) for s, v in enumerate(cand[:2])])
+    t = compare(runs, "ref", ["q"]).set_index("candidate")
+    assert t.at["same", "method"] == "paired" and t.at["new", "method"] == "welch" and t.at["two", "method"] == "welch"
+    assert t.at["same", "bound"] < t.at["new", "bound"]
+    assert t.at["same", "rel_error"] == pytest.approx(t.at["new", "rel_error"])
+
+
+def test_speedups_are_timed_on_one_machine():
+    rows = ([dict(candidate="ref", seed=s, wall_s=400.0 + s, q=1.0, machine="old") for s in range(4)]
+            + [dict(candidate="ref", seed=4, wall_s=900.0, q=1.0, machine="slow")]
+            + [dict(candidate="fast", seed=s, wall_s=10.0 + s, q=1.0, machine="old") for s in range(2)]
+            + [dict(candidate="fast", seed=s, wall_s=22.0 + s, q=1.0, machine="slow") for s in range(2, 5)]
+            + [dict(candidate="elsewhere", seed=s, wall_s=5.0, q=1.0, machine="third") for s in range(3)])
+    t = compare(pd.DataFrame(rows), "ref", ["q"]).set_index("candidate")
+    # the slow machine ran 3 of fast's 5 runs and a reference: 900 / 25, not a mix of the two machines
+    assert t.at["fast", "timing_machine"] == "slow" and t.at["fast", "timed_runs"] == "1/3"
+    assert t.at["fast", "speedup"] == pytest.approx(900.0 / 25.0)
+    assert math.isnan(t.at["elsewhere", "speedup"]) and pd.isna(t.at["elsewhere", "timing_machine"])
+    no_column = compare(pd.DataFrame(rows).drop(columns="machine"), "ref", ["q"]).set_index("candidate")
+    assert no_column.at["fast", "timed_runs"] == "5/5"

@@ -14,7 +14,7 @@ from siloflow import accuracy_bench as ab
 from siloflow import stability as st
 from siloflow.case_file import case_from_dict
 from siloflow.derived import derive
-from siloflow.errors import EngineRunError
+from siloflow.errors import EngineRunError, SetupError
 from siloflow.run_table import PlannedRun, read_rows, run_missing
 
 from conftest import ROOT, SMALL
@@ -87,6 +87,27 @@ def test_the_run_table_resumes_and_keeps_interrupted_folders(tmp_path, monkeypat
     assert (tmp_path / "runs" / "r3").is_dir()                  # kept as it was
     assert run_missing(tmp_path, planned, measure, failed) and calls == ["r1", "r2", "r3"]   # nothing again
     assert len(read_rows(tmp_path)) == 3
+
+
+def test_a_run_table_is_of_one_case_and_says_where_each_run_ran(tmp_path, monkeypatch):
+    import siloflow.runs
+    from siloflow.case_file import load_case
+    from siloflow.run_table import case_digest, machine_id
+    monkeypatch.setattr(siloflow.runs, "run", lambda case, folder, **kw: Path(folder).mkdir(parents=True))
+    case = load_case(SMALL)
+    sha = case_digest(case)
+    assert case_digest(case.model_copy(update={"seed": case.seed + 5, "name": "other"})) == sha   # not the case
+    softer = case.model_copy(update={"gravity": case.gravity / 2})
+    assert case_digest(softer) != sha
+    base = yaml.safe_load(SMALL.read_text())
+    planned = [PlannedRun(key={"seed": s}, case={**base, "name": f"r{s}", "seed": s}) for s in (1, 2)]
+    rows = run_missing(tmp_path, planned[:1], lambda f: {}, lambda f, r: {}, case_sha=sha)
+    assert rows[0]["case_sha"] == sha and rows[0]["machine"] == machine_id() != ""
+    before = (tmp_path / "runs.csv").read_bytes()
+    with pytest.raises(SetupError, match=f"another case.*{case_digest(softer)}.*-o"):
+        run_missing(tmp_path, planned, lambda f: {}, lambda f, r: {}, case_sha=case_digest(softer))
+    assert (tmp_path / "runs.csv").read_bytes() == before and not (tmp_path / "runs" / "r2").exists()
+    assert len(run_missing(tmp_path, planned, lambda f: {}, lambda f, r: {}, case_sha=sha)) == 2
 
 
 @pytest.mark.parametrize("reason,verdict,signal", [
