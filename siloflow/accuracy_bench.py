@@ -171,7 +171,7 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
     return run_missing(out, planned, run_metrics,
                        lambda folder, reason: {"wall_s": engine_wall_time(folder),
                                                **{q: float("nan") for q in QUANTITIES}}, report,
-                       case_digest(case))
+                       case_digest(base))
 
 
 #: a candidate re-run with new seeds to check the recommendation is named ``<candidate>_new_seeds``
@@ -223,6 +223,26 @@ def run_errors(runs):
     return pd.DataFrame(rows)
 
 
+#: what a candidate changes of what a seed makes of its random insertion stream: runs pair by seed
+#: with the reference only when none of these differ (another engine fills differently, another rank
+#: count inserts differently, upscaled grains are other grains)
+DESIGN = ("design_engine", "design_ranks", "design_grain_scale")
+
+
+def design_columns(runs):
+    """``runs`` with the ``DESIGN`` columns, from each row's candidate definition ("" where it keeps
+    the case's; a candidate not defined here keeps everything)."""
+    defs = {c.name: c for c in CANDIDATES}
+
+    def of(name: str):
+        c = defs.get(name[:-len(VALIDATION)] if name.endswith(VALIDATION) else name)
+        if c is None:
+            return "", "", ""
+        return c.engine or "", "" if c.ranks is None else str(c.ranks), "" if c.upscale is None else repr(c.upscale)
+    values = runs["candidate"].map(of)
+    return runs.assign(**{col: values.map(lambda v, k=k: v[k]) for k, col in enumerate(DESIGN)})
+
+
 def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
              case_file: Optional[Path] = None) -> tuple:
     """From ``out/runs.csv``: ``comparison.csv`` (every candidate x quantity: errors with their
@@ -237,8 +257,8 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
     runs = pd.DataFrame(read_rows(out))
     if runs.empty:
         raise SetupError(f"{out / 'runs.csv'} holds no runs yet")
-    ok = runs[runs.state == "complete"]
-    table = bench_stats.compare(ok, REFERENCE.name, list(QUANTITIES), confidence)
+    ok = design_columns(runs[runs.state == "complete"])
+    table = bench_stats.compare(ok, REFERENCE.name, list(QUANTITIES), confidence, design=DESIGN)
     failed = runs[runs.state != "complete"].groupby("candidate").size()
     table["failed_runs"] = table.candidate.map(failed).fillna(0).astype(int)
     write_text(out / "comparison.csv", table.to_csv(index=False))

@@ -146,36 +146,52 @@ def speedup(ref_wall, cand_wall, confidence: float = 0.95) -> dict:
     return dict(speedup=ratio, lo=ratio * math.exp(-half), hi=ratio * math.exp(half))
 
 
-def _pairs(ref: pd.DataFrame, cand: pd.DataFrame) -> bool:
+#: ``timing_machine`` of runs that recorded no machine (taken as one, when no recorded machine ran both)
+UNRECORDED = "unrecorded"
+
+
+def _pairs(ref: pd.DataFrame, cand: pd.DataFrame, design: tuple = ()) -> bool:
     """Whether a candidate's runs pair with the reference's by seed: every one of at least
-    ``MIN_PAIRS`` runs has a reference run of its seed (seeds unique on both sides). Decided from
-    the seeds alone, before any value is looked at."""
+    ``MIN_PAIRS`` runs has a reference run of its seed (seeds unique on both sides), and the
+    ``design`` columns that decide what a seed makes of its random stream (ranks, engine, grain
+    size) hold the same values on both sides (missing ones ignored). Decided from the seeds and the
+    design, before any value is looked at."""
     if "seed" not in cand.columns or len(cand) < MIN_PAIRS:
         return False
     rs, cs = ref["seed"], cand["seed"]
-    return bool(rs.is_unique and cs.is_unique and set(cs) <= set(rs))
+    if not (rs.is_unique and cs.is_unique and set(cs) <= set(rs)):
+        return False
+    for col in design:
+        if col in ref.columns and col in cand.columns:
+            if set(ref[col].dropna().astype(str)) != set(cand[col].dropna().astype(str)):
+                return False
+    return True
 
 
 def _timing_machine(ref: pd.DataFrame, cand: pd.DataFrame):
-    """The machine whose runs time a candidate against the reference: of the machines with runs of
-    both, the one with the most candidate runs (speed-ups are ratios measured on one machine).
-    Returns (machine, reference walls, candidate walls); without a ``machine`` column every run is
-    on one machine; (None, empty, empty) when no machine ran both."""
-    if "machine" not in cand.columns:
+    """The machine whose runs time a candidate against the reference: of the recorded machines with
+    runs of both, the one with the most candidate runs (speed-ups are ratios measured on one
+    machine); runs that recorded none count as one machine (``UNRECORDED``) only when no recorded
+    machine ran both. Returns (machine, reference walls, candidate walls); without a ``machine``
+    column every run is on one machine (""); (None, empty, empty) when no machine ran both."""
+    if "machine" not in cand.columns or "machine" not in ref.columns:
         return "", ref["wall_s"], cand["wall_s"]
-    rm, cm = ref["machine"].fillna("").astype(str), cand["machine"].fillna("").astype(str)
+    rm, cm = ref["machine"].fillna(UNRECORDED).astype(str), cand["machine"].fillna(UNRECORDED).astype(str)
     shared = [m for m in cm.value_counts().index if (rm == m).any()]
+    shared.sort(key=lambda m: m == UNRECORDED)          # stable: recorded machines first, by count
     if not shared:
         return None, ref["wall_s"].iloc[:0], cand["wall_s"].iloc[:0]
     m = shared[0]
     return m, ref["wall_s"][rm == m], cand["wall_s"][cm == m]
 
 
-def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidence: float = 0.95) -> pd.DataFrame:
+def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidence: float = 0.95,
+            design: tuple = ()) -> pd.DataFrame:
     """One row per (candidate, quantity): the difference from the reference and the speed-up.
 
     The difference is :func:`paired_difference` when the candidate's runs pair with the reference's
-    by seed (:func:`_pairs`, ``method`` "paired"), else Welch's :func:`difference` ("welch"). The
+    by seed (:func:`_pairs` with the ``design`` columns) and at least ``MIN_PAIRS`` pairs of the
+    quantity are finite (``method`` "paired"), else Welch's :func:`difference` ("welch"). The
     speed-up compares engine wall times on one machine (:func:`_timing_machine`, column
     ``timing_machine``; NaN when no machine ran both).
 
@@ -183,7 +199,7 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
     ----------
     runs : pandas.DataFrame
         One row per run: ``candidate``, ``seed``, ``wall_s`` (s), the quantities (SI; NaN = not
-        measured); optional ``machine`` (where it ran).
+        measured); optional ``machine`` (where it ran) and the ``design`` columns.
     reference : str
         The candidate compared with; its own rows have rel_error 0, bound 0, speed-up 1 and
         verdict "the reference". ValueError if it has no runs.
@@ -211,17 +227,19 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
         sp = (dict(speedup=1.0, lo=1.0, hi=1.0) if name == reference
               else speedup(ref_wall, cand_wall, confidence) if machine is not None
               else dict(speedup=math.nan, lo=math.nan, hi=math.nan))
-        paired = name != reference and _pairs(ref, grp)
+        paired = name != reference and _pairs(ref, grp, design)
         if paired:
             aligned = ref.set_index("seed").loc[list(grp["seed"])]
         for q in quantities:
-            if paired:
-                d = dict(paired_difference(aligned[q].to_numpy(), grp[q].to_numpy(), confidence), method="paired")
+            r, c = (aligned[q].to_numpy(dtype=float), grp[q].to_numpy(dtype=float)) if paired else (None, None)
+            if paired and np.sum(~(np.isnan(r) | np.isnan(c))) >= MIN_PAIRS:
+                d = dict(paired_difference(r, c, confidence), method="paired")
             else:
                 d = dict(difference(ref[q], grp[q], confidence), method="welch", pair_corr=math.nan)
-            if name == reference and d["n_ref"] > 0 and d["ref_mean"] != 0:
-                d.update(rel_error=0.0, ci_lo=0.0, ci_hi=0.0, bound=0.0, resolved=False,
-                         verdict="the reference", method="")
+            if name == reference:
+                d.update(method="")
+                if d["n_ref"] > 0 and d["ref_mean"] != 0:
+                    d.update(rel_error=0.0, ci_lo=0.0, ci_hi=0.0, bound=0.0, resolved=False, verdict="the reference")
             rows.append(dict(candidate=name, quantity=q, **d, speedup=sp["speedup"], speedup_lo=sp["lo"],
                              speedup_hi=sp["hi"], timing_machine=machine,
                              timed_runs=f"{ref_wall.notna().sum()}/{cand_wall.notna().sum()}",

@@ -61,7 +61,9 @@ def read_rows(out: Path) -> list[dict]:
     """The rows of ``out/runs.csv`` (none if it does not exist)."""
     import pandas as pd
     table = Path(out) / TABLE_NAME
-    return pd.read_csv(table).to_dict(orient="records") if table.is_file() else []
+    # text columns whose values can look like numbers (a hex digest "1234e567...", a host name)
+    text = {"case_sha": str, "machine": str}
+    return pd.read_csv(table, dtype=text).to_dict(orient="records") if table.is_file() else []
 
 
 def _write_rows(rows: list[dict], out: Path) -> None:
@@ -80,14 +82,15 @@ def _free_folder(folder: Path) -> Path:
     return path
 
 
-def case_digest(case) -> str:
-    """SHA-256 (16 hex digits) of a study's validated base case without its ``name`` and ``seed``:
-    the rows of one ``runs.csv`` must all come from one case (a study resumed on an edited case file
-    would mix two)."""
+def case_digest(fields: dict) -> str:
+    """SHA-256 (16 hex digits) of a study's case fields as its case file gives them (the parsed YAML,
+    keys sorted), without ``name`` and ``seed``: the rows of one ``runs.csv`` must all come from one
+    case (a study resumed on an edited case file would mix two). The file's fields, not the validated
+    case: a siloflow that adds a defaulted field or publishes another fast profile does not change it."""
     import hashlib
     import json
-    fields = case.model_dump(mode="json", exclude={"name", "seed"})
-    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]
+    kept = {k: v for k, v in fields.items() if k not in ("name", "seed")}
+    return hashlib.sha256(json.dumps(kept, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def machine_id() -> str:

