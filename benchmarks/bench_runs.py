@@ -3,6 +3,7 @@ and running one case (a dict) into a work folder. A failed run stops the benchma
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -11,6 +12,8 @@ from pathlib import Path
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
+#: LIGGGHTS' and LAMMPS' "Loop time of T on P procs for N steps with A atoms", one per ``run``
+LOOP = re.compile(r"^Loop time of (\S+) on (\d+) procs for (\d+) steps with (\d+) atoms", re.M)
 
 
 def siloflow(*args: str) -> list[str]:

@@ -19,8 +19,6 @@ Writes benchmarks/results/deck_costs/deck_costs.csv (every timing) and summary.c
 """
 from __future__ import annotations
 
-import copy
-import os
 import re
 import subprocess
 import sys
@@ -30,15 +28,15 @@ import pandas as pd
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_runs import ROOT, siloflow, timed  # noqa: E402
+from bench_runs import LOOP, ROOT, siloflow, timed  # noqa: E402
 
 sys.path.insert(0, str(ROOT))
 from siloflow.atomic_files import write_text  # noqa: E402
+from siloflow.engine.liggghts.engine import LiggghtsEngine  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "results" / "deck_costs"
 WORK = ROOT / "benchmarks" / "work" / "deck_costs"
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
-LOOP = re.compile(r"^Loop time of (\S+) on (\d+) procs for (\d+) steps with (\d+) atoms", re.M)
 NEIGHBOR = re.compile(r"^neighbor\s+(\S+)\s+bin$", re.M)
 REPEATS = 3
 RANKS = 2
@@ -49,7 +47,6 @@ TIMESTEP_FRACTION, STIFFNESS_SCALE = 0.1, 0.01
 def case_of(variant: str) -> dict:
     """The case fields a variant renders (the skin variants render the baseline)."""
     data = yaml.safe_load(CASE.read_text())
-    data = copy.deepcopy(data)
     data["engine"] = {**{k: v for k, v in data["engine"].items() if k != "profile"}, "profile": "custom",
                       "timestep_fraction": TIMESTEP_FRACTION, "stiffness_scale": STIFFNESS_SCALE, "ranks": RANKS}
     if variant == "sensors 5x3":
@@ -94,9 +91,7 @@ def prepare(variant: str) -> Path:
 def loop_time(deck: Path) -> tuple[float, int, int]:
     """Run ``deck`` in its folder on RANKS ranks; (loop time s, steps, atoms) of its run."""
     log = deck.with_suffix(".log")
-    cmd = ["mpirun", "-np", str(RANKS), "liggghts", "-in", deck.name, "-log", log.name]
-    if os.geteuid() == 0:
-        cmd.insert(1, "--allow-run-as-root")
+    cmd = LiggghtsEngine().command(RANKS, deck=deck.name, log=log.name)
     subprocess.run(cmd, cwd=deck.parent, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, check=True)
     m = LOOP.findall(log.read_text())
     if not m:

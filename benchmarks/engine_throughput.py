@@ -16,7 +16,6 @@ Writes benchmarks/results/engines/throughput.csv and throughput.png.
 from __future__ import annotations
 
 import copy
-import re
 import sys
 from pathlib import Path
 
@@ -25,10 +24,11 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from bench_runs import LOOP  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "results" / "engines"
 WORK = ROOT / "benchmarks" / "work" / "engines"
-LOOP = re.compile(r"^Loop time of (\S+) on (\d+) procs for (\d+) steps with (\d+) atoms")
 #: LAMMPS' published chute benchmark, atom-steps/s on one core
 CHUTE_ANCHOR = 2.06e7
 VARIANTS = [("liggghts", 1, "mesh walls"), ("liggghts", 2, "mesh walls"),

@@ -39,6 +39,15 @@ def _t_half(parts, confidence: float) -> float:
     return float(stats.t.ppf(0.5 + confidence / 2, dof)) * math.sqrt(var)
 
 
+def _with_interval(out: dict, rel: float, half: float) -> dict:
+    """``out`` with the interval ``rel +/- half`` (relative): ``ci_lo, ci_hi``, ``bound`` (the larger
+    end's magnitude), ``resolved`` (the interval excludes 0) and the ``verdict`` text."""
+    lo, hi = rel - half, rel + half
+    resolved = bool(lo > 0 or hi < 0)
+    verdict = f"{rel:+.1%} [{lo:+.1%}, {hi:+.1%}]" if resolved else "not resolved"
+    return dict(out, ci_lo=lo, ci_hi=hi, bound=max(abs(lo), abs(hi)), resolved=resolved, verdict=verdict)
+
+
 def difference(ref, cand, confidence: float = 0.95) -> dict:
     """Relative difference of the means, ``cand_mean / ref_mean - 1``, with a Welch t interval:
     delta method for the ratio, ``se = sqrt(se_c**2/m_r**2 + m_c**2 se_r**2/m_r**4)``, and the
@@ -67,10 +76,7 @@ def difference(ref, cand, confidence: float = 0.95) -> dict:
         return dict(out, verdict="not resolved (n < 2)")
     half = _t_half([(s_c ** 2 / n_c / m_r ** 2, n_c - 1),
                     (m_c ** 2 * s_r ** 2 / n_r / m_r ** 4, n_r - 1)], confidence)
-    lo, hi = rel - half, rel + half
-    resolved = bool(lo > 0 or hi < 0)
-    verdict = f"{rel:+.1%} [{lo:+.1%}, {hi:+.1%}]" if resolved else "not resolved"
-    return dict(out, ci_lo=lo, ci_hi=hi, bound=max(abs(lo), abs(hi)), resolved=resolved, verdict=verdict)
+    return _with_interval(out, rel, half)
 
 
 #: pair the runs by seed (common random numbers) when a candidate has at least this many runs, all
@@ -114,10 +120,7 @@ def paired_difference(ref, cand, confidence: float = 0.95) -> dict:
     ratio = m_c / m_r
     se = float(np.std(c - ratio * r, ddof=1)) / math.sqrt(n) / abs(m_r)
     half = float(stats.t.ppf(0.5 + confidence / 2, n - 1)) * se
-    lo, hi = rel - half, rel + half
-    resolved = bool(lo > 0 or hi < 0)
-    verdict = f"{rel:+.1%} [{lo:+.1%}, {hi:+.1%}]" if resolved else "not resolved"
-    return dict(out, ci_lo=lo, ci_hi=hi, bound=max(abs(lo), abs(hi)), resolved=resolved, verdict=verdict)
+    return _with_interval(out, rel, half)
 
 
 def speedup(ref_wall, cand_wall, confidence: float = 0.95) -> dict:

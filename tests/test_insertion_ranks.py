@@ -8,7 +8,6 @@ and compares where the grains were put.
 """
 from __future__ import annotations
 
-import os
 import shutil
 import subprocess
 import sys
@@ -16,6 +15,8 @@ import sys
 import numpy as np
 import pytest
 import yaml
+
+from siloflow.engine import LiggghtsEngine
 
 from conftest import ROOT
 
@@ -39,10 +40,8 @@ def _first_batch(tmp_path, ranks: int) -> np.ndarray:
     text = (folder / "in.liggghts").read_text()
     cut = text.index("\nrun ", text.index("SILOFLOW_STAGE fill"))
     (folder / "first.in").write_text(text[:cut] + "\ndump first all custom 1 first.dump id radius x y z\nrun 2\n")
-    cmd = ["liggghts", "-in", "first.in", "-log", "first.log"]
-    if ranks > 1:
-        cmd = ["mpirun"] + (["--allow-run-as-root"] if os.geteuid() == 0 else []) + ["-np", str(ranks)] + cmd
-    subprocess.run(cmd, cwd=folder, check=True, capture_output=True)
+    subprocess.run(LiggghtsEngine().command(ranks, deck="first.in", log="first.log"), cwd=folder, check=True,
+                   capture_output=True)
     frame = (folder / "first.dump").read_text().split("ITEM: TIMESTEP")[-1].splitlines()
     start = next(i for i, line in enumerate(frame) if line.startswith("ITEM: ATOMS")) + 1
     return np.loadtxt(frame[start:], ndmin=2)
