@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-stability bench-engines bench-deck golden paper-a-quick paper-b-quick paper-a paper-b clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-stability bench-engines bench-deck bench-rank-fill golden paper-a-quick paper-b-quick paper-a paper-b clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -48,7 +48,7 @@ paper-b: install
 
 # every test, the engine tests included
 test: install
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=25
 
 # without the LIGGGHTS runs
 test-fast: $(VENV)/.installed
@@ -102,9 +102,16 @@ bench-accuracy: install
 	  --flow-tolerance 0.06 --static-tolerance 0.06
 	$(VENV)/bin/siloflow bench benchmarks/cases/accuracy_small.yaml -o $(ACCURACY) --seeds 12 --candidates reference,E1e-2_dt0.1,E1e-2_dt0.2 \
 	  --flow-tolerance 0.06 --static-tolerance 0.06 --validate 3
+	$(VENV)/bin/siloflow bench benchmarks/cases/accuracy_small.yaml -o $(ACCURACY) --seeds 15 \
+	  --candidates reference,E1e-2_dt0.1,E1e-2_dt0.2,E1e-2_dt0.3 --flow-tolerance 0.06 --static-tolerance 0.06 --validate 3
 	mkdir -p benchmarks/results/accuracy
 	cd $(ACCURACY) && cp runs.csv comparison.csv run_errors.csv pareto.png recommended_profile.json $(CURDIR)/benchmarks/results/accuracy/
 	$(PY) benchmarks/publish_fast_profile.py
+
+# MPI ranks and the fill: 1 against 2 ranks at the accuracy case's over-full batches (0.35) and at a
+# batch that fits (0.15), 8 seeds each (resumable in runs/bench_rank_fill; benchmarks/results/rank_fill)
+bench-rank-fill: install
+	$(PY) benchmarks/rank_fill.py
 
 # the numerical-stability envelope of the same case (siloflow stability, two seeds; resumable in runs/)
 STABILITY = runs/bench_stability

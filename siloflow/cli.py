@@ -57,7 +57,7 @@ def validate(case_file: Path = typer.Argument(..., help="YAML case file")) -> No
         _fail(exc)
     out.print(printable(f"{case_file}: valid case '{case.name}' ({case.geometry.kind}, {case.materials.model})"),
               markup=False, highlight=False)
-    _warn(d)
+    _warn(d, engine, case)
 
 
 @app.command()
@@ -79,9 +79,9 @@ FORCE_HELP = "replace an existing folder siloflow made (never one holding files 
 ALLOW_LONG_HELP = "run a case whose planned steps exceed the cap (siloflow.derived.MAX_RUN_STEPS)"
 
 
-def _warn(d) -> None:
-    """Print the case's physics warnings (each names its consequence)."""
-    for line in d.warnings:
+def _warn(d, engine, case) -> None:
+    """Print the case's physics warnings and the engine's (each names its consequence)."""
+    for line in [*d.warnings, *[w for w in engine.plan_warnings(case, d) if w not in d.warnings]]:
         err.print(printable(f"warning: {line}"), style="yellow", markup=False, highlight=False)
 
 
@@ -103,7 +103,7 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
         folder = engine.prepare(case, output, force=force, keep=[case_file], plan=d)
     except SiloflowError as exc:
         _fail(exc)
-    _warn(d)
+    _warn(d, engine, case)
     t = d.timestep
     out.print(f"deck written to {folder}: {d.fill.count} particles, dt = {t.dt:.3g} s "
               f"({t.fraction} x {t.critical_time_source} {t.critical_time:.3g} s)")
@@ -212,7 +212,7 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
-    _warn(derived)
+    _warn(derived, engine, case)
     out.print(profile_note(derived.profile))
     out.print(f"run folder: {folder} (expected output up to {sizes['total'] / 1e6:.0f} MB, "
               f"{sizes['frames']} dump frames)")

@@ -339,6 +339,7 @@ class RunRecord:
     completed: bool
     warnings: list[str] = field(default_factory=list)
     templates_inserted: Optional[int] = None   # grains + dust spheres the insertion placed
+    short_batches: dict = field(default_factory=dict)   # per insertion fix: batches placed short (LIGGGHTS)
     fill_losses: int = 0                       # atoms that left the box during the fill (recorded, < 1 %)
     fill_cache: Optional[dict] = None          # {"key", "hit"}: the settled bed came from (or went to) the cache
     discharge_stop: Optional[dict] = None      # until_steady: why it stopped (steady, empty, max_time), rate error

@@ -63,6 +63,11 @@ class Engine(ABC):
         refuse a case with problems before anything is written."""
         return []
 
+    def plan_warnings(self, case: Case, plan) -> list[str]:
+        """What this engine will do differently from ``plan`` without refusing it (each names its
+        field and consequence); recorded with the plan's own warnings in the run folder."""
+        return []
+
     def preflight(self, ranks: int) -> None:
         """Refuse (``SetupError``) to start when the engine, or the MPI launcher ``ranks`` > 1 needs,
         is not installed here: checked before anything is written."""
@@ -83,6 +88,9 @@ class Engine(ABC):
         from ..derived import derive
         plan = plan if plan is not None else derive(case)
         check_case(case, self, plan)
+        extra = [w for w in self.plan_warnings(case, plan) if w not in plan.warnings]
+        if extra:
+            plan = plan.model_copy(update={"warnings": [*plan.warnings, *extra]})
         folder = render(case, folder, force=force, keep=keep, plan=plan, engine=self)
         write_status(folder, "rendered")
         return folder

@@ -22,6 +22,7 @@ from ..processes import FILL_LOSS_LIMIT, die_with_parent, read_plan, stop
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
+from .insertion import short_batch_warning, short_batches_note
 from .log import LogState, decode, diagnose, parse_log_text
 from .tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 
@@ -88,6 +89,12 @@ class LiggghtsEngine(Engine):
             except CaseError as exc:
                 problems += list(exc.problems)
         return problems
+
+    def plan_warnings(self, case: Case, plan: RunPlan) -> list[str]:
+        """A grain batch asking for more than LIGGGHTS places in the insertion region on this many
+        ranks (:mod:`.insertion`)."""
+        warning = short_batch_warning(plan, encode(plan).box, case.engine.ranks, case.fill)
+        return [warning] if warning else []
 
     def write_deck(self, plan: RunPlan, case: Case, folder: Path) -> None:
         liggghts_deck.write_deck(plan, case, folder)
@@ -290,6 +297,11 @@ class LiggghtsEngine(Engine):
         templates = plan.fill.count + plan.fill.dust_count
         placed = sum(state.templates.values()) if state.templates else None
         record.templates_inserted = placed
+        record.short_batches = {fix: len(got) for fix, got in state.short_batches.items()}
+        for note in short_batches_note(state.batches, state.short_batches,
+                                       {"ins": plan.fill.batch, "ins_dust": plan.fill.dust_batch}):
+            if note not in record.warnings:
+                record.warnings.append(note)
         if placed is not None and placed < templates:
             fail(f"insertion fell short: {placed} of {templates} grains and dust spheres inserted",
                  "the insertion region above the bed is too small or batches did not clear it",

@@ -21,6 +21,8 @@ _STOP = re.compile(r"^SILOFLOW_STOP (steady|empty|max_time|clogged) (\S+)\s*$")
 _THERMO = re.compile(r"^\s*(\d+)\s+([-+0-9.eE]+)\s+(\d+)(\s+[-+0-9.eEnaif]+)*\s*$")
 #: an insertion fix's report of one batch (fix id, templates: a clump or a sphere each)
 _INSERT_BATCH = re.compile(r"^INFO: Particle insertion (\S+): inserted (\d+) particle templates")
+#: the warning after a batch placed short (it names no fix: the batch reported just before)
+_SHORT_BATCH = re.compile(r"Particle insertion: Less insertions than requested")
 _ERROR = re.compile(r"^(ERROR( on proc \d+)?:.*)$")
 _WARNING = re.compile(r"^(WARNING:.*)$")
 #: check/timestep/gran's verdict that the time step is too large: a failure, not a warning
@@ -46,6 +48,9 @@ class LogState:
     atoms: Optional[int] = None
     inserted: Optional[int] = None              # atoms (spheres) in the box after the fill
     templates: dict[str, int] = field(default_factory=dict)   # per insertion fix: grains or dust spheres
+    batches: dict[str, list] = field(default_factory=dict)    # per insertion fix: templates placed per batch
+    short_batches: dict[str, list] = field(default_factory=dict)  # per insertion fix: what short batches placed
+    last_batch_fix: str = ""                    # the insertion fix that reported the last batch
     settled_ke_pe: Optional[float] = None
     not_settled_ke_pe: Optional[float] = None
     done: bool = False
@@ -96,12 +101,17 @@ class LogState:
         m = _INSERT_BATCH.match(line)
         if m:
             self.templates[m.group(1)] = self.templates.get(m.group(1), 0) + int(m.group(2))
+            self.batches.setdefault(m.group(1), []).append(int(m.group(2)))
+            self.last_batch_fix = m.group(1)
             return False
         m = _ERROR.match(line)
         if m:
             self.errors.append(m.group(1).strip())
             return False
         m = _WARNING.match(line)
+        if m and _SHORT_BATCH.search(line):     # follows the INFO line of the batch it is about
+            placed = self.batches.get(self.last_batch_fix, [0])[-1]
+            self.short_batches.setdefault(self.last_batch_fix, []).append(placed)
         if m and _TIMESTEP.search(line) and not self.fatal:
             self.errors.append(m.group(1).strip())
             self.fatal = True

@@ -1,0 +1,124 @@
+"""Do MPI ranks change a LIGGGHTS fill, and does a batch that fits make them neutral?
+
+``make bench-rank-fill`` (resumable: a (batch fraction, ranks, seed) already in the table is not run
+again). LIGGGHTS' ``fix insert/rate/region`` places a batch by random sequential insertion with 50
+attempts per grain, inside the region shrunk by a grain radius (``all_in yes``) and at least one
+radius from every subdomain border. A batch asking for more than fits comes in short (a warning in
+the log), the fill takes more batches, and on 2 ranks (a border through the region) shorter still.
+
+The case is the accuracy benchmark's (benchmarks/cases/accuracy_small.yaml: 1000 grains of paper B's
+7 sizes, ``fill.batch_volume_fraction`` 0.35) at dt = 0.2 t_c and 1/1000 of the stiffness (candidate
+``E1e-3_dt0.2``, where the bench measured 1 rank 17 % below 2 ranks in static band pressure), run
+at the case's batch fraction and at one that fits on both rank counts, on 1 and 2 ranks, over
+``SEEDS`` seeds each. One engine job at a time.
+
+Writes benchmarks/results/rank_fill/: runs.csv (every run: the accuracy bench's quantities, the
+batches and how many came in short), summary.csv (per batch fraction: 1 rank against 2, Welch's
+95 % interval, ``siloflow.bench_stats.difference``) and rank_fill.png.
+"""
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_runs import ROOT  # noqa: E402
+
+sys.path.insert(0, str(ROOT))
+from siloflow import bench_stats  # noqa: E402
+from siloflow.accuracy_bench import QUANTITIES, run_metrics  # noqa: E402
+from siloflow.atomic_files import write_text  # noqa: E402
+from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing, run_name  # noqa: E402
+
+CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
+OUT = ROOT / "benchmarks" / "results" / "rank_fill"
+WORK = ROOT / "runs" / "bench_rank_fill"
+SEEDS = 8
+RANKS = (1, 2)
+#: the case's batch fraction (over-full: short batches on any rank count) and one that fits on both
+BATCH_FRACTIONS = (0.35, 0.15)
+#: the settings measured (pinned: the table resumes on them)
+TIMESTEP_FRACTION, STIFFNESS_SCALE = 0.2, 1e-3
+SHORT = re.compile(r"^WARNING: Particle insertion: Less insertions than requested", re.M)
+BATCH = re.compile(r"^INFO: Particle insertion ins: inserted (\d+) particle templates", re.M)
+REQUESTED = re.compile(r"^INFO: Particle insertion ins: (\S+) particles every", re.M)
+
+
+def case_of(base: dict, fraction: float, ranks: int, seed: int) -> dict:
+    """The case fields of one run."""
+    engine = {k: v for k, v in base["engine"].items() if k != "profile"}
+    engine.update(profile="custom", timestep_fraction=TIMESTEP_FRACTION, stiffness_scale=STIFFNESS_SCALE, ranks=ranks)
+    return {**base, "engine": engine, "seed": seed, "fill": {**base["fill"], "batch_volume_fraction": fraction},
+            "name": run_name("rank_fill", f"b{fraction:g}", f"r{ranks}", f"s{seed}")}
+
+
+def batches(folder: Path) -> dict:
+    """The grain insertion of a run's log: batches, how many came in short, the first batch placed
+    and requested."""
+    text = (folder / "log.liggghts").read_text(errors="replace")
+    placed = [int(n) for n in BATCH.findall(text)]
+    requested = REQUESTED.search(text)
+    return {"batches": len(placed), "short_batches": len(SHORT.findall(text)),
+            "first_batch": placed[0] if placed else float("nan"),
+            "batch_requested": float(requested.group(1)) if requested else float("nan")}
+
+
+def summary(runs: pd.DataFrame) -> pd.DataFrame:
+    """Per batch fraction and quantity: 2 ranks against 1 (relative difference of the means with
+    Welch's 95 % interval); the mean batch count and first batch per rank count."""
+    rows = []
+    ok = runs[runs.state == "complete"]
+    for fraction, g in ok.groupby("batch_volume_fraction"):
+        one, two = g[g.ranks == 1], g[g.ranks == 2]
+        for q in (*QUANTITIES, "batches", "first_batch"):
+            d = bench_stats.difference(one[q], two[q])
+            rows.append({"batch_volume_fraction": fraction, "quantity": q, "n_1rank": len(one), "n_2ranks": len(two),
+                         "mean_1rank": one[q].mean(), "mean_2ranks": two[q].mean(), **d})
+    return pd.DataFrame(rows)
+
+
+def figure(table: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    shown = ["static_pressure", "flow_rate", "solid_fraction", "first_batch"]
+    fig, axes = plt.subplots(1, len(shown), figsize=(3.2 * len(shown), 3.2))
+    for ax, q in zip(axes, shown):
+        t = table[table.quantity == q]
+        x = range(len(t))
+        ax.errorbar(list(x), 100 * t.rel_error, yerr=[100 * (t.rel_error - t.ci_lo), 100 * (t.ci_hi - t.rel_error)],
+                    fmt="o", capsize=4)
+        ax.axhline(0, color="0.6", lw=0.8)
+        ax.set_xticks(list(x), [f"{b:g}" for b in t.batch_volume_fraction])
+        ax.set_xlim(-0.5, len(t) - 0.5)
+        ax.set_xlabel("fill.batch_volume_fraction")
+        ax.set_title(q.replace("_", " "), fontsize=9)
+    axes[0].set_ylabel("2 ranks / 1 rank - 1, % (95 %)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main() -> None:
+    base, _ = read_base_case(CASE)
+    planned = [PlannedRun(key={"batch_volume_fraction": b, "ranks": r, "seed": base["seed"] + k},
+                          case=case_of(base, b, r, base["seed"] + k))
+               for k in range(SEEDS) for b in BATCH_FRACTIONS for r in RANKS]
+    nan = {q: float("nan") for q in QUANTITIES}
+    rows = run_missing(WORK, planned, lambda f: {**run_metrics(f), **batches(f)},
+                       lambda f, reason: {"wall_s": engine_wall_time(f), **nan}, print, case_digest(base))
+    runs = pd.DataFrame(rows)
+    table = summary(runs)
+    OUT.mkdir(parents=True, exist_ok=True)
+    write_text(OUT / "runs.csv", runs.to_csv(index=False))
+    write_text(OUT / "summary.csv", table.to_csv(index=False))
+    figure(table, OUT / "rank_fill.png")
+    pd.set_option("display.width", 200)
+    print(table[["batch_volume_fraction", "quantity", "n_1rank", "n_2ranks", "mean_1rank", "mean_2ranks",
+                 "rel_error", "ci_lo", "ci_hi"]].to_string(index=False))
+
+
+if __name__ == "__main__":
+    main()
