@@ -98,11 +98,16 @@ def test_an_overfull_batch_stalls_at_one_solid_fraction_of_the_usable_region_on_
     the batch is the subdomain border's slab and nothing else."""
     filled = {}
     for ranks in (1, 2):
-        _, log = _first_batch(tmp_path, ranks)
+        grains, log = _first_batch(tmp_path, ranks)
         placed, asked, short = _batch(log)
         plan, box = _plan(ranks)
         assert short and placed < asked == plan.fill.batch
         filled[ranks] = placed / asked * batch_solid_fraction(plan, box, ranks)
+        # what is left out is the smallest grains: LIGGGHTS places the batch's list largest first
+        radii = grains[:, 1]
+        smallest, largest = min(plan.fill.radii), max(plan.fill.radii)
+        assert np.sum(np.isclose(radii, largest)) == pytest.approx(asked / 7, abs=1)
+        assert np.sum(np.isclose(radii, smallest)) < 0.5 * asked / 7
     assert filled[1] > PLACEABLE_FRACTION + 0.05            # stalled well above what siloflow allows
     assert filled[2] == pytest.approx(filled[1], rel=0.06)
 

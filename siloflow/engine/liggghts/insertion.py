@@ -6,9 +6,11 @@ largest grain's radius), and each rank places its share by random sequential ins
 pool of 50 tries per grain, largest grains first. A grain's centre must lie at least its bounding
 radius inside the region (``all_in yes``, cylinders) and at least that far from every face of its
 rank's subdomain (``check_dist_from_subdomain_border``, default yes; a draw rejected there uses up
-a try too; docs/engine_facts.md). A batch asking for more than fits comes in short: the fill takes
-more batches than planned, and since the borders depend on the rank count, so do the fill and the
-settled bed's wall loads (``make bench-rank-fill``).
+a try too; docs/engine_facts.md). A batch asking for more than fits comes in short, and what it
+leaves out are its smallest grains (the list is placed largest first): the fill takes more batches
+than planned and ends with more large grains than the case asks for, a heavier bed of another size
+mix. Since the borders depend on the rank count, so do the fill, the bed's weight and its wall
+loads (``make bench-rank-fill``).
 
 :func:`batch_solid_fraction` estimates the solid fraction a batch asks for in the part of the
 region its centres can take, on the rank that is asked most, on the processor grid LIGGGHTS builds
@@ -149,8 +151,9 @@ def short_batch_warning(plan: RunPlan, box: dict, ranks: int, fill=None) -> str 
         advice = f"use at most {math.floor(fits * 100) / 100:g}"
     return (f"{field}{value} makes batches of {f.batch} grains that ask for a solid fraction of {asked:.2f} in the "
             f"part of the insertion region a grain's centre can take {where}; LIGGGHTS' random insertion places "
-            f"about {PLACEABLE_FRACTION:g} there at most, so batches come in short and the fill takes longer than "
-            f"planned, by an amount that depends on engine.ranks, and so do the settled bed and its wall loads: "
+            f"about {PLACEABLE_FRACTION:g} there at most, so batches come in short of their smallest grains (it "
+            f"places the largest first): the fill takes longer than planned and the bed holds more large grains "
+            f"than asked, both by amounts that depend on engine.ranks, and so do the bed's weight and wall loads: "
             f"{advice}")
 
 
@@ -165,8 +168,8 @@ def short_batches_note(batches: dict[str, list[int]], short: dict[str, list[int]
             continue
         placed = f"{min(got)}" if min(got) == max(got) else f"{min(got)}-{max(got)}"
         out.append(f"siloflow: {len(got)} of {len(batches.get(fix, []))} {what} batches came in short (placed "
-                   f"{placed}, batches of {planned.get(fix, 0)} planned; LIGGGHTS could not place the rest without "
-                   "overlaps): the fill took longer than planned, by an amount that depends on engine.ranks, and "
-                   "so may the settled bed and its wall loads; lower fill.batch_volume_fraction (a pour: lengthen "
-                   "fill.pour_time)")
+                   f"{placed}, batches of {planned.get(fix, 0)} planned; LIGGGHTS places the largest first and "
+                   "could not place the rest without overlaps): the fill took longer than planned and the bed holds "
+                   "more large grains than asked, both by amounts that depend on engine.ranks, and so do its weight "
+                   "and wall loads; lower fill.batch_volume_fraction (a pour: lengthen fill.pour_time)")
     return out
