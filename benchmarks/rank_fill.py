@@ -55,13 +55,19 @@ def case_of(base: dict, fraction: float, ranks: int, seed: int) -> dict:
             "name": run_name("rank_fill", f"b{fraction:g}", f"r{ranks}", f"s{seed}")}
 
 
+def bed_weight(folder: Path) -> float:
+    """The settled bed's weight (the static window's mass in the silo x g), N."""
+    from siloflow.run_folder import RunFolder
+    return float((RunFolder(folder).read_summary().get("force_balance") or {}).get("weight_N", float("nan")))
+
+
 def batches(folder: Path) -> dict:
     """The grain insertion of a run's log: batches, how many came in short, the first batch placed
-    and requested."""
+    and requested; the settled bed's weight, N."""
     text = (folder / "log.liggghts").read_text(errors="replace")
     placed = [int(n) for n in BATCH.findall(text)]
     requested = REQUESTED.search(text)
-    return {"batches": len(placed), "short_batches": len(SHORT.findall(text)),
+    return {"weight_N": bed_weight(folder), "batches": len(placed), "short_batches": len(SHORT.findall(text)),
             "first_batch": placed[0] if placed else float("nan"),
             "batch_requested": float(requested.group(1)) if requested else float("nan")}
 
@@ -73,7 +79,7 @@ def summary(runs: pd.DataFrame) -> pd.DataFrame:
     ok = runs[runs.state == "complete"]
     for fraction, g in ok.groupby("batch_volume_fraction"):
         one, two = g[g.ranks == 1], g[g.ranks == 2]
-        for q in (*QUANTITIES, "batches", "first_batch"):
+        for q in (*QUANTITIES, "weight_N", "batches", "first_batch"):
             d = bench_stats.difference(one[q], two[q])
             rows.append({"batch_volume_fraction": fraction, "quantity": q, "n_1rank": len(one), "n_2ranks": len(two),
                          "mean_1rank": one[q].mean(), "mean_2ranks": two[q].mean(), **d})
@@ -84,7 +90,7 @@ def figure(table: pd.DataFrame, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    shown = ["static_pressure", "flow_rate", "solid_fraction", "first_batch"]
+    shown = ["static_pressure", "weight_N", "flow_rate", "first_batch"]
     fig, axes = plt.subplots(1, len(shown), figsize=(3.2 * len(shown), 3.2))
     for ax, q in zip(axes, shown):
         t = table[table.quantity == q]
@@ -110,6 +116,12 @@ def main() -> None:
     rows = run_missing(WORK, planned, lambda f: {**run_metrics(f), **batches(f)},
                        lambda f, reason: {"wall_s": engine_wall_time(f), **nan}, print, case_digest(base))
     runs = pd.DataFrame(rows)
+    if "weight_N" not in runs:                 # rows written before the column: read their folders
+        runs["weight_N"] = float("nan")
+    for i in runs.index[runs.weight_N.isna() & (runs.state == "complete")]:
+        folder = WORK / str(runs.at[i, "folder"])
+        if folder.is_dir():
+            runs.at[i, "weight_N"] = bed_weight(folder)
     table = summary(runs)
     OUT.mkdir(parents=True, exist_ok=True)
     write_text(OUT / "runs.csv", runs.to_csv(index=False))
