@@ -157,7 +157,7 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
               report: Callable[[str], None] = lambda s: None, skip_reference: bool = False,
               seed_offset: int = 0) -> list[dict]:
     """Run every candidate x seed not yet in ``out/runs.csv`` (the case's seed + ``seed_offset``, +1,
-    ...); return all rows (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
+    ...), seed by seed (a stopped study keeps whole seeds: the reference and its candidates); return all rows (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
     from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing
     base, case = read_base_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
@@ -167,7 +167,7 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
                           case=candidate_case(base, c, first_seed + k),
                           columns={"timestep_fraction": c.timestep_fraction, "stiffness_scale": c.stiffness_scale,
                                    "ranks": c.ranks or ranks, "engine": c.engine or case.engine.name})
-               for c in candidates for k in range(seeds) if not (skip_reference and c is REFERENCE)]
+               for k in range(seeds) for c in candidates if not (skip_reference and c is REFERENCE)]
     return run_missing(out, planned, run_metrics,
                        lambda folder, reason: {"wall_s": engine_wall_time(folder),
                                                **{q: float("nan") for q in QUANTITIES}}, report,
