@@ -111,7 +111,7 @@ bench-accuracy: install
 # the second, larger case (2000 grains, about 30 min per reference run on 2 cores): LARGE_SEEDS
 # fills a side, resumed from the committed table (a new machine starts from it), results committed
 ACCURACY_LARGE = runs/bench_accuracy_large
-LARGE_SEEDS = 1
+LARGE_SEEDS = 2
 bench-accuracy-large: install
 	mkdir -p $(ACCURACY_LARGE)
 	if [ ! -f $(ACCURACY_LARGE)/runs.csv ] && [ -f benchmarks/results/accuracy_large/runs.csv ]; then \
