@@ -31,6 +31,7 @@ sys.path.insert(0, str(ROOT))
 from siloflow import bench_stats  # noqa: E402
 from siloflow.accuracy_bench import QUANTITIES, run_metrics  # noqa: E402
 from siloflow.atomic_files import write_text  # noqa: E402
+from siloflow.engine.liggghts.log import parse_log_text  # noqa: E402
 from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing, run_name  # noqa: E402
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
@@ -42,8 +43,6 @@ RANKS = (1, 2)
 BATCH_FRACTIONS = (0.35, 0.15)
 #: the settings measured (pinned: the table resumes on them)
 TIMESTEP_FRACTION, STIFFNESS_SCALE = 0.2, 1e-3
-SHORT = re.compile(r"^WARNING: Particle insertion: Less insertions than requested", re.M)
-BATCH = re.compile(r"^INFO: Particle insertion ins: inserted (\d+) particle templates", re.M)
 REQUESTED = re.compile(r"^INFO: Particle insertion ins: (\S+) particles every", re.M)
 
 
@@ -65,9 +64,11 @@ def batches(folder: Path) -> dict:
     """The grain insertion of a run's log: batches, how many came in short, the first batch placed
     and requested; the settled bed's weight, N."""
     text = (folder / "log.liggghts").read_text(errors="replace")
-    placed = [int(n) for n in BATCH.findall(text)]
+    state = parse_log_text(text)
+    placed = state.batches.get("ins", [])
     requested = REQUESTED.search(text)
-    return {"weight_N": bed_weight(folder), "batches": len(placed), "short_batches": len(SHORT.findall(text)),
+    return {"weight_N": bed_weight(folder), "batches": len(placed),
+            "short_batches": len(state.short_batches.get("ins", [])),
             "first_batch": placed[0] if placed else float("nan"),
             "batch_requested": float(requested.group(1)) if requested else float("nan")}
 

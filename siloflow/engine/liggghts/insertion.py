@@ -59,6 +59,11 @@ def processor_grid(box: dict, ranks: int, planar: bool) -> tuple[int, int, int]:
     return best
 
 
+def _region_volume(reg) -> float:
+    """The cylindrical insertion region's volume, m3."""
+    return math.pi * reg.radius ** 2 * (reg.z_max - reg.z_min)
+
+
 def _region_points(plan: RunPlan, rng) -> tuple[np.ndarray, np.ndarray, float]:
     """Uniform points of the (cylindrical) insertion region, (N, 3); each one's distance to the
     region's surface, m; the region's volume, m3."""
@@ -68,7 +73,7 @@ def _region_points(plan: RunPlan, rng) -> tuple[np.ndarray, np.ndarray, float]:
     phi = rng.uniform(0.0, 2 * math.pi, SAMPLES)
     pts = np.column_stack([rho * np.cos(phi), rho * np.sin(phi), z])
     to_surface = np.minimum.reduce([reg.radius - rho, z - reg.z_min, reg.z_max - z])
-    return pts, to_surface, math.pi * reg.radius ** 2 * (reg.z_max - reg.z_min)
+    return pts, to_surface, _region_volume(reg)
 
 
 def _subdomains(pts: np.ndarray, box: dict, grid: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -145,9 +150,8 @@ def short_batch_warning(plan: RunPlan, box: dict, ranks: int, fill=None) -> str 
         advice = f"pour for at least {math.ceil(pour * 100) / 100:g} s"
     else:
         field, value = "fill.batch_volume_fraction", (f" {fill.batch_volume_fraction:g}" if fill is not None else "")
-        reg = f.region
         solid = sum(count * v for count, v, _ in _batch_kinds(plan)) / f.batch      # m3 per grain, dust included
-        fits = batch_fit * solid / (math.pi * reg.radius ** 2 * (reg.z_max - reg.z_min))
+        fits = batch_fit * solid / _region_volume(f.region)
         advice = f"use at most {math.floor(fits * 100) / 100:g}"
     return (f"{field}{value} makes batches of {f.batch} grains that ask for a solid fraction of {asked:.2f} in the "
             f"part of the insertion region a grain's centre can take {where}; LIGGGHTS' random insertion places "
