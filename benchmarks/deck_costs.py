@@ -32,6 +32,7 @@ from bench_runs import LOOP, ROOT, siloflow, timed  # noqa: E402
 
 sys.path.insert(0, str(ROOT))
 from siloflow.atomic_files import write_text  # noqa: E402
+from siloflow.engine.liggghts.deck import before_stage_run  # noqa: E402
 from siloflow.engine.liggghts.engine import LiggghtsEngine  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "results" / "deck_costs"
@@ -61,9 +62,8 @@ def fill_deck(folder: Path, skin_factor: float | None) -> str:
     """The rendered deck cut after its fill stage's ``run``; the skin times ``skin_factor`` / 0.5
     when given (siloflow's skin is 0.5 r_max)."""
     text = (folder / "in.liggghts").read_text()
-    start = text.index("SILOFLOW_STAGE fill")
-    end = text.index("\n", text.index("\nrun ", start) + 1)
-    deck = text[:end + 1]
+    head = before_stage_run(text, "fill")
+    deck = text[:text.index("\n", len(head)) + 1]         # with the fill's run line
     if skin_factor is not None:
         skin = float(NEIGHBOR.search(deck).group(1))
         deck = NEIGHBOR.sub(f"neighbor        {skin * skin_factor / 0.5:.8g} bin", deck, count=1)

@@ -23,6 +23,7 @@ import yaml
 from siloflow.case_file import case_from_dict
 from siloflow.derived import derive
 from siloflow.engine import LiggghtsEngine
+from siloflow.engine.liggghts.deck import before_stage_run
 from siloflow.engine.liggghts.encoding import encode
 from siloflow.engine.liggghts.insertion import (PLACEABLE_FRACTION, batch_solid_fraction, processor_grid,
                                                 short_batch_warning, short_batches_note)
@@ -63,8 +64,8 @@ def _first_batch(tmp_path, ranks: int, fraction: float | None = None) -> tuple[n
     subprocess.run([sys.executable, "-m", "siloflow.cli", "render", str(case), "-o", str(folder)],
                    check=True, capture_output=True)
     text = (folder / "in.liggghts").read_text()
-    cut = text.index("\nrun ", text.index("SILOFLOW_STAGE fill"))
-    (folder / "first.in").write_text(text[:cut] + "\ndump first all custom 1 first.dump id radius x y z\nrun 2\n")
+    (folder / "first.in").write_text(before_stage_run(text, "fill")
+                                     + "dump first all custom 1 first.dump id radius x y z\nrun 2\n")
     subprocess.run(LiggghtsEngine().command(ranks, deck="first.in", log="first.log"), cwd=folder, check=True,
                    capture_output=True)
     frame = (folder / "first.dump").read_text().split("ITEM: TIMESTEP")[-1].splitlines()

@@ -43,6 +43,13 @@ def check_deck(text: str) -> None:
     check_commands(text, ALLOWED_COMMANDS)
 
 
+def before_stage_run(text: str, stage: str) -> str:
+    """A rendered deck up to its stage ``stage``'s first ``run`` line (left out), newline-ended:
+    the set-up and the stage's own commands, for a test or benchmark to run part of the stage."""
+    start = text.index(f"SILOFLOW_STAGE {stage}")
+    return text[:text.index("\nrun ", start) + 1]
+
+
 def volume_limit(radius: float) -> float | None:
     """The ``volume_limit`` a sphere template of ``radius`` (m) needs, m3: None (LIGGGHTS'
     default) unless the sphere is smaller than the default allows, then a tenth of its volume."""
