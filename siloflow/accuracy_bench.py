@@ -246,7 +246,8 @@ def design_columns(runs):
 def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
              case_file: Optional[Path] = None) -> tuple:
     """From ``out/runs.csv``: ``comparison.csv`` (every candidate x quantity: errors with their
-    interval, speed-up), ``pareto.png`` and ``recommended_profile.json``: the fastest candidate
+    interval, speed-up, and for the bounded quantities the fills a side that would prove the
+    tolerance if today's error and spread held, ``bench_stats.fills_needed``), ``pareto.png`` and ``recommended_profile.json``: the fastest candidate
     proven within the tolerances (the reference when none faster is), with its bounds, its softness
     as the impact overlap ratio in ``case_file``'s case, and the new seeds' check (``validation``)
     when :func:`validate` ran. Returns (table, recommendation)."""
@@ -261,6 +262,9 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
     table = bench_stats.compare(ok, REFERENCE.name, list(QUANTITIES), confidence, design=DESIGN)
     failed = runs[runs.state != "complete"].groupby("candidate").size()
     table["failed_runs"] = table.candidate.map(failed).fillna(0).astype(int)
+    # fills a side that would prove each bounded quantity within its tolerance, at today's estimates
+    table["fills_needed"] = [bench_stats.fills_needed(r, tolerances[r["quantity"]], confidence)
+                             if r["quantity"] in tolerances else math.nan for _, r in table.iterrows()]
     write_text(out / "comparison.csv", table.to_csv(index=False))
     write_text(out / "run_errors.csv", run_errors(ok).to_csv(index=False))
     bench_stats.pareto_figure(table, out / "pareto.png", tolerances)

@@ -250,6 +250,53 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
     return pd.DataFrame(rows)
 
 
+#: the largest ensemble :func:`fills_needed` looks at (fills a side)
+MAX_FILLS = 100_000
+
+
+def fills_needed(row, tolerance: float, confidence: float = 0.95) -> float:
+    """Fills a side at which one row of :func:`compare` would be proven within ``tolerance`` (its 95 %
+    bound <= ``tolerance``) if its measured error and per-run spread held: a projection for planning
+    an ensemble, not a promise (both estimates move as fills are added).
+
+    A paired row keeps its residual spread, ``sd = half * sqrt(n) / t(n - 1)``, and needs the smallest
+    n with ``|rel_error| + t(n - 1) sd / sqrt(n) <= tolerance``; a Welch row keeps both sides' per-run
+    variances and adds fills to both alike. Returns n (a float, >= 2), ``inf`` when the measured error
+    is already at or beyond the tolerance (no ensemble proves it at that error) or more than
+    ``MAX_FILLS`` would be needed, NaN for the reference's rows and rows without a spread.
+    """
+    rel = abs(float(row["rel_error"]))
+    if row.get("verdict") == "the reference" or not math.isfinite(rel):
+        return math.nan
+    if rel >= tolerance:
+        return math.inf
+    q = 0.5 + confidence / 2
+    if row.get("method") == "paired":
+        n0 = int(row["n_cand"])
+        half0 = (float(row["ci_hi"]) - float(row["ci_lo"])) / 2
+        if n0 < 2 or not math.isfinite(half0):
+            return math.nan
+        sd = half0 * math.sqrt(n0) / float(stats.t.ppf(q, n0 - 1))
+
+        def half(n: int) -> float:
+            return float(stats.t.ppf(q, n - 1)) * sd / math.sqrt(n)
+    else:
+        m_r, m_c, s_r, s_c = (float(row[k]) for k in ("ref_mean", "cand_mean", "ref_sd", "cand_sd"))
+        a, b = s_c ** 2 / m_r ** 2, m_c ** 2 * s_r ** 2 / m_r ** 4
+        if not (math.isfinite(a) and math.isfinite(b)):
+            return math.nan
+
+        def half(n: int) -> float:
+            return _t_half([(a / n, n - 1), (b / n, n - 1)], confidence)
+    if rel + half(MAX_FILLS) > tolerance:
+        return math.inf
+    lo, hi = 2, MAX_FILLS          # half(n) falls with n: the smallest n that fits, by bisection
+    while lo < hi:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if rel + half(mid) <= tolerance else (mid + 1, hi)
+    return float(lo)
+
+
 def recommend(table: pd.DataFrame, tolerances: dict[str, float]) -> dict | None:
     """The fastest candidate whose 95 % error bound is within the tolerance for every quantity.
 

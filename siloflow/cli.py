@@ -548,6 +548,7 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
             best = best_bounds(table[~table.candidate.isin([REFERENCE.name])], q)
             best = best[best.bound < float("inf")].sort_values("bound").head(3)
             out.print(printable(f"  {q}: " + "; ".join(f"{r.candidate} {r.bound:.1%} at {r.speedup:.3g}x"
+                                                       f"{_fills_note(table, r.candidate, q)}"
                                                        for r in best.itertuples())), markup=False, highlight=False)
     else:
         bounds = ", ".join(f"{q} <= {b:.1%}" for q, b in rec["error_bounds"].items())
@@ -560,6 +561,14 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
                             f"{c['ci_hi']:+.1%}]: {'inside' if c['inside'] else 'OUTSIDE'} the bound {c['bound']:.1%}"),
                   markup=False, highlight=False)
     out.print(f"tables and figure: {output} (comparison.csv, pareto.png, recommended_profile.json)")
+
+
+def _fills_note(table, candidate: str, quantity: str) -> str:
+    """`` (about N fills a side for the tolerance)`` from the bench table's ``fills_needed``."""
+    n = table[(table.candidate == candidate) & (table.quantity == quantity)]["fills_needed"].iloc[0]
+    if n != n:
+        return ""
+    return " (no ensemble at this error)" if n == float("inf") else f" (about {n:.0f} fills a side for the tolerance)"
 
 
 def _note(text: str) -> None:

@@ -207,3 +207,46 @@ def test_speedups_are_timed_on_one_machine():
     assert t.at["only_unrecorded", "speedup"] == pytest.approx(50.0)
     no_column = compare(pd.DataFrame(rows).drop(columns="machine"), "ref", ["q"]).set_index("candidate")
     assert no_column.at["fast", "timed_runs"] == "8/5"
+
+
+def _bench_rows(n: int, seed: int, paired: bool, err: float = 0.01, sd: float = 0.04) -> pd.DataFrame:
+    """n fills of a reference (mean 1, relative sd ``sd``) and of a candidate ``err`` off; paired: the
+    candidate shares half of each fill's noise (the same seeds)."""
+    rng = np.random.default_rng(seed)
+    common = rng.standard_normal(n)
+    ref = 1.0 + sd * common
+    cand = (1.0 + err) * (1.0 + sd * (np.sqrt(0.5) * common + np.sqrt(0.5) * rng.standard_normal(n))
+                          if paired else 1.0 + sd * rng.standard_normal(n))
+    seeds = np.arange(n) if paired else np.arange(n) + 1000       # other seeds: no pairs
+    return pd.DataFrame({"candidate": ["ref"] * n + ["cand"] * n, "seed": np.r_[np.arange(n), seeds],
+                         "wall_s": np.r_[np.full(n, 10.0), np.full(n, 1.0)], "q": np.r_[ref, cand]})
+
+
+@pytest.mark.parametrize("paired", [True, False])
+def test_fills_needed_is_the_ensemble_whose_bound_meets_the_tolerance(paired):
+    from siloflow.bench_stats import _t_half, fills_needed
+    from scipy import stats
+    row = compare(_bench_rows(8, 3, paired), "ref", ["q"]).set_index("candidate").loc["cand"]
+    assert row["method"] == ("paired" if paired else "welch")
+    rel, tol = abs(row["rel_error"]), row["bound"] * 0.8       # 8 fills do not prove this tolerance
+    n = fills_needed(row, tol)
+    assert 8 < n < math.inf
+
+    def bound(k):      # the projected bound at k fills a side, from the row's own spread
+        if paired:
+            sd = (row["ci_hi"] - row["ci_lo"]) / 2 * math.sqrt(8) / stats.t.ppf(0.975, 7)
+            return rel + stats.t.ppf(0.975, k - 1) * sd / math.sqrt(k)
+        a = row["cand_sd"] ** 2 / row["ref_mean"] ** 2
+        b = row["cand_mean"] ** 2 * row["ref_sd"] ** 2 / row["ref_mean"] ** 4
+        return rel + _t_half([(a / k, k - 1), (b / k, k - 1)], 0.95)
+    assert bound(int(n)) <= tol < bound(int(n) - 1)
+    # at the row's own tolerance, its own fills are enough (the projection reproduces the bound)
+    assert fills_needed(row, row["bound"] * 1.0001) <= 8
+
+
+def test_fills_needed_is_infinite_at_an_error_beyond_the_tolerance_and_nan_for_the_reference():
+    from siloflow.bench_stats import fills_needed
+    table = compare(_bench_rows(8, 4, True, err=0.06), "ref", ["q"]).set_index("candidate")
+    assert fills_needed(table.loc["cand"], 0.05) == math.inf          # 6 % off: no ensemble proves 5 %
+    assert fills_needed(table.loc["cand"], 0.5) <= 8
+    assert math.isnan(fills_needed(table.loc["ref"], 0.05))
