@@ -259,6 +259,12 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
     if runs.empty:
         raise SetupError(f"{out / 'runs.csv'} holds no runs yet")
     ok = design_columns(runs[runs.state == "complete"])
+    twice = ok[ok.duplicated(["candidate", "seed"], keep=False)]
+    if not twice.empty:          # only a hand-merged table has them; they would count one fill as two
+        first = twice.iloc[0]
+        raise SetupError(f"{out / 'runs.csv'} holds {first.candidate} with seed {first.seed} more than once "
+                         f"({len(twice)} rows repeat a candidate's seed): a seed repeats its run on the same deck "
+                         "and rank count, so a second row is no new fill; keep one row per candidate and seed")
     table = bench_stats.compare(ok, REFERENCE.name, list(QUANTITIES), confidence, design=DESIGN)
     failed = runs[runs.state != "complete"].groupby("candidate").size()
     table["failed_runs"] = table.candidate.map(failed).fillna(0).astype(int)

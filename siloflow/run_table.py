@@ -86,11 +86,25 @@ def case_digest(fields: dict) -> str:
     """SHA-256 (16 hex digits) of a study's case fields as its case file gives them (the parsed YAML,
     keys sorted), without ``name`` and ``seed``: the rows of one ``runs.csv`` must all come from one
     case (a study resumed on an edited case file would mix two). The file's fields, not the validated
-    case: a siloflow that adds a defaulted field or publishes another fast profile does not change it."""
+    case: a siloflow that adds a defaulted field or publishes another fast profile does not change it.
+    An insert's STL file counts by its bytes, not its path: an edited mesh is another case, a moved
+    folder is not (an unreadable file counts as missing; the run that reads it says why)."""
     import hashlib
     import json
     kept = {k: v for k, v in fields.items() if k not in ("name", "seed")}
+    if isinstance(kept.get("inserts"), list):
+        kept["inserts"] = [dict(ins, file=_file_digest(ins["file"])) if isinstance(ins, dict) and "file" in ins
+                           else ins for ins in kept["inserts"]]
     return hashlib.sha256(json.dumps(kept, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _file_digest(path) -> str:
+    """``sha256:<hex>`` of a file's bytes, or ``missing`` when it cannot be read."""
+    import hashlib
+    try:
+        return "sha256:" + hashlib.sha256(Path(str(path)).read_bytes()).hexdigest()
+    except (OSError, ValueError):
+        return "missing"
 
 
 def machine_id() -> str:

@@ -109,6 +109,23 @@ def test_a_run_table_is_of_one_case_and_says_where_each_run_ran(tmp_path, monkey
     assert len(run_missing(tmp_path, planned, *nothing, case_sha=sha)) == 2
 
 
+def test_an_insert_counts_in_the_case_digest_by_its_bytes_not_its_path(tmp_path):
+    from siloflow.run_table import case_digest, read_base_case
+    base = yaml.safe_load(SMALL.read_text())
+    solid = "solid b\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0.05\nvertex 0.004 0 0.05\nvertex 0 0.004 0.05\n" \
+            "endloop\nendfacet\nendsolid b\n"
+    digests = {}
+    for where in ("a", "b"):
+        (tmp_path / where).mkdir()
+        (tmp_path / where / "baffle.stl").write_text(solid)
+        (tmp_path / where / "case.yaml").write_text(yaml.safe_dump(
+            {**base, "inserts": [{"name": "baffle", "file": "baffle.stl"}]}))
+        digests[where] = case_digest(read_base_case(tmp_path / where / "case.yaml")[0])
+    assert digests["a"] == digests["b"] != case_digest(base)           # a moved folder: the same case
+    (tmp_path / "b" / "baffle.stl").write_text(solid.replace("0.05", "0.06"))
+    assert case_digest(read_base_case(tmp_path / "b" / "case.yaml")[0]) != digests["a"]    # an edited mesh: another
+
+
 @pytest.mark.parametrize("sha", ["0123456789012345", "1234e56789012345", "12345678901234e5"])
 def test_a_digest_that_looks_like_a_number_survives_the_table(tmp_path, monkeypatch, sha):
     import siloflow.runs
@@ -163,6 +180,14 @@ def test_conclude_writes_the_table_figure_and_a_recommendation(tmp_path):
     assert (tmp_path / "pareto.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     written = pd.read_csv(tmp_path / "comparison.csv")
     assert int(written[written.candidate == "E1_dt0.1"].failed_runs.iloc[0]) == 1
+    needed = written.set_index(["candidate", "quantity"])["fills_needed"]
+    assert needed[("E1e-4_dt0.2", "flow_rate")] <= 4 and math.isnan(needed[("E1e-4_dt0.2", "coordination")])
+    # a hand-merged table repeating a seed is refused, naming the candidate and the seed, and nothing is rewritten
+    before = (tmp_path / "comparison.csv").read_bytes()
+    pd.DataFrame(rows + [rows[0]]).to_csv(tmp_path / "runs.csv", index=False)
+    with pytest.raises(SetupError, match="reference with seed 0 more than once"):
+        ab.conclude(tmp_path)
+    assert (tmp_path / "comparison.csv").read_bytes() == before
 
 
 @pytest.mark.engine
