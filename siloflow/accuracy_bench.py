@@ -153,15 +153,32 @@ def run_metrics(folder: Path) -> dict:
     return {k: float(v) if isinstance(v, (int, float)) else nan for k, v in out.items()}
 
 
+def refuse_repeated_seeds(runs, out: Path) -> None:
+    """SetupError when the complete runs of ``out/runs.csv`` repeat a candidate's seed: only a
+    hand-merged table has them, and they would count one fill as two."""
+    done = runs[runs.state == "complete"] if "state" in runs.columns else runs
+    twice = done[done.duplicated(["candidate", "seed"], keep=False)]
+    if not twice.empty:
+        first = twice.iloc[0]
+        raise SetupError(f"{out / 'runs.csv'} holds {first.candidate} with seed {int(first.seed)} more than once "
+                         f"({len(twice)} rows repeat a candidate's seed): a seed repeats its run on the same deck "
+                         "and rank count, so a second row is no new fill; keep one row per candidate and seed")
+
+
 def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
               report: Callable[[str], None] = lambda s: None, skip_reference: bool = False,
               seed_offset: int = 0) -> list[dict]:
     """Run every candidate x seed not yet in ``out/runs.csv`` (the case's seed + ``seed_offset``, +1,
     ...), seed by seed (a stopped study keeps whole seeds: the reference and its candidates); return all rows (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
     from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing
+    import pandas as pd
+    from .run_table import read_rows
     base, case = read_base_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
         raise SetupError("the bench needs the reference candidate (the papers' settings) to compare with")
+    rows = pd.DataFrame(read_rows(out))
+    if not rows.empty:
+        refuse_repeated_seeds(rows, out)     # before hours of runs, not after them
     first_seed, ranks = case.seed + seed_offset, case.engine.ranks
     planned = [PlannedRun(key={"candidate": c.name, "seed": first_seed + k},
                           case=candidate_case(base, c, first_seed + k),
@@ -259,12 +276,7 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
     if runs.empty:
         raise SetupError(f"{out / 'runs.csv'} holds no runs yet")
     ok = design_columns(runs[runs.state == "complete"])
-    twice = ok[ok.duplicated(["candidate", "seed"], keep=False)]
-    if not twice.empty:          # only a hand-merged table has them; they would count one fill as two
-        first = twice.iloc[0]
-        raise SetupError(f"{out / 'runs.csv'} holds {first.candidate} with seed {first.seed} more than once "
-                         f"({len(twice)} rows repeat a candidate's seed): a seed repeats its run on the same deck "
-                         "and rank count, so a second row is no new fill; keep one row per candidate and seed")
+    refuse_repeated_seeds(ok, out)
     table = bench_stats.compare(ok, REFERENCE.name, list(QUANTITIES), confidence, design=DESIGN)
     failed = runs[runs.state != "complete"].groupby("candidate").size()
     table["failed_runs"] = table.candidate.map(failed).fillna(0).astype(int)

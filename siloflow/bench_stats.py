@@ -257,18 +257,18 @@ MAX_FILLS = 100_000
 def fills_needed(row, tolerance: float, confidence: float = 0.95) -> float:
     """Fills a side at which one row of :func:`compare` would be proven within ``tolerance`` (its 95 %
     bound <= ``tolerance``) if its measured error and per-run spread held: a projection for planning
-    an ensemble, not a promise (both estimates move as fills are added).
+    an ensemble, not a promise (both estimates move as fills are added). n counts each side's fills;
+    a side that already has more keeps them.
 
     A paired row keeps its residual spread, ``sd = half * sqrt(n) / t(n - 1)``, and needs the smallest
     n with ``|rel_error| + t(n - 1) sd / sqrt(n) <= tolerance``; a Welch row keeps both sides' per-run
-    variances and adds fills to both alike. Returns n (a float, >= 2), ``inf`` when the measured error
-    is already at or beyond the tolerance (no ensemble proves it at that error) or more than
-    ``MAX_FILLS`` would be needed, NaN for the reference's rows and rows without a spread.
+    variances. Returns n (a float, >= 2), ``inf`` when the measured error is at or beyond the
+    tolerance (no ensemble proves it at that error) or more than ``MAX_FILLS`` would be needed, NaN for the reference's rows and rows without a spread.
     """
     rel = abs(float(row["rel_error"]))
     if row.get("verdict") == "the reference" or not math.isfinite(rel):
         return math.nan
-    if rel >= tolerance:
+    if rel > tolerance:
         return math.inf
     q = 0.5 + confidence / 2
     if row.get("method") == "paired":
@@ -285,9 +285,11 @@ def fills_needed(row, tolerance: float, confidence: float = 0.95) -> float:
         a, b = s_c ** 2 / m_r ** 2, m_c ** 2 * s_r ** 2 / m_r ** 4
         if not (math.isfinite(a) and math.isfinite(b)):
             return math.nan
+        n_c, n_r = int(row["n_cand"]), int(row["n_ref"])
 
-        def half(n: int) -> float:
-            return _t_half([(a / n, n - 1), (b / n, n - 1)], confidence)
+        def half(n: int) -> float:          # a side that has more than n fills keeps them
+            k_c, k_r = max(n, n_c), max(n, n_r)
+            return _t_half([(a / k_c, k_c - 1), (b / k_r, k_r - 1)], confidence)
     if rel + half(MAX_FILLS) > tolerance:
         return math.inf
     lo, hi = 2, MAX_FILLS          # half(n) falls with n: the smallest n that fits, by bisection

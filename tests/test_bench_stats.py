@@ -250,3 +250,13 @@ def test_fills_needed_is_infinite_at_an_error_beyond_the_tolerance_and_nan_for_t
     assert fills_needed(table.loc["cand"], 0.05) == math.inf          # 6 % off: no ensemble proves 5 %
     assert fills_needed(table.loc["cand"], 0.5) <= 8
     assert math.isnan(fills_needed(table.loc["ref"], 0.05))
+
+
+def test_fills_needed_keeps_the_fills_a_side_already_has():
+    from siloflow.bench_stats import fills_needed
+    rows = _bench_rows(15, 6, False)
+    rows = rows[(rows.candidate == "ref") | (rows.index < 15 + 4)]            # 15 reference fills, 4 candidate
+    row = compare(rows, "ref", ["q"]).set_index("candidate").loc["cand"]
+    assert (row["n_ref"], row["n_cand"], row["method"]) == (15, 4, "welch")
+    assert fills_needed(row, row["bound"] * 1.0001) <= 4                      # already proven: no more fills
+    assert fills_needed(row, abs(row["rel_error"]) + 0.5 * (row["bound"] - abs(row["rel_error"]))) > 4

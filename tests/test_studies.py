@@ -188,6 +188,9 @@ def test_conclude_writes_the_table_figure_and_a_recommendation(tmp_path):
     with pytest.raises(SetupError, match="reference with seed 0 more than once"):
         ab.conclude(tmp_path)
     assert (tmp_path / "comparison.csv").read_bytes() == before
+    with pytest.raises(SetupError, match="reference with seed 0 more than once"):     # before running anything
+        ab.run_bench(SMALL, tmp_path, seeds=5, candidates=[ab.REFERENCE])
+    assert not (tmp_path / "runs").exists()
 
 
 @pytest.mark.engine
