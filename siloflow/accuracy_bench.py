@@ -170,9 +170,8 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
               seed_offset: int = 0) -> list[dict]:
     """Run every candidate x seed not yet in ``out/runs.csv`` (the case's seed + ``seed_offset``, +1,
     ...), seed by seed (a stopped study keeps whole seeds: the reference and its candidates); return all rows (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
-    from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing
     import pandas as pd
-    from .run_table import read_rows
+    from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, read_rows, run_missing
     base, case = read_base_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
         raise SetupError("the bench needs the reference candidate (the papers' settings) to compare with")
@@ -264,8 +263,8 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
              case_file: Optional[Path] = None) -> tuple:
     """From ``out/runs.csv``: ``comparison.csv`` (every candidate x quantity: errors with their
     interval, speed-up, and for the bounded quantities the fills a side that would prove the
-    tolerance if today's error and spread held, ``bench_stats.fills_needed``), ``pareto.png`` and ``recommended_profile.json``: the fastest candidate
-    proven within the tolerances (the reference when none faster is), with its bounds, its softness
+    tolerance if today's error and spread held, ``bench_stats.fills_needed``), ``pareto.png`` and
+    ``recommended_profile.json``: the fastest candidate proven within the tolerances (the reference when none faster is), with its bounds, its softness
     as the impact overlap ratio in ``case_file``'s case, and the new seeds' check (``validation``)
     when :func:`validate` ran. Returns (table, recommendation)."""
     import pandas as pd

@@ -263,7 +263,8 @@ def fills_needed(row, tolerance: float, confidence: float = 0.95) -> float:
     A paired row keeps its residual spread, ``sd = half * sqrt(n) / t(n - 1)``, and needs the smallest
     n with ``|rel_error| + t(n - 1) sd / sqrt(n) <= tolerance``; a Welch row keeps both sides' per-run
     variances. Returns n (a float, >= 2), ``inf`` when the measured error is at or beyond the
-    tolerance (no ensemble proves it at that error) or more than ``MAX_FILLS`` would be needed, NaN for the reference's rows and rows without a spread.
+    tolerance (no ensemble proves it at that error) or more than ``MAX_FILLS`` would be needed,
+    NaN for the reference's rows and rows without a spread.
     """
     rel = abs(float(row["rel_error"]))
     if row.get("verdict") == "the reference" or not math.isfinite(rel):

@@ -568,7 +568,8 @@ def _fills_note(table, candidate: str, quantity: str) -> str:
     n = table[(table.candidate == candidate) & (table.quantity == quantity)]["fills_needed"].iloc[0]
     if n != n:
         return ""
-    return (" (no ensemble at this error, or over 100 000 fills)" if n == float("inf")
+    from .bench_stats import MAX_FILLS
+    return (f" (no ensemble at this error, or over {MAX_FILLS:,} fills)" if n == float("inf")
             else f" (about {n:.0f} fills a side for the tolerance)")
 
 

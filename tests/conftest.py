@@ -1,7 +1,8 @@
-"""Shared fixtures: the quick case as a dict, and writing case dicts to YAML files."""
+"""Shared fixtures: the quick case as a dict, and writing case dicts to YAML files; the engine-test mark."""
 from __future__ import annotations
 
 import copy
+import shutil
 from pathlib import Path
 
 import pytest
@@ -10,6 +11,13 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = ROOT / "decks" / "quick.yaml"
 SMALL = ROOT / "tests" / "data" / "small_silo.yaml"
+
+
+def needs_liggghts(test):
+    """An engine test: marked ``engine``, skipped where LIGGGHTS or mpirun is missing."""
+    return pytest.mark.engine(pytest.mark.skipif(
+        shutil.which("liggghts") is None or shutil.which("mpirun") is None,
+        reason="LIGGGHTS not installed (make install-engine); CI installs it")(test))
 
 
 @pytest.fixture(scope="session")

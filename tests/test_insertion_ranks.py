@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 import re
-import shutil
 import subprocess
 import sys
 
@@ -29,15 +28,9 @@ from siloflow.engine.liggghts.insertion import (PLACEABLE_FRACTION, batch_solid_
                                                 short_batch_warning, short_batches_note)
 from siloflow.engine.liggghts.log import parse_log_text
 
-from conftest import ROOT
+from conftest import ROOT, needs_liggghts
 
 
-
-def needs_liggghts(test):
-    """An engine test: marked ``engine``, skipped where LIGGGHTS or mpirun is missing."""
-    return pytest.mark.engine(pytest.mark.skipif(
-        shutil.which("liggghts") is None or shutil.which("mpirun") is None,
-        reason="LIGGGHTS not installed (make install-engine); CI installs it")(test))
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
 

@@ -8,14 +8,13 @@ a page of 20000 the trajectory jumps at a run boundary, as if contact histories 
 there (which ones, pair or wall, is not isolated; pages of 5000-99999 gave the same jump, 100000
 none), while one run at that page follows the default's. That page is also what each mesh wall's
 contact history zeroes once a step (``FixContactHistoryMesh::markAllContacts``: 27 % of a step on
-the accuracy case, measured with perf), so a smaller page would make the accuracy case's runs 30 % faster, and siloflow leaves
-it alone: the tests check that the decks never set it, that chunks at the default page keep the
-trajectory, and the engine fact that a smaller page breaks it.
+the accuracy case, measured with perf), so a smaller page would make the accuracy case's runs 30 %
+faster, and siloflow leaves it alone: the tests check that the decks never set it, that chunks at
+the default page keep the trajectory, and the engine fact that a smaller page breaks it.
 """
 from __future__ import annotations
 
 import re
-import shutil
 import subprocess
 import sys
 
@@ -25,20 +24,13 @@ import yaml
 from siloflow.engine import LiggghtsEngine
 from siloflow.engine.liggghts.deck import before_stage_run
 
-from conftest import ROOT
+from conftest import ROOT, needs_liggghts
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
 #: steps compared after the boundary, the fill's end (siloflow's first run boundary: the bed lies on
 #: the plate and against the walls, and the next batch would come 1678 steps on)
 AFTER = 34
 NEIGH_MODIFY = re.compile(r"^neigh_modify.*$", re.M)
-
-
-def needs_liggghts(test):
-    """An engine test: marked ``engine``, skipped where LIGGGHTS or mpirun is missing."""
-    return pytest.mark.engine(pytest.mark.skipif(
-        shutil.which("liggghts") is None or shutil.which("mpirun") is None,
-        reason="LIGGGHTS not installed (make install-engine); CI installs it")(test))
 
 
 @pytest.fixture(scope="module")
