@@ -25,6 +25,10 @@ from .run_table import run_name
 #: pressure and maximum dynamic band pressure (Pa, means over the bands the settled bed loads),
 #: settled bulk solid fraction, settled coordination number
 QUANTITIES = ("flow_rate", "static_pressure", "dynamic_pressure_max", "solid_fraction", "coordination")
+#: the quantities of the discharge: a fill-only run (:func:`fill_only_case`) does not measure them
+DISCHARGE_QUANTITIES = ("flow_rate", "flow_rate_fit_se", "flow_rate_batch_se", "dynamic_pressure_max")
+#: fill-only seeds start this far from the case's seed
+FILL_ONLY_SEED_OFFSET = 2000
 #: default tolerances of the recommendation (relative 95 % bounds)
 TOLERANCES = {"flow_rate": 0.03, "static_pressure": 0.05}
 #: a band counts as loaded when its static pressure exceeds this fraction of the largest band's
@@ -102,6 +106,25 @@ def candidate_case(base: dict, cand: Candidate, seed: int) -> dict:
     return upscaled_case(data, cand.upscale) if cand.upscale else data
 
 
+#: a fill-only run's plate speed (m/s): the orifice opens fast, as nothing after the static stage is kept
+FILL_ONLY_PLATE_SPEED = 5.0
+
+
+def fill_only_case(data: dict) -> dict:
+    """A run's case cut after its static stage, for the quantities of the settled bed (static band
+    pressure, solid fraction, coordination): the same deck up to the static stage's end (the
+    fill, its settling, the static window: one seed makes the same bed and the same static loads
+    as the whole run), then the shortest discharge the case allows (one sample interval) behind a
+    plate moved away at ``FILL_ONLY_PLATE_SPEED``. About half a whole run's cost on the accuracy
+    case; its flow rate and dynamic loads are not measured (:func:`fill_only_metrics`)."""
+    from .case import Outputs
+    out = copy.deepcopy(data)
+    interval = float(out.get("outputs", {}).get("sample_interval", Outputs.model_fields["sample_interval"].default))
+    opening = {**out.get("discharge", {}).get("opening", {}), "speed": FILL_ONLY_PLATE_SPEED}
+    out["discharge"] = {"duration": interval, "opening": opening}
+    return out
+
+
 def upscaled_case(data: dict, factor: float) -> dict:
     """Coarse-grained DEM (particle upscaling; Thakur, Ooi and Ahmadian, Powder Technol. 293 (2016)
     130-137): every grain and dust radius x ``factor``, the count / factor^3 (the same bed), the same
@@ -167,9 +190,12 @@ def refuse_repeated_seeds(runs, out: Path) -> None:
 
 def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
               report: Callable[[str], None] = lambda s: None, skip_reference: bool = False,
-              seed_offset: int = 0) -> list[dict]:
+              seed_offset: int = 0, fill_only_seeds: int = 0) -> list[dict]:
     """Run every candidate x seed not yet in ``out/runs.csv`` (the case's seed + ``seed_offset``, +1,
-    ...), seed by seed (a stopped study keeps whole seeds: the reference and its candidates); return all rows (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
+    ...), seed by seed (a stopped study keeps whole seeds: the reference and its candidates), then
+    ``fill_only_seeds`` seeds more (from the case's seed + ``FILL_ONLY_SEED_OFFSET``) cut after the
+    static stage (:func:`fill_only_case`, column ``fill_only`` true); return all rows
+    (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
     import pandas as pd
     from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, read_rows, run_missing
     base, case = read_base_case(case_file)
@@ -179,15 +205,31 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
     if not rows.empty:
         refuse_repeated_seeds(rows, out)     # before hours of runs, not after them
     first_seed, ranks = case.seed + seed_offset, case.engine.ranks
-    planned = [PlannedRun(key={"candidate": c.name, "seed": first_seed + k},
-                          case=candidate_case(base, c, first_seed + k),
-                          columns={"timestep_fraction": c.timestep_fraction, "stiffness_scale": c.stiffness_scale,
-                                   "ranks": c.ranks or ranks, "engine": c.engine or case.engine.name})
-               for k in range(seeds) for c in candidates if not (skip_reference and c is REFERENCE)]
-    return run_missing(out, planned, run_metrics,
-                       lambda folder, reason: {"wall_s": engine_wall_time(folder),
-                                               **{q: float("nan") for q in QUANTITIES}}, report,
+
+    def plan(seeds_: list[int], fill_only: bool) -> list[PlannedRun]:
+        return [PlannedRun(key={"candidate": c.name, "seed": seed},
+                           case=fill_only_case(candidate_case(base, c, seed)) if fill_only
+                           else candidate_case(base, c, seed),
+                           columns={"timestep_fraction": c.timestep_fraction, "stiffness_scale": c.stiffness_scale,
+                                    "ranks": c.ranks or ranks, "engine": c.engine or case.engine.name,
+                                    "fill_only": fill_only})
+                for seed in seeds_ for c in candidates if not (skip_reference and c is REFERENCE)]
+
+    def failed(folder: Path, reason: str) -> dict:
+        return {"wall_s": engine_wall_time(folder), **{q: float("nan") for q in QUANTITIES}}
+    rows = run_missing(out, plan([first_seed + k for k in range(seeds)], False), run_metrics, failed, report,
                        case_digest(base))
+    if fill_only_seeds:
+        first = case.seed + FILL_ONLY_SEED_OFFSET
+        rows = run_missing(out, plan([first + k for k in range(fill_only_seeds)], True), fill_only_metrics, failed,
+                           report, case_digest(base))
+    return rows
+
+
+def fill_only_metrics(folder: Path) -> dict:
+    """:func:`run_metrics` of a fill-only run (:func:`fill_only_case`): its one-interval discharge
+    measures nothing, so the discharge's quantities are NaN."""
+    return {**run_metrics(folder), **{q: float("nan") for q in DISCHARGE_QUANTITIES}}
 
 
 #: a candidate re-run with new seeds to check the recommendation is named ``<candidate>_new_seeds``
@@ -259,6 +301,14 @@ def design_columns(runs):
     return runs.assign(**{col: values.map(lambda v, k=k: v[k]) for k, col in enumerate(DESIGN)})
 
 
+def fill_only_rows(runs):
+    """Boolean Series: which rows of a bench's run table are fill-only runs (column ``fill_only``;
+    rows written before the column existed are whole runs)."""
+    if "fill_only" not in runs.columns:
+        return runs["candidate"].map(lambda _: False).astype(bool)
+    return runs["fill_only"].map(lambda v: v is True or str(v).strip().lower() in ("true", "1", "1.0")).astype(bool)
+
+
 def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
              case_file: Optional[Path] = None) -> tuple:
     """From ``out/runs.csv``: ``comparison.csv`` (every candidate x quantity: errors with their
@@ -276,14 +326,17 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
         raise SetupError(f"{out / 'runs.csv'} holds no runs yet")
     ok = design_columns(runs[runs.state == "complete"])
     refuse_repeated_seeds(ok, out)
-    table = bench_stats.compare(ok, REFERENCE.name, list(QUANTITIES), confidence, design=DESIGN)
+    fill_only = fill_only_rows(ok)
+    # a fill-only run adds its fill to the settled bed's quantities; its time is not a whole run's
+    table = bench_stats.compare(ok.assign(timed=~fill_only), REFERENCE.name, list(QUANTITIES), confidence,
+                                design=DESIGN)
     failed = runs[runs.state != "complete"].groupby("candidate").size()
     table["failed_runs"] = table.candidate.map(failed).fillna(0).astype(int)
     # fills a side that would prove each bounded quantity within its tolerance, at today's estimates
     table["fills_needed"] = [bench_stats.fills_needed(r, tolerances[r["quantity"]], confidence)
                              if r["quantity"] in tolerances else math.nan for _, r in table.iterrows()]
     write_text(out / "comparison.csv", table.to_csv(index=False))
-    write_text(out / "run_errors.csv", run_errors(ok).to_csv(index=False))
+    write_text(out / "run_errors.csv", run_errors(ok[~fill_only]).to_csv(index=False))
     bench_stats.pareto_figure(table, out / "pareto.png", tolerances)
     barred = {c.name for c in CANDIDATES if not c.profile}
     choices = table[~table.candidate.str.endswith(VALIDATION) & ~table.candidate.isin(barred)]
@@ -293,10 +346,12 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
         row = ok[ok.candidate == rec["candidate"]].iloc[0]
         rec.update(meets_tolerances=True, timestep_fraction=float(row.timestep_fraction),
                    stiffness_scale=float(row.stiffness_scale), confidence=confidence, error_bounds=rec.pop("bounds"),
-                   seeds=int((ok.candidate == rec["candidate"]).sum()),
-                   reference_seeds=int((ok.candidate == REFERENCE.name).sum()),
+                   seeds=int(((ok.candidate == rec["candidate"]) & ~fill_only).sum()),
+                   reference_seeds=int(((ok.candidate == REFERENCE.name) & ~fill_only).sum()),
+                   fill_only_seeds=int(((ok.candidate == rec["candidate"]) & fill_only).sum()),
                    ranks=int(row.ranks) if cand is None or cand.ranks is None else cand.ranks,
-                   benchmark=f"{out.name}: {int((ok.candidate == REFERENCE.name).sum())} reference runs")
+                   benchmark=f"{out.name}: {int(((ok.candidate == REFERENCE.name) & ~fill_only).sum())} reference "
+                             f"runs and {int(((ok.candidate == REFERENCE.name) & fill_only).sum())} fill-only ones")
         if case_file is not None:
             from .case_file import load_case
             from .profiles import impact_overlap_ratio

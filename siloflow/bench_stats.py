@@ -202,7 +202,9 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
     ----------
     runs : pandas.DataFrame
         One row per run: ``candidate``, ``seed``, ``wall_s`` (s), the quantities (SI; NaN = not
-        measured); optional ``machine`` (where it ran) and the ``design`` columns.
+        measured); optional ``machine`` (where it ran), ``timed`` (bool; False: the run is not a
+        whole one, its wall time is left out of the speed-up and ``wall_mean_s``) and the ``design``
+        columns.
     reference : str
         The candidate compared with; its own rows have rel_error 0, bound 0, speed-up 1 and
         verdict "the reference". ValueError if it has no runs.
@@ -214,19 +216,22 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
     pandas.DataFrame
         Columns ``candidate, quantity``, the keys of ``difference``, ``method``, ``pair_corr``,
         ``speedup, speedup_lo, speedup_hi`` (dimensionless), ``timing_machine``, ``timed_runs``
-        (reference/candidate) and ``wall_mean_s`` (s, all the candidate's runs); the reference first.
+        (reference/candidate) and ``wall_mean_s`` (s, all the candidate's timed runs); the reference first.
     """
     missing = [c for c in ["candidate", "wall_s", *quantities] if c not in runs.columns]
     if missing:
         raise ValueError(f"runs has no column(s) {missing}")
+    # the runs that time a candidate: whole ones (a fill-only run times nothing)
+    timing = runs[runs["timed"].astype(bool)] if "timed" in runs.columns else runs
     groups = dict(list(runs.groupby("candidate", sort=False)))
+    timed = {name: timing[timing["candidate"] == name] for name in groups}
     if reference not in groups:
         raise ValueError(f"the reference {reference!r} has no runs")
     ref = groups[reference]
     rows = []
     for name in [reference, *(c for c in groups if c != reference)]:
         grp = groups[name]
-        machine, ref_wall, cand_wall = _timing_machine(ref, grp)
+        machine, ref_wall, cand_wall = _timing_machine(timed[reference], timed[name])
         sp = (dict(speedup=1.0, lo=1.0, hi=1.0) if name == reference
               else speedup(ref_wall, cand_wall, confidence) if machine is not None
               else dict(speedup=math.nan, lo=math.nan, hi=math.nan))
@@ -246,7 +251,7 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
             rows.append(dict(candidate=name, quantity=q, **d, speedup=sp["speedup"], speedup_lo=sp["lo"],
                              speedup_hi=sp["hi"], timing_machine=machine,
                              timed_runs=f"{ref_wall.notna().sum()}/{cand_wall.notna().sum()}",
-                             wall_mean_s=float(grp["wall_s"].mean())))
+                             wall_mean_s=float(timed[name]["wall_s"].mean())))
     return pd.DataFrame(rows)
 
 

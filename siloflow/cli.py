@@ -513,7 +513,12 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
           conclude_only: bool = typer.Option(False, "--conclude", help="run nothing: tables and figure from the "
                                              "runs already in the folder"),
           validate_seeds: int = typer.Option(0, "--validate", min=0, help="then run the recommended profile with "
-                                             "this many new seeds and check its errors stay in the bounds")) -> None:
+                                             "this many new seeds and check its errors stay in the bounds"),
+          fill_only_seeds: int = typer.Option(0, "--fill-only-seeds", min=0, help="then this many seeds more, from "
+                                              "the case's seed + 2000, each run only to the end of its static stage "
+                                              "(about half a run): more fills for the settled bed's quantities "
+                                              "(static band pressure, solid fraction, coordination), none for the "
+                                              "flow rate or the speed-up")) -> None:
     """Run time against error: each candidate setting (time step, stiffness, ranks) over --seeds fills, against
     the reference (dt = t_c/50, full stiffness); errors with 95 % intervals, a Pareto figure and the fastest
     profile within the tolerances."""
@@ -531,7 +536,7 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
     tolerances = {"flow_rate": flow_tolerance, "static_pressure": static_tolerance}
     with _study(output, "bench"):
         if not conclude_only:
-            run_bench(case_file, output, seeds, chosen, report=_note)
+            run_bench(case_file, output, seeds, chosen, report=_note, fill_only_seeds=fill_only_seeds)
         table, rec = conclude(output, tolerances, case_file=case_file)
         if rec is not None and validate_seeds and not conclude_only and rec["candidate"] != REFERENCE.name:
             validate(case_file, output, rec["candidate"], validate_seeds, report=_note)

@@ -267,3 +267,85 @@ def test_upscaling_keeps_the_bed_and_scales_the_grains():
     lin, _ = read_base_case(ROOT / "decks" / "paper_a_spheres_quick.yaml")
     up = ab.upscaled_case(lin, 2.0)
     assert up["materials"]["particle_particle"]["kn"] == 2.0 * float(lin["materials"]["particle_particle"]["kn"])
+
+
+def _render(data: dict, folder: Path) -> str:
+    """The LIGGGHTS deck ``siloflow render`` writes for the case fields ``data``."""
+    import subprocess
+    import sys
+    case = folder.with_suffix(".yaml")
+    case.write_text(yaml.safe_dump(data))
+    subprocess.run([sys.executable, "-m", "siloflow.cli", "render", str(case), "-o", str(folder)], check=True,
+                   capture_output=True)
+    return (folder / "in.liggghts").read_text()
+
+
+def test_a_fill_only_run_is_the_whole_run_up_to_the_end_of_its_static_stage(tmp_path):
+    """A fill-only run (siloflow bench --fill-only-seeds) stands for the whole run's fill only if its
+    deck is the same up to the opening: the same commands and meshes, hence (a seed making the same
+    insertion stream) the same bed and the same static loads; after it, one sample interval."""
+    base = yaml.safe_load((ROOT / "benchmarks" / "cases" / "accuracy_small.yaml").read_text())
+    whole = ab.candidate_case(base, ab.REFERENCE, 2100)
+    cut = ab.fill_only_case(whole)
+    assert {k for k in whole if whole[k] != cut[k]} == {"discharge"} and whole["discharge"]["duration"] == 0.8
+    a, b = _render(whole, tmp_path / "whole"), _render(cut, tmp_path / "cut")
+    head = "SILOFLOW_STAGE open"
+    assert a[:a.index(head)] == b[:b.index(head)] and a != b
+    for mesh in (tmp_path / "whole" / "meshes").iterdir():
+        assert (tmp_path / "cut" / "meshes" / mesh.name).read_bytes() == mesh.read_bytes()
+    steps = {t: int(next(line.split()[3].strip('"') for line in d.splitlines()
+                         if line.startswith('print           "SILOFLOW_STAGE discharge')))
+             for t, d in (("whole", a), ("cut", b))}
+    assert steps["cut"] * 0.8 / 0.01 == pytest.approx(steps["whole"], rel=1e-2)     # 0.01 s of 0.8 s (whole chunks)
+
+
+def test_fill_only_runs_add_fills_to_the_settled_quantities_and_time_nothing(tmp_path):
+    """Fill-only rows count in the static band pressure, solid fraction and coordination, paired
+    by seed; not in the flow rate, the dynamic loads or the speed-up (their times are half-runs)."""
+    import numpy as np
+    rng = np.random.default_rng(8)
+    rows = []
+    for seed in [*range(4), *range(2100, 2106)]:
+        fill_only = seed >= 2100
+        p = 500 * (1 + 0.05 * rng.standard_normal())
+        for cand, wall in (("reference", 100.0), ("E1e-2_dt0.1", 4.0)):
+            rows.append({"candidate": cand, "seed": seed, "state": "complete", "reason": "", "fill_only": fill_only,
+                         "timestep_fraction": 0.1, "stiffness_scale": 1.0, "ranks": 2,
+                         "wall_s": wall / (50.0 if fill_only and cand == "reference" else 1.0),
+                         "flow_rate": float("nan") if fill_only else 0.01 * (1 + 0.01 * rng.standard_normal()),
+                         "static_pressure": p * (1.02 if cand != "reference" else 1.0),
+                         "dynamic_pressure_max": float("nan") if fill_only else 600.0,
+                         "solid_fraction": 0.6, "coordination": 5.0})
+    pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)
+    table, rec = ab.conclude(tmp_path, tolerances={"flow_rate": 0.05, "static_pressure": 0.05})
+    t = table[table.candidate == "E1e-2_dt0.1"].set_index("quantity")
+    assert t.loc["static_pressure", "n_ref"] == 10 and t.loc["static_pressure", "method"] == "paired"
+    assert t.loc["static_pressure", "rel_error"] == pytest.approx(0.02)
+    assert t.loc["flow_rate", "n_ref"] == 4 and t.loc["dynamic_pressure_max", "n_cand"] == 4
+    assert t.loc["flow_rate", "speedup"] == pytest.approx(25.0) and t.loc["flow_rate", "timed_runs"] == "4/4"
+    assert rec["candidate"] == "E1e-2_dt0.1" and (rec["seeds"], rec["fill_only_seeds"]) == (4, 6)
+    assert rec["reference_seeds"] == 4 and "6 fill-only" in rec["benchmark"]
+    assert (pd.read_csv(tmp_path / "run_errors.csv").set_index("candidate").runs == 4).all()
+
+
+def test_the_bench_plans_fill_only_seeds_after_the_whole_ones(tmp_path, monkeypatch):
+    import siloflow.runs
+    ran = []
+
+    def fake_run(case, folder, **kw):
+        ran.append((case.name, case.discharge.duration))
+        fake_summary(Path(folder))
+    monkeypatch.setattr(siloflow.runs, "run", fake_run)
+    cands = [ab.REFERENCE, next(c for c in ab.CANDIDATES if c.name == "E1e-2_dt0.1")]
+    base = yaml.safe_load(SMALL.read_text())
+    rows = ab.run_bench(SMALL, tmp_path, seeds=2, candidates=cands, fill_only_seeds=2)
+    s0 = base["seed"]
+    assert [r["seed"] for r in rows] == [s0, s0, s0 + 1, s0 + 1, *[s0 + ab.FILL_ONLY_SEED_OFFSET + k
+                                                                  for k in (0, 0, 1, 1)]]
+    assert [r["fill_only"] for r in rows] == [False] * 4 + [True] * 4
+    interval = case_from_dict(base).outputs.sample_interval
+    assert [d for _, d in ran[4:]] == [interval] * 4 and all(d != interval for _, d in ran[:4])
+    assert all(math.isnan(r["flow_rate"]) and math.isnan(r["dynamic_pressure_max"]) for r in rows[4:])
+    assert all(r["static_pressure"] == pytest.approx(450.0) for r in rows)
+    assert not ab.fill_only_rows(pd.DataFrame(read_rows(tmp_path))).iloc[:4].any()
+    assert ab.fill_only_rows(pd.DataFrame(read_rows(tmp_path))).iloc[4:].all()
