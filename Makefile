@@ -96,7 +96,7 @@ ACCURACY = runs/bench_accuracy
 ACCURACY_SEEDS = 27
 # then fill-only seeds (seeds 2100, ...: each run to the end of its static stage, half a run): more fills
 # for the static band pressure, solid fraction and coordination, none for the flow rate or the speed-up
-ACCURACY_FILL_SEEDS = 0
+ACCURACY_FILL_SEEDS = 28
 ACCURACY_FLOW_TOL = 0.03
 ACCURACY_STATIC_TOL = 0.08
 FAST_CANDIDATES = E1e-3_dt0.3,E1e-3_dt0.2,E1e-3_dt0.1,E3e-4_dt0.2,E1e-2_dt0.1,E1e-4_dt0.2_past_guard,E1e-3_dt0.2_1rank,E1e-3_dt0.2_lean

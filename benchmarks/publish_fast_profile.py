@@ -16,7 +16,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SOURCE = ROOT / "benchmarks" / "results" / "accuracy" / "recommended_profile.json"
 TARGET = ROOT / "siloflow" / "fast_profile.json"
 KEEP = ("candidate", "timestep_fraction", "overlap_ratio", "stiffness_scale", "speedup", "speedup_lo", "speedup_hi",
-        "error_bounds", "rel_errors", "tolerances", "confidence", "seeds", "reference_seeds", "ranks", "validation")
+        "error_bounds", "rel_errors", "tolerances", "confidence", "seeds", "reference_seeds", "fill_only_seeds", "ranks",
+        "validation")
 
 
 def main() -> None:
@@ -29,8 +30,10 @@ def main() -> None:
     if not checks or not all(c["inside"] for c in checks):
         raise SystemExit(f"{SOURCE}: the recommendation was not confirmed with new seeds (siloflow bench --validate)")
     out = {k: rec[k] for k in KEEP if k in rec}
+    fills = f" (and {rec['fill_only_seeds']} fill-only fills a side)" if rec.get("fill_only_seeds") else ""
     out["benchmark"] = (f"benchmarks/cases/accuracy_small.yaml, {rec.get('reference_seeds')} reference runs and "
-                        f"{rec.get('seeds')} of the profile, confirmed with {checks[0]['n']} new seeds (make bench-accuracy)")
+                        f"{rec.get('seeds')} of the profile{fills}, confirmed with {checks[0]['n']} new seeds "
+                        "(make bench-accuracy)")
     TARGET.write_text(json.dumps(out, indent=1) + "\n")
     print(f"{TARGET}: {out['candidate']} (timestep_fraction {out['timestep_fraction']}, impact overlap "
           f"{out['overlap_ratio']:.3g} of the radius)")
