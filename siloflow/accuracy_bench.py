@@ -106,22 +106,18 @@ def candidate_case(base: dict, cand: Candidate, seed: int) -> dict:
     return upscaled_case(data, cand.upscale) if cand.upscale else data
 
 
-#: a fill-only run's plate speed (m/s): the orifice opens fast, as nothing after the static stage is kept
-FILL_ONLY_PLATE_SPEED = 5.0
-
-
 def fill_only_case(data: dict) -> dict:
     """A run's case cut after its static stage, for the quantities of the settled bed (static band
-    pressure, solid fraction, coordination): the same deck up to the static stage's end (the
-    fill, its settling, the static window: one seed makes the same bed and the same static loads
-    as the whole run), then the shortest discharge the case allows (one sample interval) behind a
-    plate moved away at ``FILL_ONLY_PLATE_SPEED``. About half a whole run's cost on the accuracy
-    case; its flow rate and dynamic loads are not measured (:func:`fill_only_metrics`)."""
+    pressure, solid fraction, coordination): the whole run's plan but for the discharge, which is
+    the shortest the case allows (one sample interval), so the same deck up to the opening (the
+    fill, its settling, the static window: one seed makes the same bed and the same static loads)
+    under the same guard (its speed limit counts the plate's speed). About half a whole run's cost on
+    the accuracy case; its flow rate and dynamic loads are not measured (:func:`fill_only_metrics`)."""
     from .case import Outputs
     out = copy.deepcopy(data)
     interval = float(out.get("outputs", {}).get("sample_interval", Outputs.model_fields["sample_interval"].default))
-    opening = {**out.get("discharge", {}).get("opening", {}), "speed": FILL_ONLY_PLATE_SPEED}
-    out["discharge"] = {"duration": interval, "opening": opening}
+    out["discharge"] = {"duration": interval, **({"opening": data["discharge"]["opening"]}
+                                                 if "opening" in data.get("discharge", {}) else {})}
     return out
 
 

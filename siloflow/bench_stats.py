@@ -222,7 +222,9 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
     if missing:
         raise ValueError(f"runs has no column(s) {missing}")
     # the runs that time a candidate: whole ones (a fill-only run times nothing)
-    timing = runs[runs["timed"].astype(bool)] if "timed" in runs.columns else runs
+    if "timed" in runs.columns and runs["timed"].dtype != bool:
+        raise ValueError("runs' column 'timed' must be boolean (True: a whole run, timed)")
+    timing = runs[runs["timed"]] if "timed" in runs.columns else runs
     groups = dict(list(runs.groupby("candidate", sort=False)))
     timed = {name: timing[timing["candidate"] == name] for name in groups}
     if reference not in groups:

@@ -288,6 +288,8 @@ def test_a_fill_only_run_is_the_whole_run_up_to_the_end_of_its_static_stage(tmp_
     whole = ab.candidate_case(base, ab.REFERENCE, 2100)
     cut = ab.fill_only_case(whole)
     assert {k for k in whole if whole[k] != cut[k]} == {"discharge"} and whole["discharge"]["duration"] == 0.8
+    plans = [derive(case_from_dict(d)).model_dump() for d in (whole, cut)]
+    assert [k for k in plans[0] if plans[0][k] != plans[1][k]] == ["discharge"]   # the same guard, opening, dt
     a, b = _render(whole, tmp_path / "whole"), _render(cut, tmp_path / "cut")
     head = "SILOFLOW_STAGE open"
     assert a[:a.index(head)] == b[:b.index(head)] and a != b
