@@ -300,8 +300,9 @@ def design_columns(runs):
 def fill_only_rows(runs):
     """Boolean Series: which rows of a bench's run table are fill-only runs (column ``fill_only``;
     rows written before the column existed are whole runs)."""
+    import pandas as pd
     if "fill_only" not in runs.columns:
-        return runs["candidate"].map(lambda _: False).astype(bool)
+        return pd.Series(False, index=runs.index, dtype=bool)
     return runs["fill_only"].map(lambda v: v is True or str(v).strip().lower() in ("true", "1", "1.0")).astype(bool)
 
 
@@ -340,14 +341,15 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
     if rec is not None:
         cand = next((c for c in CANDIDATES if c.name == rec["candidate"]), None)
         row = ok[ok.candidate == rec["candidate"]].iloc[0]
+        runs_of = ok.groupby(["candidate", fill_only.rename("fill_only")]).size()   # (candidate, fill-only) -> runs
+        count = lambda name, fill: int(runs_of.get((name, fill), 0))              # noqa: E731
         rec.update(meets_tolerances=True, timestep_fraction=float(row.timestep_fraction),
                    stiffness_scale=float(row.stiffness_scale), confidence=confidence, error_bounds=rec.pop("bounds"),
-                   seeds=int(((ok.candidate == rec["candidate"]) & ~fill_only).sum()),
-                   reference_seeds=int(((ok.candidate == REFERENCE.name) & ~fill_only).sum()),
-                   fill_only_seeds=int(((ok.candidate == rec["candidate"]) & fill_only).sum()),
+                   seeds=count(rec["candidate"], False), reference_seeds=count(REFERENCE.name, False),
+                   fill_only_seeds=count(rec["candidate"], True),
                    ranks=int(row.ranks) if cand is None or cand.ranks is None else cand.ranks,
-                   benchmark=f"{out.name}: {int(((ok.candidate == REFERENCE.name) & ~fill_only).sum())} reference "
-                             f"runs and {int(((ok.candidate == REFERENCE.name) & fill_only).sum())} fill-only ones")
+                   benchmark=f"{out.name}: {count(REFERENCE.name, False)} reference runs and "
+                             f"{count(REFERENCE.name, True)} fill-only ones")
         if case_file is not None:
             from .case_file import load_case
             from .profiles import impact_overlap_ratio

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import copy
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -18,6 +20,16 @@ def needs_liggghts(test):
     return pytest.mark.engine(pytest.mark.skipif(
         shutil.which("liggghts") is None or shutil.which("mpirun") is None,
         reason="LIGGGHTS not installed (make install-engine); CI installs it")(test))
+
+
+def render_deck(data: dict, folder: Path) -> str:
+    """The LIGGGHTS deck ``siloflow render`` writes into ``folder`` for the case fields ``data``
+    (their YAML beside it, ``folder.yaml``)."""
+    case = folder.with_suffix(".yaml")
+    case.write_text(yaml.safe_dump(data))
+    subprocess.run([sys.executable, "-m", "siloflow.cli", "render", str(case), "-o", str(folder)], check=True,
+                   capture_output=True)
+    return (folder / "in.liggghts").read_text()
 
 
 @pytest.fixture(scope="session")

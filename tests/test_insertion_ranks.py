@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 import re
 import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -28,7 +27,7 @@ from siloflow.engine.liggghts.insertion import (PLACEABLE_FRACTION, batch_solid_
                                                 short_batch_warning, short_batches_note)
 from siloflow.engine.liggghts.log import parse_log_text
 
-from conftest import ROOT, needs_liggghts
+from conftest import ROOT, needs_liggghts, render_deck
 
 
 
@@ -51,12 +50,8 @@ def _plan(ranks: int, fraction: float | None = None):
 
 def _first_batch(tmp_path, ranks: int, fraction: float | None = None) -> tuple[np.ndarray, str]:
     """(id, radius, x, y, z) of the grains of the first insertion on ``ranks`` ranks, and the log."""
-    case = tmp_path / f"ins{ranks}-{fraction}.yaml"
-    case.write_text(yaml.safe_dump(_case_data(ranks, fraction)))
     folder = tmp_path / f"r{ranks}-{fraction}"
-    subprocess.run([sys.executable, "-m", "siloflow.cli", "render", str(case), "-o", str(folder)],
-                   check=True, capture_output=True)
-    text = (folder / "in.liggghts").read_text()
+    text = render_deck(_case_data(ranks, fraction), folder)
     (folder / "first.in").write_text(before_stage_run(text, "fill")
                                      + "dump first all custom 1 first.dump id radius x y z\nrun 2\n")
     subprocess.run(LiggghtsEngine().command(ranks, deck="first.in", log="first.log"), cwd=folder, check=True,

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import re
 import subprocess
-import sys
 
 import pytest
 import yaml
@@ -24,7 +23,7 @@ import yaml
 from siloflow.engine import LiggghtsEngine
 from siloflow.engine.liggghts.deck import before_stage_run
 
-from conftest import ROOT, needs_liggghts
+from conftest import ROOT, needs_liggghts, render_deck
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
 #: steps compared after the boundary, the fill's end (siloflow's first run boundary: the bed lies on
@@ -40,12 +39,8 @@ def fill_deck(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("chunks")
     data = yaml.safe_load(CASE.read_text())
     data.update(name="chunks", engine={"ranks": 2, "timestep_fraction": 0.1, "stiffness_scale": 0.01})
-    case = tmp / "chunks.yaml"
-    case.write_text(yaml.safe_dump(data))
     folder = tmp / "deck"
-    subprocess.run([sys.executable, "-m", "siloflow.cli", "render", str(case), "-o", str(folder)],
-                   check=True, capture_output=True)
-    return folder, before_stage_run((folder / "in.liggghts").read_text(), "fill")
+    return folder, before_stage_run(render_deck(data, folder), "fill")
 
 
 def _state(folder, head: str, name: str, runs: list[int], page: int | None = None) -> tuple[float, float]:

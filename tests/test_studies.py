@@ -17,7 +17,7 @@ from siloflow.derived import derive
 from siloflow.errors import EngineRunError, SetupError
 from siloflow.run_table import PlannedRun, read_rows, run_missing
 
-from conftest import ROOT, SMALL
+from conftest import ROOT, SMALL, render_deck
 
 SHIPPED = sorted((ROOT / "decks").glob("*quick*.yaml")) + sorted((ROOT / "tests" / "data").glob("*.yaml"))
 
@@ -269,17 +269,6 @@ def test_upscaling_keeps_the_bed_and_scales_the_grains():
     assert up["materials"]["particle_particle"]["kn"] == 2.0 * float(lin["materials"]["particle_particle"]["kn"])
 
 
-def _render(data: dict, folder: Path) -> str:
-    """The LIGGGHTS deck ``siloflow render`` writes for the case fields ``data``."""
-    import subprocess
-    import sys
-    case = folder.with_suffix(".yaml")
-    case.write_text(yaml.safe_dump(data))
-    subprocess.run([sys.executable, "-m", "siloflow.cli", "render", str(case), "-o", str(folder)], check=True,
-                   capture_output=True)
-    return (folder / "in.liggghts").read_text()
-
-
 def test_a_fill_only_run_is_the_whole_run_up_to_the_end_of_its_static_stage(tmp_path):
     """A fill-only run (siloflow bench --fill-only-seeds) stands for the whole run's fill only if its
     deck is the same up to the opening: the same commands and meshes, hence (a seed making the same
@@ -290,7 +279,7 @@ def test_a_fill_only_run_is_the_whole_run_up_to_the_end_of_its_static_stage(tmp_
     assert {k for k in whole if whole[k] != cut[k]} == {"discharge"} and whole["discharge"]["duration"] == 0.8
     plans = [derive(case_from_dict(d)).model_dump() for d in (whole, cut)]
     assert [k for k in plans[0] if plans[0][k] != plans[1][k]] == ["discharge"]   # the same guard, opening, dt
-    a, b = _render(whole, tmp_path / "whole"), _render(cut, tmp_path / "cut")
+    a, b = render_deck(whole, tmp_path / "whole"), render_deck(cut, tmp_path / "cut")
     head = "SILOFLOW_STAGE open"
     assert a[:a.index(head)] == b[:b.index(head)] and a != b
     for mesh in (tmp_path / "whole" / "meshes").iterdir():
