@@ -29,6 +29,9 @@ QUANTITIES = ("flow_rate", "static_pressure", "dynamic_pressure_max", "solid_fra
 DISCHARGE_QUANTITIES = ("flow_rate", "flow_rate_fit_se", "flow_rate_batch_se", "dynamic_pressure_max")
 #: fill-only seeds start this far from the case's seed
 FILL_ONLY_SEED_OFFSET = 2000
+#: whole runs' seeds start at the case's seed, the new-seed check's at + ``VALIDATION_SEED_OFFSET``:
+#: each range holds at most this many seeds
+SEED_RANGE = 1000
 #: default tolerances of the recommendation (relative 95 % bounds)
 TOLERANCES = {"flow_rate": 0.03, "static_pressure": 0.05}
 #: a band counts as loaded when its static pressure exceeds this fraction of the largest band's
@@ -78,6 +81,9 @@ CANDIDATES = (
     Candidate("E1e-2_dt0.1_up1.25", 0.1, 1e-2, upscale=1.25, profile=False),
     Candidate("E1e-4_dt0.02", 0.02, 1e-4),
     Candidate("E1e-2_dt0.1", 0.1, 1e-2),
+    # between the fast profile's 1/100 stiffness (static band pressure +3.4 %, resolved) and the full one
+    Candidate("E3e-2_dt0.2", 0.2, 3e-2),
+    Candidate("E3e-2_dt0.1", 0.1, 3e-2),
     Candidate("E1e-2_dt0.02", 0.02, 1e-2),
     Candidate("E1_dt0.1", 0.1, 1.0),
     Candidate("E1_dt0.05", 0.05, 1.0),
@@ -113,11 +119,15 @@ def fill_only_case(data: dict) -> dict:
     fill, its settling, the static window: one seed makes the same bed and the same static loads)
     under the same guard (its speed limit counts the plate's speed). About half a whole run's cost on
     the accuracy case; its flow rate and dynamic loads are not measured (:func:`fill_only_metrics`)."""
-    from .case import Outputs
+    from .case_file import case_from_dict
+    from .derived import auto_dump_interval, result_needs
+    case = case_from_dict(data)
     out = copy.deepcopy(data)
-    interval = float(out.get("outputs", {}).get("sample_interval", Outputs.model_fields["sample_interval"].default))
-    out["discharge"] = {"duration": interval, **({"opening": data["discharge"]["opening"]}
-                                                 if "opening" in data.get("discharge", {}) else {})}
+    if case.outputs.dump_interval is None and result_needs(case)["dumps"]:
+        # the automatic interval follows the discharge's length: pin the whole run's, for the same frames
+        out.setdefault("outputs", {})["dump_interval"] = auto_dump_interval(case)
+    out["discharge"] = {"duration": case.outputs.sample_interval,
+                        **({"opening": data["discharge"]["opening"]} if "opening" in data.get("discharge", {}) else {})}
     return out
 
 
@@ -194,6 +204,10 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
     (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
     import pandas as pd
     from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, read_rows, run_missing
+    if seeds > SEED_RANGE:
+        raise SetupError(f"seeds: {seeds} is more than {SEED_RANGE}: a bench's whole runs, its new-seed check and its "
+                         f"fill-only runs take seeds from {SEED_RANGE}-wide ranges (the case's seed, + "
+                         f"{VALIDATION_SEED_OFFSET}, + {FILL_ONLY_SEED_OFFSET}), and more would reuse another's fills")
     base, case = read_base_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
         raise SetupError("the bench needs the reference candidate (the papers' settings) to compare with")

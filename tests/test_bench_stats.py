@@ -186,6 +186,28 @@ def test_compare_pairs_only_candidates_whose_seeds_the_reference_ran():
     assert compare(runs, "ref", ["q"]).set_index("candidate").at["other_engine", "method"] == "paired"   # no design given
 
 
+def test_a_failed_reference_run_costs_its_own_pair_not_the_pairing():
+    # 6 whole seeds (flow and static) and 6 fill-only ones (static only); the reference's fill-only
+    # seed 12 failed, so its row is missing: every other pair still pairs, for both quantities
+    rng = np.random.default_rng(8)
+    ref, cand = _paired_runs(rng, 12, 0.9)
+    whole = lambda s: s < 6                                     # noqa: E731
+    rows = [dict(candidate=name, seed=s if whole(s) else s + 4, wall_s=wall, timed=whole(s),
+                 flow=v if whole(s) else np.nan, static=v)
+            for name, vals, wall in (("ref", ref, 100.0), ("cand", cand, 10.0)) for s, v in enumerate(vals)]
+    runs = pd.DataFrame([r for r in rows if not (r["candidate"] == "ref" and r["seed"] == 12)])
+    t = compare(runs, "ref", ["flow", "static"]).set_index("quantity")
+    t = t[t.candidate == "cand"]
+    assert list(t["method"]) == ["paired", "paired"]
+    assert t.at["flow", "n_cand"] == 6 and t.at["static", "n_cand"] == 11
+    keep = [s for s in range(12) if s != 8]                     # seed 12 is the 9th run (index 8)
+    assert t.at["static", "rel_error"] == pytest.approx(np.mean(cand[keep]) / np.mean(ref[keep]) - 1)
+    assert t.at["flow", "timed_runs"] == "6/6"
+    # pairing on a minority of the candidate's seeds would drop most of its runs: Welch instead
+    few = runs[~((runs.candidate == "ref") & (runs.seed >= 3))]
+    assert set(compare(few, "ref", ["static"]).query("candidate == 'cand'")["method"]) == {"welch"}
+
+
 def test_speedups_are_timed_on_one_machine():
     rows = ([dict(candidate="ref", seed=s, wall_s=400.0 + s, q=1.0, machine="old") for s in range(4)]
             + [dict(candidate="ref", seed=10 + s, wall_s=300.0, q=1.0, machine=np.nan) for s in range(3)]

@@ -13,7 +13,7 @@ import yaml
 from siloflow import accuracy_bench as ab
 from siloflow import stability as st
 from siloflow.case_file import case_from_dict
-from siloflow.derived import derive
+from siloflow.derived import auto_dump_interval, derive
 from siloflow.errors import EngineRunError, SetupError
 from siloflow.run_table import PlannedRun, read_rows, run_missing
 
@@ -340,3 +340,20 @@ def test_the_bench_plans_fill_only_seeds_after_the_whole_ones(tmp_path, monkeypa
     assert all(r["static_pressure"] == pytest.approx(450.0) for r in rows)
     assert not ab.fill_only_rows(pd.DataFrame(read_rows(tmp_path))).iloc[:4].any()
     assert ab.fill_only_rows(pd.DataFrame(read_rows(tmp_path))).iloc[4:].all()
+    with pytest.raises(SetupError, match="seeds: 1001 is more than 1000"):
+        ab.run_bench(SMALL, tmp_path / "many", seeds=ab.SEED_RANGE + 1, candidates=cands)
+    assert not (tmp_path / "many").exists()            # refused before anything is written
+
+
+def test_a_fill_only_run_keeps_the_whole_runs_automatic_dump_interval():
+    """A case with results needing frames and no dump interval dumps as often as its discharge's
+    length says: the cut pins the whole run's interval, or its settled frame would be another one."""
+    base = yaml.safe_load(SMALL.read_text())
+    base["outputs"] = {"sample_interval": 0.01, "results": ["flow_rate", "coordination"]}
+    cut = ab.fill_only_case(base)
+    auto = auto_dump_interval(case_from_dict(base))
+    assert cut["outputs"]["dump_interval"] == auto and auto != auto_dump_interval(case_from_dict(
+        {**base, "discharge": cut["discharge"]}))
+    assert "dump_interval" not in base["outputs"]                      # the whole case is left as it was
+    lean = {**base, "outputs": {"results": ["flow_rate", "force_balance"]}}
+    assert "dump_interval" not in ab.fill_only_case(lean)["outputs"]   # no frames needed: nothing pinned
