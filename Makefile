@@ -97,6 +97,8 @@ ACCURACY_SEEDS = 27
 # then fill-only seeds (seeds 2100, ...: each run to the end of its static stage, half a run): more fills
 # for the static band pressure, solid fraction and coordination, none for the flow rate or the speed-up
 ACCURACY_FILL_SEEDS = 28
+# the 1/100-stiffness candidates, and 3/100 between them and the full stiffness
+ACCURACY_CANDIDATES = reference,E1e-2_dt0.1,E1e-2_dt0.2,E1e-2_dt0.3,E3e-2_dt0.2,E3e-2_dt0.1
 ACCURACY_FLOW_TOL = 0.03
 ACCURACY_STATIC_TOL = 0.08
 FAST_CANDIDATES = E1e-3_dt0.3,E1e-3_dt0.2,E1e-3_dt0.1,E3e-4_dt0.2,E1e-2_dt0.1,E1e-4_dt0.2_past_guard,E1e-3_dt0.2_1rank,E1e-3_dt0.2_lean
@@ -113,7 +115,7 @@ bench-accuracy: install
 	$(VENV)/bin/siloflow bench benchmarks/cases/accuracy_small.yaml -o $(ACCURACY) --seeds 12 --candidates reference,E1e-2_dt0.1,E1e-2_dt0.2 \
 	  --flow-tolerance 0.06 --static-tolerance 0.06 --validate 3
 	$(VENV)/bin/siloflow bench benchmarks/cases/accuracy_small.yaml -o $(ACCURACY) --seeds $(ACCURACY_SEEDS) \
-	  --candidates reference,E1e-2_dt0.1,E1e-2_dt0.2,E1e-2_dt0.3 --flow-tolerance $(ACCURACY_FLOW_TOL) \
+	  --candidates $(ACCURACY_CANDIDATES) --flow-tolerance $(ACCURACY_FLOW_TOL) \
 	  --static-tolerance $(ACCURACY_STATIC_TOL) --validate 3 --fill-only-seeds $(ACCURACY_FILL_SEEDS)
 	mkdir -p benchmarks/results/accuracy
 	cd $(ACCURACY) && cp runs.csv comparison.csv run_errors.csv pareto.png recommended_profile.json $(CURDIR)/benchmarks/results/accuracy/
@@ -123,12 +125,15 @@ bench-accuracy: install
 # fills a side, resumed from the committed table (a new machine starts from it), results committed
 ACCURACY_LARGE = runs/bench_accuracy_large
 LARGE_SEEDS = 2
+# fill-only seeds (half a run each) for its settled bed's quantities: none run yet
+LARGE_FILL_SEEDS = 0
 bench-accuracy-large: install
 	mkdir -p $(ACCURACY_LARGE)
 	if [ ! -f $(ACCURACY_LARGE)/runs.csv ] && [ -f benchmarks/results/accuracy_large/runs.csv ]; then \
 	  cp benchmarks/results/accuracy_large/runs.csv $(ACCURACY_LARGE)/; fi
 	$(VENV)/bin/siloflow bench benchmarks/cases/accuracy_large.yaml -o $(ACCURACY_LARGE) --seeds $(LARGE_SEEDS) \
-	  --candidates reference,E1e-2_dt0.1,E1e-2_dt0.2 --flow-tolerance 0.06 --static-tolerance 0.06
+	  --candidates reference,E1e-2_dt0.1,E1e-2_dt0.2 --flow-tolerance 0.06 --static-tolerance 0.06 \
+	  --fill-only-seeds $(LARGE_FILL_SEEDS)
 	mkdir -p benchmarks/results/accuracy_large
 	cd $(ACCURACY_LARGE) && cp runs.csv comparison.csv run_errors.csv pareto.png recommended_profile.json \
 	  $(CURDIR)/benchmarks/results/accuracy_large/

@@ -194,6 +194,16 @@ def refuse_repeated_seeds(runs, out: Path) -> None:
                          "and rank count, so a second row is no new fill; keep one row per candidate and seed")
 
 
+def check_seed_count(seeds: int, option: str, seed_offset: int = 0) -> None:
+    """SetupError naming ``option`` when ``seeds`` seeds from the case's seed + ``seed_offset`` would
+    run into the next range: a bench's whole runs, its new-seed check and its fill-only runs take
+    their seeds from ``SEED_RANGE``-wide ranges, and one more would reuse another range's fill."""
+    if seed_offset % SEED_RANGE + seeds > SEED_RANGE:
+        raise SetupError(f"{option}: {seeds} is more than {SEED_RANGE - seed_offset % SEED_RANGE}: the whole runs, the "
+                         f"new-seed check and the fill-only runs take seeds from {SEED_RANGE}-wide ranges (the case's "
+                         f"seed, + {VALIDATION_SEED_OFFSET}, + {FILL_ONLY_SEED_OFFSET}); more would reuse another's fills")
+
+
 def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
               report: Callable[[str], None] = lambda s: None, skip_reference: bool = False,
               seed_offset: int = 0, fill_only_seeds: int = 0) -> list[dict]:
@@ -204,10 +214,7 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
     (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
     import pandas as pd
     from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, read_rows, run_missing
-    if seeds > SEED_RANGE:
-        raise SetupError(f"seeds: {seeds} is more than {SEED_RANGE}: a bench's whole runs, its new-seed check and its "
-                         f"fill-only runs take seeds from {SEED_RANGE}-wide ranges (the case's seed, + "
-                         f"{VALIDATION_SEED_OFFSET}, + {FILL_ONLY_SEED_OFFSET}), and more would reuse another's fills")
+    check_seed_count(seeds, "seeds", seed_offset)
     base, case = read_base_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
         raise SetupError("the bench needs the reference candidate (the papers' settings) to compare with")

@@ -79,11 +79,11 @@ def difference(ref, cand, confidence: float = 0.95) -> dict:
     return _with_interval(out, rel, half)
 
 
-#: pair the runs by seed (common random numbers) when at least this many of a candidate's seeds have
-#: a reference run of the same seed ...
+#: a quantity of a candidate pairs with the reference's by seed (common random numbers) when at least
+#: this many of the candidate's values of it have a reference value of the same seed ...
 MIN_PAIRS = 3
-#: ... and they are at least this share of the candidate's runs (the others are left out of a paired
-#: difference: a reference run that failed costs its seed's pair, not the pairing of the rest)
+#: ... and they are at least this share of the candidate's values of it (the others are left out of
+#: the paired difference: a reference run that failed costs its seed's pair, not the pairing)
 MIN_PAIRED_SHARE = 0.8
 
 
@@ -157,24 +157,22 @@ UNRECORDED = "unrecorded"
 
 
 def _pairs(ref: pd.DataFrame, cand: pd.DataFrame, design: tuple = ()) -> list:
-    """The seeds by which a candidate's runs pair with the reference's: those both sides ran, when
-    they are at least ``MIN_PAIRS`` and ``MIN_PAIRED_SHARE`` of the candidate's runs (seeds unique
-    on both sides), and the ``design`` columns that decide what a seed makes of its random stream
-    (ranks, engine, grain size) hold the same values on both sides (missing ones ignored); else []
-    (no pairing). Decided from the seeds and the design, before any value is looked at."""
-    if "seed" not in cand.columns or len(cand) < MIN_PAIRS:
+    """The seeds by which a candidate's runs can pair with the reference's: those both sides ran
+    (seeds unique on both sides), when the ``design`` columns that decide what a seed makes of its
+    random stream (ranks, engine, grain size) hold the same values on both sides (missing ones
+    ignored); else [] (no pairing). Decided from the seeds and the design, before any value is
+    looked at; :func:`compare` then pairs a quantity on them when enough of its values pair."""
+    if "seed" not in cand.columns or "seed" not in ref.columns:
         return []
     rs, cs = ref["seed"], cand["seed"]
     if not (rs.is_unique and cs.is_unique):
-        return []
-    common = [s for s in cs if s in set(rs)]
-    if len(common) < max(MIN_PAIRS, MIN_PAIRED_SHARE * len(cand)):
         return []
     for col in design:
         if col in ref.columns and col in cand.columns:
             if set(ref[col].dropna().astype(str)) != set(cand[col].dropna().astype(str)):
                 return []
-    return common
+    known = set(rs)
+    return [s for s in cs if s in known]
 
 
 def _timing_machine(ref: pd.DataFrame, cand: pd.DataFrame):
@@ -198,9 +196,10 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
             design: tuple = ()) -> pd.DataFrame:
     """One row per (candidate, quantity): the difference from the reference and the speed-up.
 
-    The difference is :func:`paired_difference` of the seeds the candidate's runs pair with the
-    reference's by (:func:`_pairs` with the ``design`` columns) when at least ``MIN_PAIRS`` pairs of
-    the quantity are finite (``method`` "paired"), else Welch's :func:`difference` ("welch"). The
+    The difference is :func:`paired_difference` on the seeds both sides ran (:func:`_pairs` with the
+    ``design`` columns) when the quantity's finite pairs are at least ``MIN_PAIRS`` and
+    ``MIN_PAIRED_SHARE`` of the candidate's finite values of it (decided from which values exist,
+    not what they are) (``method`` "paired"), else Welch's :func:`difference` ("welch"). The
     speed-up compares engine wall times on one machine (:func:`_timing_machine`, column
     ``timing_machine``; NaN when no machine ran both).
 
@@ -244,12 +243,12 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
               else speedup(ref_wall, cand_wall, confidence) if machine is not None
               else dict(speedup=math.nan, lo=math.nan, hi=math.nan))
         seeds = _pairs(ref, grp, design) if name != reference else []
-        paired = bool(seeds)
-        if paired:
+        if seeds:
             ref_at, cand_at = ref.set_index("seed").loc[seeds], grp.set_index("seed").loc[seeds]
         for q in quantities:
-            r, c = (ref_at[q].to_numpy(dtype=float), cand_at[q].to_numpy(dtype=float)) if paired else (None, None)
-            if paired and np.sum(~(np.isnan(r) | np.isnan(c))) >= MIN_PAIRS:
+            r, c = (ref_at[q].to_numpy(dtype=float), cand_at[q].to_numpy(dtype=float)) if seeds else (None, None)
+            pairs = int(np.sum(~(np.isnan(r) | np.isnan(c)))) if seeds else 0
+            if pairs and pairs >= max(MIN_PAIRS, MIN_PAIRED_SHARE * int(grp[q].notna().sum())):
                 d = dict(paired_difference(r, c, confidence), method="paired")
             else:
                 d = dict(difference(ref[q], grp[q], confidence), method="welch", pair_corr=math.nan)

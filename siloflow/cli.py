@@ -522,8 +522,13 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
     """Run time against error: each candidate setting (time step, stiffness, ranks) over --seeds fills, against
     the reference (dt = t_c/50, full stiffness); errors with 95 % intervals, a Pareto figure and the fastest
     profile within the tolerances."""
-    from .accuracy_bench import CANDIDATES, REFERENCE, conclude, run_bench, validate
+    from .accuracy_bench import CANDIDATES, REFERENCE, check_seed_count, conclude, run_bench, validate
     from .bench_stats import best_bounds
+    try:                            # before hours of runs, not after them
+        check_seed_count(seeds, "--seeds")
+        check_seed_count(validate_seeds, "--validate")
+    except SiloflowError as exc:
+        _fail(exc)
     known = {c.name: c for c in CANDIDATES}
     chosen = list(CANDIDATES)
     if candidates:

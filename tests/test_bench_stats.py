@@ -203,9 +203,28 @@ def test_a_failed_reference_run_costs_its_own_pair_not_the_pairing():
     keep = [s for s in range(12) if s != 8]                     # seed 12 is the 9th run (index 8)
     assert t.at["static", "rel_error"] == pytest.approx(np.mean(cand[keep]) / np.mean(ref[keep]) - 1)
     assert t.at["flow", "timed_runs"] == "6/6"
-    # pairing on a minority of the candidate's seeds would drop most of its runs: Welch instead
-    few = runs[~((runs.candidate == "ref") & (runs.seed >= 3))]
-    assert set(compare(few, "ref", ["static"]).query("candidate == 'cand'")["method"]) == {"welch"}
+    # each quantity pairs on its own values: with the reference's whole seeds 1-5 lost too, the flow
+    # rate has 1 pair of 6 values and the static pressure 6 of 12, both below 80 %: Welch
+    lost = runs[~((runs.candidate == "ref") & runs.seed.between(1, 5))]
+    t = compare(lost, "ref", ["flow", "static"]).query("candidate == 'cand'").set_index("quantity")
+    assert t.at["flow", "method"] == "welch" and t.at["static", "method"] == "welch"
+    many = pd.concat([runs, pd.DataFrame([dict(candidate=c, seed=100 + s, wall_s=1.0, timed=False, flow=np.nan,
+                                               static=10.0 + rng.standard_normal()) for c in ("ref", "cand")
+                                          for s in range(40)])])
+    many = many[~((many.candidate == "ref") & many.seed.between(1, 5))]
+    t = compare(many, "ref", ["flow", "static"]).query("candidate == 'cand'").set_index("quantity")
+    # 40 fill-only seeds more: the static pressure's 46 pairs of 52 (88 %) pair; the flow rate's do not
+    assert t.at["flow", "method"] == "welch" and t.at["static", "method"] == "paired"
+    assert t.at["static", "n_cand"] == 46 and t.at["flow", "n_cand"] == 6
+
+
+@pytest.mark.parametrize("candidate_seeds, method", [((0, 1, 2, 3, 99), "paired"), ((0, 1, 2, 99), "welch")])
+def test_a_quantity_pairs_when_80_percent_of_its_values_have_a_reference_seed(candidate_seeds, method):
+    rows = ([dict(candidate="ref", seed=s, wall_s=10.0, q=1.0 + 0.1 * s) for s in range(5)]
+            + [dict(candidate="cand", seed=s, wall_s=1.0, q=1.1 + 0.1 * s) for s in candidate_seeds])
+    row = compare(pd.DataFrame(rows), "ref", ["q"]).set_index("candidate").loc["cand"]
+    assert row["method"] == method
+    assert row["n_cand"] == (len(candidate_seeds) - 1 if method == "paired" else len(candidate_seeds))
 
 
 def test_speedups_are_timed_on_one_machine():

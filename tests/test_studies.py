@@ -342,7 +342,15 @@ def test_the_bench_plans_fill_only_seeds_after_the_whole_ones(tmp_path, monkeypa
     assert ab.fill_only_rows(pd.DataFrame(read_rows(tmp_path))).iloc[4:].all()
     with pytest.raises(SetupError, match="seeds: 1001 is more than 1000"):
         ab.run_bench(SMALL, tmp_path / "many", seeds=ab.SEED_RANGE + 1, candidates=cands)
+    with pytest.raises(SetupError, match="seeds: 4 is more than 3"):      # offsets 997-1000: 1000 is the check's
+        ab.run_bench(SMALL, tmp_path / "many", seeds=4, candidates=cands, seed_offset=ab.SEED_RANGE - 3)
     assert not (tmp_path / "many").exists()            # refused before anything is written
+    from typer.testing import CliRunner
+    from siloflow.cli import app
+    for option in ("--seeds", "--validate"):       # refused before the bench runs, not after it
+        result = CliRunner().invoke(app, ["bench", str(SMALL), "-o", str(tmp_path / "cli"), option, "1001"])
+        assert result.exit_code != 0 and f"{option}: 1001 is more than 1000" in result.output, result.output
+    assert not (tmp_path / "cli").exists() and len(ran) == 8
 
 
 def test_a_fill_only_run_keeps_the_whole_runs_automatic_dump_interval():
