@@ -30,7 +30,7 @@ def main() -> None:
     if not checks or not all(c["inside"] for c in checks):
         raise SystemExit(f"{SOURCE}: the recommendation was not confirmed with new seeds (siloflow bench --validate)")
     out = {k: rec[k] for k in KEEP if k in rec}
-    fills = f" (and {rec['fill_only_seeds']} fill-only fills a side)" if rec.get("fill_only_seeds") else ""
+    fills = f" (and {rec['fill_only_seeds']} fill-only fills of the profile)" if rec.get("fill_only_seeds") else ""
     out["benchmark"] = (f"benchmarks/cases/accuracy_small.yaml, {rec.get('reference_seeds')} reference runs and "
                         f"{rec.get('seeds')} of the profile{fills}, confirmed with {checks[0]['n']} new seeds "
                         "(make bench-accuracy)")

@@ -348,8 +348,10 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
     # a fill-only run adds its fill to the settled bed's quantities; its time is not a whole run's
     table = bench_stats.compare(ok.assign(timed=~fill_only), REFERENCE.name, list(QUANTITIES), confidence,
                                 design=DESIGN)
-    failed = runs[runs.state != "complete"].groupby("candidate").size()
-    table["failed_runs"] = table.candidate.map(failed).fillna(0).astype(int)
+    stopped = runs[runs.state != "complete"]
+    failed = stopped.groupby([stopped.candidate, fill_only_rows(stopped).rename("fill_only")]).size()
+    for column, fill in (("failed_runs", False), ("failed_fill_only", True)):     # whole runs, fill-only ones
+        table[column] = [int(failed.get((name, fill), 0)) for name in table.candidate]
     # fills a side that would prove each bounded quantity within its tolerance, at today's estimates
     table["fills_needed"] = [bench_stats.fills_needed(r, tolerances[r["quantity"]], confidence)
                              if r["quantity"] in tolerances else math.nan for _, r in table.iterrows()]

@@ -172,6 +172,7 @@ def test_conclude_writes_the_table_figure_and_a_recommendation(tmp_path):
                          "static_pressure": 500 * (1 + 0.002 * rng.standard_normal()),
                          "dynamic_pressure_max": 600.0, "solid_fraction": 0.6, "coordination": 5.0})
     rows.append({**rows[-1], "seed": 9, "state": "failed", "reason": "guard", "flow_rate": float("nan")})
+    rows.append({**rows[-1], "seed": 2009, "fill_only": True})
     pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)
     table, rec = ab.conclude(tmp_path)
     assert rec["candidate"] == "E1e-4_dt0.2" and rec["speedup"] == pytest.approx(100, rel=0.1)
@@ -179,7 +180,8 @@ def test_conclude_writes_the_table_figure_and_a_recommendation(tmp_path):
     assert json.loads((tmp_path / "recommended_profile.json").read_text())["candidate"] == "E1e-4_dt0.2"
     assert (tmp_path / "pareto.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     written = pd.read_csv(tmp_path / "comparison.csv")
-    assert int(written[written.candidate == "E1_dt0.1"].failed_runs.iloc[0]) == 1
+    failed = written.drop_duplicates("candidate").set_index("candidate")[["failed_runs", "failed_fill_only"]]
+    assert failed.loc["E1_dt0.1"].tolist() == [1, 1] and failed.loc["reference"].tolist() == [0, 0]
     needed = written.set_index(["candidate", "quantity"])["fills_needed"]
     assert needed[("E1e-4_dt0.2", "flow_rate")] <= 4 and math.isnan(needed[("E1e-4_dt0.2", "coordination")])
     # a hand-merged table repeating a seed is refused, naming the candidate and the seed, and nothing is rewritten
