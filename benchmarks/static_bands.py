@@ -46,7 +46,10 @@ def band_runs(bench: Path) -> pd.DataFrame:
 
 
 def main(bench: Path) -> None:
-    runs = ab.design_columns(band_runs(bench))
+    runs = band_runs(bench)
+    if runs.empty or not (runs.candidate == ab.REFERENCE.name).any():
+        raise SystemExit(f"{bench}: no complete reference run folder with results/bands.csv here")
+    runs = ab.design_columns(runs)
     ref = runs[runs.candidate == ab.REFERENCE.name]
     pressures = [c for c in runs.columns if c.endswith("_pressure")]
     top = max(ref[c].mean() for c in pressures)
