@@ -28,7 +28,7 @@ OUT = ROOT / "benchmarks" / "results" / "accuracy"
 
 
 def band_runs(bench: Path) -> pd.DataFrame:
-    """One row per complete run of the bench folder: candidate, seed, wall_s, fill_only and
+    """One row per complete run of the bench folder whose folder is here: candidate, seed, wall_s and
     ``band<i>_pressure`` / ``band<i>_shear`` (Pa, the static stage's means) from its bands.csv."""
     runs = pd.DataFrame(read_rows(bench))
     runs = runs[runs.state == "complete"]
