@@ -14,14 +14,12 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import matplotlib
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt          # noqa: E402
-import pandas as pd                      # noqa: E402
+import pandas as pd
 
-from siloflow import accuracy_bench as ab, bench_stats   # noqa: E402
-from siloflow.atomic_files import write_text          # noqa: E402
-from siloflow.run_table import read_rows              # noqa: E402
+from postprocess.figures import plt, save_figure
+from siloflow import accuracy_bench as ab, bench_stats
+from siloflow.atomic_files import write_text
+from siloflow.run_table import read_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "benchmarks" / "results" / "accuracy"
@@ -73,9 +71,7 @@ def main(bench: Path) -> None:
     ax.set_title("static wall pressure by band, from the bottom (95 % intervals)", fontsize=10)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    tmp = OUT / ".static_bands.png.tmp"
-    fig.savefig(tmp, dpi=120, format="png")
-    tmp.replace(OUT / "static_bands.png")
+    save_figure(fig, OUT / "static_bands.png")
     shown = table[table.quantity.str.endswith("_pressure") & (table.candidate != ab.REFERENCE.name)]
     print(shown[["candidate", "quantity", "n_cand", "verdict"]].to_string(index=False))
 

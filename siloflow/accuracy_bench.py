@@ -329,6 +329,13 @@ def fill_only_rows(runs):
     return runs["fill_only"].map(lambda v: v is True or str(v).strip().lower() in ("true", "1", "1.0")).astype(bool)
 
 
+def run_counts(runs) -> Callable[[str, bool], int]:
+    """``count(candidate, fill_only)``: how many rows of ``runs`` (a bench's run table) are that
+    candidate's whole (False) or fill-only (True) runs."""
+    counts = runs.groupby([runs.candidate, fill_only_rows(runs).rename("fill_only")]).size()
+    return lambda name, fill: int(counts.get((name, fill), 0))
+
+
 def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
              case_file: Optional[Path] = None) -> tuple:
     """From ``out/runs.csv``: ``comparison.csv`` (every candidate x quantity: errors with their
@@ -350,10 +357,9 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
     # a fill-only run adds its fill to the settled bed's quantities; its time is not a whole run's
     table = bench_stats.compare(ok.assign(timed=~fill_only), REFERENCE.name, list(QUANTITIES), confidence,
                                 design=DESIGN)
-    stopped = runs[runs.state != "complete"]
-    failed = stopped.groupby([stopped.candidate, fill_only_rows(stopped).rename("fill_only")]).size()
+    failed = run_counts(runs[runs.state != "complete"])
     for column, fill in (("failed_runs", False), ("failed_fill_only", True)):     # whole runs, fill-only ones
-        table[column] = [int(failed.get((name, fill), 0)) for name in table.candidate]
+        table[column] = [failed(name, fill) for name in table.candidate]
     # fills a side that would prove each bounded quantity within its tolerance, at today's estimates
     table["fills_needed"] = [bench_stats.fills_needed(r, tolerances[r["quantity"]], confidence)
                              if r["quantity"] in tolerances else math.nan for _, r in table.iterrows()]
@@ -366,8 +372,7 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
     if rec is not None:
         cand = next((c for c in CANDIDATES if c.name == rec["candidate"]), None)
         row = ok[ok.candidate == rec["candidate"]].iloc[0]
-        runs_of = ok.groupby(["candidate", fill_only.rename("fill_only")]).size()   # (candidate, fill-only) -> runs
-        count = lambda name, fill: int(runs_of.get((name, fill), 0))              # noqa: E731
+        count = run_counts(ok)
         rec.update(meets_tolerances=True, timestep_fraction=float(row.timestep_fraction),
                    stiffness_scale=float(row.stiffness_scale), confidence=confidence, error_bounds=rec.pop("bounds"),
                    seeds=count(rec["candidate"], False), reference_seeds=count(REFERENCE.name, False),

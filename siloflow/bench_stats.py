@@ -248,7 +248,7 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
         for q in quantities:
             r, c = (ref_at[q].to_numpy(dtype=float), cand_at[q].to_numpy(dtype=float)) if seeds else (None, None)
             pairs = int(np.sum(~(np.isnan(r) | np.isnan(c)))) if seeds else 0
-            if pairs and pairs >= max(MIN_PAIRS, MIN_PAIRED_SHARE * int(grp[q].notna().sum())):
+            if pairs >= max(MIN_PAIRS, MIN_PAIRED_SHARE * int(grp[q].notna().sum())):
                 d = dict(paired_difference(r, c, confidence), method="paired")
             else:
                 d = dict(difference(ref[q], grp[q], confidence), method="welch", pair_corr=math.nan)
