@@ -16,7 +16,7 @@ from typing import Iterable, Iterator
 
 import pandas as pd
 
-from siloflow.atomic_files import write_text
+from siloflow.atomic_files import atomic_path, write_text
 from siloflow.errors import ReadError
 
 from .dumps import Frame, read_frames
@@ -114,9 +114,8 @@ class FrameAnalysis:
         written = [folder / f"{self.name}.csv"]
         write_text(written[0], self.table.to_csv(index=False))
         parquet = folder / f"{self.name}.parquet"
-        tmp = parquet.with_name(f".{parquet.name}.tmp")
-        self.table.to_parquet(tmp, index=False)
-        tmp.replace(parquet)
+        with atomic_path(parquet) as tmp:
+            self.table.to_parquet(tmp, index=False)
         written.append(parquet)
         if figure and not self.table.empty:
             fig = self.figure(folder / f"{self.name}.png")

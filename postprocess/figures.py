@@ -1,7 +1,6 @@
 """Figures of a run (matplotlib, Agg backend, written atomically)."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import matplotlib
@@ -10,13 +9,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 
-def save_figure(fig, path) -> None:
-    """Write ``fig`` to ``path`` at 130 dpi (format from the suffix) atomically, through a temporary file, and close it."""
+def save_figure(fig, path, dpi: int = 130) -> None:
+    """Write ``fig`` to ``path`` (format from the suffix) atomically (``siloflow.atomic_files.atomic_path``)
+    and close it."""
+    from siloflow.atomic_files import atomic_path
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
-    fig.savefig(tmp, dpi=130)
-    plt.close(fig)
-    os.replace(tmp, path)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format=path.suffix[1:].lower() or "png", dpi=dpi)
+    finally:
+        plt.close(fig)
 
 
 def first_results_figure(bands, discharge, band_table, t_open: float, path) -> None:

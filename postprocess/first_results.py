@@ -13,7 +13,7 @@ from dataclasses import asdict
 import numpy as np
 import pandas as pd
 
-from siloflow.atomic_files import write_json, write_text
+from siloflow.atomic_files import atomic_path, write_json, write_text
 from siloflow.errors import ReadError
 from siloflow.run_folder import RESULT_TABLES, SUMMARY_NAME, RunFolder
 
@@ -181,7 +181,8 @@ def analyse(folder, measured_pressure=None) -> dict:
                    sectors.assign(time=sectors.step * run.dt).to_csv(index=False))
         write_text(out / RESULT_TABLES["bands"], table.to_csv(index=False))
         try:
-            sectors.to_parquet(out / "wall_pressure_sectors.parquet", index=False)
+            with atomic_path(out / "wall_pressure_sectors.parquet") as tmp:
+                sectors.to_parquet(tmp, index=False)
         except ImportError:  # pyarrow is a dependency; a missing one only loses the Parquet copy
             pass
 

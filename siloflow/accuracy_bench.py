@@ -86,6 +86,9 @@ CANDIDATES = (
     Candidate("E3e-2_dt0.1", 0.1, 3e-2),
     # a tenth of the stiffness: full stiffness at dt 0.1 t_c keeps the static load, 3/100 of it does not
     Candidate("E1e-1_dt0.2", 0.2, 1e-1),
+    # where between 1/10 and 3/100 the static over-load starts, and 1/10 at the shorter step
+    Candidate("E5e-2_dt0.2", 0.2, 5e-2),
+    Candidate("E1e-1_dt0.1", 0.1, 1e-1),
     Candidate("E1e-2_dt0.02", 0.02, 1e-2),
     Candidate("E1_dt0.1", 0.1, 1.0),
     Candidate("E1_dt0.05", 0.05, 1.0),

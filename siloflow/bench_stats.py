@@ -8,8 +8,6 @@ fastest candidate whose 95 % error bound is inside the tolerances; ``pareto_figu
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -220,6 +218,9 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
     -------
     pandas.DataFrame
         Columns ``candidate, quantity``, the keys of ``difference``, ``method``, ``pair_corr``,
+        ``ref_unpaired`` (a paired row's reference values left out because the candidate has no
+        finite value at their seeds: a failed or missing run; a failure that follows the fill biases
+        the pairs, so a non-zero count is worth reading),
         ``speedup, speedup_lo, speedup_hi`` (dimensionless), ``timing_machine``, ``timed_runs``
         (reference/candidate) and ``wall_mean_s`` (s, all the candidate's timed runs); the reference first.
     """
@@ -249,9 +250,12 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
             r, c = (ref_at[q].to_numpy(dtype=float), cand_at[q].to_numpy(dtype=float)) if seeds else (None, None)
             pairs = int(np.sum(~(np.isnan(r) | np.isnan(c)))) if seeds else 0
             if pairs >= max(MIN_PAIRS, MIN_PAIRED_SHARE * int(grp[q].notna().sum())):
-                d = dict(paired_difference(r, c, confidence), method="paired")
+                # reference values left out: their seeds' candidate runs are missing or failed
+                d = dict(paired_difference(r, c, confidence), method="paired",
+                         ref_unpaired=int(ref[q].notna().sum()) - pairs)
             else:
-                d = dict(difference(ref[q], grp[q], confidence), method="welch", pair_corr=math.nan)
+                d = dict(difference(ref[q], grp[q], confidence), method="welch", pair_corr=math.nan,
+                         ref_unpaired=0)
             if name == reference:
                 d.update(method="")
                 if d["n_ref"] > 0 and d["ref_mean"] != 0:
@@ -390,11 +394,5 @@ def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None) -> 
     for ax in axes[len(quantities):]:
         ax.set_visible(False)
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fig.savefig(fh, format=path.suffix[1:].lower() or "png", dpi=130)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    from postprocess.figures import save_figure
+    save_figure(fig, path)

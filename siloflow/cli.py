@@ -549,6 +549,12 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
     cols = ["candidate", "quantity", "n_cand", "speedup", "rel_error", "ci_lo", "ci_hi", "verdict"]
     out.print(printable(table[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}")), markup=False,
               highlight=False)
+    unpaired = table[(table.method == "paired") & (table.ref_unpaired > 0) & table.quantity.isin(tolerances)]
+    for r in unpaired.itertuples():
+        out.print(printable(f"note: {r.candidate} {r.quantity}: {r.ref_unpaired} reference fill(s) left out of the "
+                            f"pairs, their seeds' candidate runs failed or are missing (failed_runs "
+                            f"{r.failed_runs}, failed_fill_only {r.failed_fill_only}); a failure that follows "
+                            "the fill biases the pairs"), markup=False, highlight=False)
     if rec is None:
         out.print("the reference has none of the bounded quantities: nothing to recommend (see comparison.csv)")
     elif rec["candidate"] == REFERENCE.name:

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import io
 import math
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -876,7 +875,6 @@ def write_stl(wall: WallMesh, path) -> None:
     m = stl_mesh.Mesh(np.zeros(len(wall.triangles), dtype=stl_mesh.Mesh.dtype))
     m.vectors[:] = wall.triangles
     m.update_normals()
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "wb") as fh:
+    from .atomic_files import atomic_path
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         m.save(wall.name, fh=fh, mode=Mode.ASCII, update_normals=False)
-    os.replace(tmp, path)

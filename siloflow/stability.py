@@ -151,8 +151,6 @@ def conclude(out: Path, rows: list[dict]) -> list[dict]:
 def envelope_figure(df, edges: list[dict], path: Path) -> None:
     """Time-step fraction (x, log) against stiffness scale (y, log): stable points green circles, unstable
     red crosses labelled with their signal, inconclusive grey squares; the safe edge per stiffness as a bar."""
-    import os
-    import tempfile
     import matplotlib
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
@@ -177,11 +175,5 @@ def envelope_figure(df, edges: list[dict], path: Path) -> None:
     ax.set_title("stability envelope (bar: largest safe time step)")
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=path.parent)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=120)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    from postprocess.figures import save_figure
+    save_figure(fig, path, dpi=120)
