@@ -27,7 +27,7 @@ from .run_table import run_name
 QUANTITIES = ("flow_rate", "static_pressure", "dynamic_pressure_max", "solid_fraction", "coordination")
 #: the quantities of the discharge: a fill-only run (:func:`fill_only_case`) does not measure them
 DISCHARGE_QUANTITIES = ("flow_rate", "flow_rate_fit_se", "flow_rate_batch_se", "dynamic_pressure_max")
-#: fill-only seeds start this far from the case's seed
+#: fill-only seeds start this far from the case's seed (the new-seed check's this far from its first seed)
 FILL_ONLY_SEED_OFFSET = 2000
 #: whole runs' seeds start at the case's seed, the new-seed check's at + ``VALIDATION_SEED_OFFSET``:
 #: each range holds at most this many seeds
@@ -214,7 +214,7 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
               seed_offset: int = 0, fill_only_seeds: int = 0) -> list[dict]:
     """Run every candidate x seed not yet in ``out/runs.csv`` (the case's seed + ``seed_offset``, +1,
     ...), seed by seed (a stopped study keeps whole seeds: the reference and its candidates), then
-    ``fill_only_seeds`` seeds more (from the case's seed + ``FILL_ONLY_SEED_OFFSET``) cut after the
+    ``fill_only_seeds`` seeds more (from the case's seed + ``FILL_ONLY_SEED_OFFSET`` + ``seed_offset``) cut after the
     static stage (:func:`fill_only_case`, column ``fill_only`` true); return all rows
     (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
     import pandas as pd
@@ -242,7 +242,8 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
     rows = run_missing(out, plan([first_seed + k for k in range(seeds)], False), run_metrics, failed, report,
                        case_digest(base))
     if fill_only_seeds:
-        first = case.seed + FILL_ONLY_SEED_OFFSET
+        first = case.seed + FILL_ONLY_SEED_OFFSET + seed_offset
+        check_seed_count(fill_only_seeds, "fill-only seeds", FILL_ONLY_SEED_OFFSET + seed_offset)
         rows = run_missing(out, plan([first + k for k in range(fill_only_seeds)], True), fill_only_metrics, failed,
                            report, case_digest(base))
     return rows
@@ -261,19 +262,22 @@ VALIDATION_SEED_OFFSET = 1000
 
 
 def validate(case_file: Path, out: Path, recommended: str, seeds: int,
-             report: Callable[[str], None] = lambda s: None) -> list[dict]:
-    """Run the recommended candidate again with ``seeds`` new seeds (its fills independent of those
-    that chose it), as the candidate ``<name>_new_seeds``; :func:`conclude` then compares them with
-    the reference like any candidate, and :func:`validation` says whether they stay in the bounds."""
+             report: Callable[[str], None] = lambda s: None, fill_only_seeds: int = 0) -> list[dict]:
+    """Run the recommended candidate again with ``seeds`` new seeds and ``fill_only_seeds`` new
+    fill-only ones (from + ``VALIDATION_SEED_OFFSET``: fills independent of those that chose it), as
+    the candidate ``<name>_new_seeds``; :func:`conclude` then compares them with the reference like
+    any candidate, and :func:`validation` says whether they agree with the bounds."""
     from dataclasses import replace
     cand = next(c for c in CANDIDATES if c.name == recommended)
     return run_bench(case_file, out, seeds, [REFERENCE, replace(cand, name=cand.name + VALIDATION)], report,
-                     skip_reference=True, seed_offset=VALIDATION_SEED_OFFSET)
+                     skip_reference=True, seed_offset=VALIDATION_SEED_OFFSET, fill_only_seeds=fill_only_seeds)
 
 
 def validation(table, rec: dict) -> list[dict]:
-    """For each bounded quantity: the new seeds' error against the reference, and whether it lies
-    within the recommendation's 95 % bound (``inside``)."""
+    """For each bounded quantity: the new seeds' error against the reference, whether it lies
+    within the recommendation's 95 % bound (``inside``), and whether their own 95 % interval reaches
+    into [-bound, bound] (``consistent``: False only when the new seeds contradict the bound; a
+    few new seeds' point estimate may well fall outside a bound their interval does not refute)."""
     name = rec["candidate"] + VALIDATION
     out = []
     for q, bound in rec["error_bounds"].items():
@@ -282,7 +286,8 @@ def validation(table, rec: dict) -> list[dict]:
             continue
         r = row.iloc[0]
         out.append({"quantity": q, "rel_error": float(r.rel_error), "ci_lo": float(r.ci_lo), "ci_hi": float(r.ci_hi),
-                    "bound": float(bound), "inside": bool(abs(r.rel_error) <= bound), "n": int(r.n_cand)})
+                    "bound": float(bound), "inside": bool(abs(r.rel_error) <= bound),
+                    "consistent": bool(r.ci_lo <= bound and r.ci_hi >= -bound), "n": int(r.n_cand)})
     return out
 
 
@@ -339,6 +344,29 @@ def run_counts(runs) -> Callable[[str, bool], int]:
     return lambda name, fill: int(counts.get((name, fill), 0))
 
 
+def pairs_lost(runs, table) -> list[int]:
+    """Per row of a bench's comparison (``table``, from ``runs``, its run table): on a paired row,
+    the reference's finite values of the row's quantity at seeds where the candidate's run failed
+    (a guard stop, a crash) and no retry completed: pairs the failure took out. A failure that
+    follows the fill (a looser bed escaping, say) leaves the pairs biased, so a count above 0 is
+    worth reading; 0 on Welch rows (they use every value) and on the reference's."""
+    import numpy as np
+    complete = runs.state == "complete"
+    ref = runs[complete & (runs.candidate == REFERENCE.name)].set_index("seed")
+    done = set(zip(runs.candidate[complete], runs.seed[complete]))
+    failed = runs[~complete]
+    lost = {}
+    for name, seed, fill in zip(failed.candidate, failed.seed, fill_only_rows(failed)):
+        if (name, seed) not in done and seed in ref.index:
+            lost.setdefault(name, []).append((seed, fill))
+    counts = []
+    for r in table.itertuples():
+        seeds = [s for s, fill in lost.get(r.candidate, []) if not (fill and r.quantity in DISCHARGE_QUANTITIES)]
+        counts.append(int(np.isfinite(ref.loc[seeds, r.quantity].to_numpy(dtype=float)).sum())
+                      if r.method == "paired" and seeds else 0)
+    return counts
+
+
 def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
              case_file: Optional[Path] = None) -> tuple:
     """From ``out/runs.csv``: ``comparison.csv`` (every candidate x quantity: errors with their
@@ -363,6 +391,7 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
     failed = run_counts(runs[runs.state != "complete"])
     for column, fill in (("failed_runs", False), ("failed_fill_only", True)):     # whole runs, fill-only ones
         table[column] = [failed(name, fill) for name in table.candidate]
+    table["pairs_lost"] = pairs_lost(runs, table)
     # fills a side that would prove each bounded quantity within its tolerance, at today's estimates
     table["fills_needed"] = [bench_stats.fills_needed(r, tolerances[r["quantity"]], confidence)
                              if r["quantity"] in tolerances else math.nan for _, r in table.iterrows()]

@@ -250,12 +250,9 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
             r, c = (ref_at[q].to_numpy(dtype=float), cand_at[q].to_numpy(dtype=float)) if seeds else (None, None)
             pairs = int(np.sum(~(np.isnan(r) | np.isnan(c)))) if seeds else 0
             if pairs >= max(MIN_PAIRS, MIN_PAIRED_SHARE * int(grp[q].notna().sum())):
-                # reference values left out: their seeds' candidate runs are missing or failed
-                d = dict(paired_difference(r, c, confidence), method="paired",
-                         ref_unpaired=int(ref[q].notna().sum()) - pairs)
+                d = dict(paired_difference(r, c, confidence), method="paired")
             else:
-                d = dict(difference(ref[q], grp[q], confidence), method="welch", pair_corr=math.nan,
-                         ref_unpaired=0)
+                d = dict(difference(ref[q], grp[q], confidence), method="welch", pair_corr=math.nan)
             if name == reference:
                 d.update(method="")
                 if d["n_ref"] > 0 and d["ref_mean"] != 0:

@@ -514,6 +514,8 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
                                              "runs already in the folder"),
           validate_seeds: int = typer.Option(0, "--validate", min=0, help="then run the recommended profile with "
                                              "this many new seeds and check its errors stay in the bounds"),
+          validate_fill_only: int = typer.Option(0, "--validate-fill-only", min=0, help="and this many new fill-only "
+                                                 "seeds for the check (the static band pressure's fills)"),
           fill_only_seeds: int = typer.Option(0, "--fill-only-seeds", min=0, help="then this many seeds more, from "
                                               "the case's seed + 2000, each run only to the end of its static stage "
                                               "(about half a run): more fills for the settled bed's quantities "
@@ -527,6 +529,7 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
     try:                            # before hours of runs, not after them
         check_seed_count(seeds, "--seeds")
         check_seed_count(validate_seeds, "--validate")
+        check_seed_count(validate_fill_only, "--validate-fill-only")
     except SiloflowError as exc:
         _fail(exc)
     known = {c.name: c for c in CANDIDATES}
@@ -543,18 +546,17 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
         if not conclude_only:
             run_bench(case_file, output, seeds, chosen, report=_note, fill_only_seeds=fill_only_seeds)
         table, rec = conclude(output, tolerances, case_file=case_file)
-        if rec is not None and validate_seeds and not conclude_only and rec["candidate"] != REFERENCE.name:
-            validate(case_file, output, rec["candidate"], validate_seeds, report=_note)
+        if rec is not None and (validate_seeds or validate_fill_only) and not conclude_only and rec["candidate"] != REFERENCE.name:
+            validate(case_file, output, rec["candidate"], validate_seeds, report=_note,
+                     fill_only_seeds=validate_fill_only)
             table, rec = conclude(output, tolerances, case_file=case_file)
     cols = ["candidate", "quantity", "n_cand", "speedup", "rel_error", "ci_lo", "ci_hi", "verdict"]
     out.print(printable(table[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}")), markup=False,
               highlight=False)
-    unpaired = table[(table.method == "paired") & (table.ref_unpaired > 0) & table.quantity.isin(tolerances)]
-    for r in unpaired.itertuples():
-        out.print(printable(f"note: {r.candidate} {r.quantity}: {r.ref_unpaired} reference fill(s) left out of the "
-                            f"pairs, their seeds' candidate runs failed or are missing (failed_runs "
-                            f"{r.failed_runs}, failed_fill_only {r.failed_fill_only}); a failure that follows "
-                            "the fill biases the pairs"), markup=False, highlight=False)
+    for r in table[(table.pairs_lost > 0) & table.quantity.isin(tolerances)].itertuples():
+        out.print(printable(f"note: {r.candidate} {r.quantity}: {r.pairs_lost} pair(s) lost to the candidate's failed "
+                            "runs (see runs.csv's reason); a failure that follows the fill biases the pairs"),
+                  markup=False, highlight=False)
     if rec is None:
         out.print("the reference has none of the bounded quantities: nothing to recommend (see comparison.csv)")
     elif rec["candidate"] == REFERENCE.name:
@@ -573,9 +575,10 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
                             f"{rec.get('overlap_ratio') or float('nan'):.3g} of the radius), {rec['speedup']:.3g}x faster "
                             f"than the reference; 95 % error bounds: {bounds}"), markup=False, highlight=False)
     for c in (rec or {}).get("validation") or []:
+        verdict = ("inside the bound" if c["inside"] else "outside the bound, but its interval reaches into it"
+                   if c.get("consistent") else "OUTSIDE the bound, the whole interval: the new seeds contradict it")
         out.print(printable(f"new seeds ({c['n']} runs): {c['quantity']} error {c['rel_error']:+.1%} [{c['ci_lo']:+.1%}, "
-                            f"{c['ci_hi']:+.1%}]: {'inside' if c['inside'] else 'OUTSIDE'} the bound {c['bound']:.1%}"),
-                  markup=False, highlight=False)
+                            f"{c['ci_hi']:+.1%}]: {verdict} {c['bound']:.1%}"), markup=False, highlight=False)
     out.print(f"tables and figure: {output} (comparison.csv, pareto.png, recommended_profile.json)")
 
 

@@ -6,6 +6,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
@@ -217,6 +218,21 @@ def test_the_envelope_flags_dt_tc_unstable_and_its_edge_repeats_with_another_see
     assert edges[0]["safe"] == edges[1]["safe"] == 0.1 and edges[0]["unstable"] == edges[1]["unstable"] == 1.0
 
 
+def test_pairs_lost_counts_reference_values_whose_candidate_run_failed():
+    # the candidate's whole seed 2 failed (a guard stop), its seed 3 failed and was retried to the
+    # end, its fill-only seed 2002 failed: flow loses 1 pair, the static pressure 2; Welch rows lose none
+    rows = [dict(candidate=c, seed=s, state="complete", fill_only=s >= 2000, flow_rate=np.nan if s >= 2000 else 1.0,
+                 static_pressure=2.0) for c in ("reference", "cand") for s in (0, 1, 2, 3, 2000, 2001, 2002)]
+    runs = pd.DataFrame(rows)
+    failed = (runs.candidate == "cand") & runs.seed.isin([2, 3, 2002])
+    runs.loc[failed, "state"] = "failed"
+    runs = pd.concat([runs, pd.DataFrame([dict(rows[3], candidate="cand")])], ignore_index=True)   # seed 3's retry
+    table = pd.DataFrame([dict(candidate=c, quantity=q, method=m) for c, m in (("reference", ""), ("cand", "paired"))
+                          for q in ("flow_rate", "static_pressure")]
+                         + [dict(candidate="cand", quantity="static_pressure", method="welch")])
+    assert ab.pairs_lost(runs, table) == [0, 0, 1, 2, 0]
+
+
 def test_validation_says_whether_new_seeds_stay_in_the_bounds():
     table = pd.DataFrame([{"candidate": "fast" + ab.VALIDATION, "quantity": "flow_rate", "rel_error": 0.01,
                            "ci_lo": -0.01, "ci_hi": 0.03, "n_cand": 3},
@@ -225,6 +241,10 @@ def test_validation_says_whether_new_seeds_stay_in_the_bounds():
     rec = {"candidate": "fast", "error_bounds": {"flow_rate": 0.02, "static_pressure": 0.05}}
     checks = {c["quantity"]: c for c in ab.validation(table, rec)}
     assert checks["flow_rate"]["inside"] and not checks["static_pressure"]["inside"]
+    # the static interval (-12 %, -4 %) reaches into the 5 % bound: outside, but not a contradiction
+    assert checks["flow_rate"]["consistent"] and checks["static_pressure"]["consistent"]
+    table.loc[1, ["ci_lo", "ci_hi"]] = [-0.12, -0.06]
+    assert not {c["quantity"]: c for c in ab.validation(table, rec)}["static_pressure"]["consistent"]
     assert case_from_dict(ab.candidate_case(yaml.safe_load(SMALL.read_text()),
                                             ab.Candidate("x" + ab.VALIDATION, 0.1), 5)).name.endswith("-s5")
 
@@ -342,6 +362,11 @@ def test_the_bench_plans_fill_only_seeds_after_the_whole_ones(tmp_path, monkeypa
     assert all(r["static_pressure"] == pytest.approx(450.0) for r in rows)
     assert not ab.fill_only_rows(pd.DataFrame(read_rows(tmp_path))).iloc[:4].any()
     assert ab.fill_only_rows(pd.DataFrame(read_rows(tmp_path))).iloc[4:].all()
+    # the new-seed check's fill-only seeds are new fills too: + 1000 from the bench's fill-only ones
+    rows = ab.validate(SMALL, tmp_path, "E1e-2_dt0.1", 1, fill_only_seeds=2)
+    check = [(r["seed"], r["fill_only"]) for r in rows if r["candidate"] == "E1e-2_dt0.1" + ab.VALIDATION]
+    first = s0 + ab.VALIDATION_SEED_OFFSET
+    assert check == [(first, False), *((first + ab.FILL_ONLY_SEED_OFFSET + k, True) for k in (0, 1))]
     with pytest.raises(SetupError, match="seeds: 1001 is more than 1000"):
         ab.run_bench(SMALL, tmp_path / "many", seeds=ab.SEED_RANGE + 1, candidates=cands)
     with pytest.raises(SetupError, match="seeds: 4 is more than 3"):      # offsets 997-1000: 1000 is the check's
@@ -349,10 +374,10 @@ def test_the_bench_plans_fill_only_seeds_after_the_whole_ones(tmp_path, monkeypa
     assert not (tmp_path / "many").exists()            # refused before anything is written
     from typer.testing import CliRunner
     from siloflow.cli import app
-    for option in ("--seeds", "--validate"):       # refused before the bench runs, not after it
+    for option in ("--seeds", "--validate", "--validate-fill-only"):   # refused before the bench runs, not after it
         result = CliRunner().invoke(app, ["bench", str(SMALL), "-o", str(tmp_path / "cli"), option, "1001"])
         assert result.exit_code != 0 and f"{option}: 1001 is more than 1000" in result.output, result.output
-    assert not (tmp_path / "cli").exists() and len(ran) == 8
+    assert not (tmp_path / "cli").exists() and len(ran) == 11
 
 
 def test_a_fill_only_run_keeps_the_whole_runs_automatic_dump_interval():
