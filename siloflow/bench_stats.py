@@ -218,9 +218,6 @@ def compare(runs: pd.DataFrame, reference: str, quantities: list[str], confidenc
     -------
     pandas.DataFrame
         Columns ``candidate, quantity``, the keys of ``difference``, ``method``, ``pair_corr``,
-        ``ref_unpaired`` (a paired row's reference values left out because the candidate has no
-        finite value at their seeds: a failed or missing run; a failure that follows the fill biases
-        the pairs, so a non-zero count is worth reading),
         ``speedup, speedup_lo, speedup_hi`` (dimensionless), ``timing_machine``, ``timed_runs``
         (reference/candidate) and ``wall_mean_s`` (s, all the candidate's timed runs); the reference first.
     """

@@ -546,7 +546,8 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
         if not conclude_only:
             run_bench(case_file, output, seeds, chosen, report=_note, fill_only_seeds=fill_only_seeds)
         table, rec = conclude(output, tolerances, case_file=case_file)
-        if rec is not None and (validate_seeds or validate_fill_only) and not conclude_only and rec["candidate"] != REFERENCE.name:
+        checking = (validate_seeds or validate_fill_only) and not conclude_only
+        if rec is not None and checking and rec["candidate"] != REFERENCE.name:
             validate(case_file, output, rec["candidate"], validate_seeds, report=_note,
                      fill_only_seeds=validate_fill_only)
             table, rec = conclude(output, tolerances, case_file=case_file)
@@ -575,10 +576,11 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
                             f"{rec.get('overlap_ratio') or float('nan'):.3g} of the radius), {rec['speedup']:.3g}x faster "
                             f"than the reference; 95 % error bounds: {bounds}"), markup=False, highlight=False)
     for c in (rec or {}).get("validation") or []:
-        verdict = ("inside the bound" if c["inside"] else "outside the bound, but its interval reaches into it"
-                   if c.get("consistent") else "OUTSIDE the bound, the whole interval: the new seeds contradict it")
+        bound = f"the bound {c['bound']:.1%}"
+        verdict = (f"inside {bound}" if c["inside"] else f"outside {bound}, but its interval reaches into it"
+                   if c.get("consistent") else f"OUTSIDE {bound}, the whole interval: the new seeds contradict it")
         out.print(printable(f"new seeds ({c['n']} runs): {c['quantity']} error {c['rel_error']:+.1%} [{c['ci_lo']:+.1%}, "
-                            f"{c['ci_hi']:+.1%}]: {verdict} {c['bound']:.1%}"), markup=False, highlight=False)
+                            f"{c['ci_hi']:+.1%}]: {verdict}"), markup=False, highlight=False)
     out.print(f"tables and figure: {output} (comparison.csv, pareto.png, recommended_profile.json)")
 
 
