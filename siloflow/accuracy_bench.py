@@ -220,6 +220,7 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
     import pandas as pd
     from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, read_rows, run_missing
     check_seed_count(seeds, "seeds", seed_offset)
+    check_seed_count(fill_only_seeds, "fill-only seeds", FILL_ONLY_SEED_OFFSET + seed_offset)
     base, case = read_base_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
         raise SetupError("the bench needs the reference candidate (the papers' settings) to compare with")
@@ -243,7 +244,6 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
                        case_digest(base))
     if fill_only_seeds:
         first = case.seed + FILL_ONLY_SEED_OFFSET + seed_offset
-        check_seed_count(fill_only_seeds, "fill-only seeds", FILL_ONLY_SEED_OFFSET + seed_offset)
         rows = run_missing(out, plan([first + k for k in range(fill_only_seeds)], True), fill_only_metrics, failed,
                            report, case_digest(base))
     return rows
@@ -276,8 +276,9 @@ def validate(case_file: Path, out: Path, recommended: str, seeds: int,
 def validation(table, rec: dict) -> list[dict]:
     """For each bounded quantity: the new seeds' error against the reference, whether it lies
     within the recommendation's 95 % bound (``inside``), and whether their own 95 % interval reaches
-    into [-bound, bound] (``consistent``: False only when the new seeds contradict the bound; a
-    few new seeds' point estimate may well fall outside a bound their interval does not refute)."""
+    into [-bound, bound] (``consistent``: False when the new seeds contradict the bound, None when
+    they have no interval, fewer than 2 fills; a few new seeds' point estimate may well fall outside a
+    bound their interval does not refute)."""
     name = rec["candidate"] + VALIDATION
     out = []
     for q, bound in rec["error_bounds"].items():
@@ -287,7 +288,9 @@ def validation(table, rec: dict) -> list[dict]:
         r = row.iloc[0]
         out.append({"quantity": q, "rel_error": float(r.rel_error), "ci_lo": float(r.ci_lo), "ci_hi": float(r.ci_hi),
                     "bound": float(bound), "inside": bool(abs(r.rel_error) <= bound),
-                    "consistent": bool(r.ci_lo <= bound and r.ci_hi >= -bound), "n": int(r.n_cand)})
+                    "consistent": (bool(r.ci_lo <= bound and r.ci_hi >= -bound)
+                                   if math.isfinite(r.ci_lo) and math.isfinite(r.ci_hi) else None),
+                    "n": int(r.n_cand)})
     return out
 
 
@@ -358,10 +361,10 @@ def pairs_lost(runs, table) -> list[int]:
     lost = {}
     for name, seed, fill in zip(failed.candidate, failed.seed, fill_only_rows(failed)):
         if (name, seed) not in done and seed in ref.index:
-            lost.setdefault(name, []).append((seed, fill))
+            lost.setdefault(name, set()).add((seed, fill))
     counts = []
     for r in table.itertuples():
-        seeds = [s for s, fill in lost.get(r.candidate, []) if not (fill and r.quantity in DISCHARGE_QUANTITIES)]
+        seeds = sorted({s for s, fill in lost.get(r.candidate, ()) if not (fill and r.quantity in DISCHARGE_QUANTITIES)})
         counts.append(int(np.isfinite(ref.loc[seeds, r.quantity].to_numpy(dtype=float)).sum())
                       if r.method == "paired" and seeds else 0)
     return counts

@@ -35,8 +35,12 @@ def atomic_path(path):
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        os.fchmod(fd, 0o666 & ~_umask())
-        os.close(fd)
+        try:
+            os.fchmod(fd, 0o666 & ~_umask())
+        except OSError:               # a file system without modes (vfat, some network mounts)
+            pass
+        finally:
+            os.close(fd)
         yield Path(tmp)
         os.replace(tmp, path)
     except BaseException:

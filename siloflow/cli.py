@@ -530,6 +530,7 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
         check_seed_count(seeds, "--seeds")
         check_seed_count(validate_seeds, "--validate")
         check_seed_count(validate_fill_only, "--validate-fill-only")
+        check_seed_count(fill_only_seeds, "--fill-only-seeds")
     except SiloflowError as exc:
         _fail(exc)
     known = {c.name: c for c in CANDIDATES}
@@ -577,7 +578,8 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
                             f"than the reference; 95 % error bounds: {bounds}"), markup=False, highlight=False)
     for c in (rec or {}).get("validation") or []:
         bound = f"the bound {c['bound']:.1%}"
-        verdict = (f"inside {bound}" if c["inside"] else f"outside {bound}, but its interval reaches into it"
+        verdict = (f"no interval (fewer than 2 new fills): {bound} not checked" if c.get("consistent", True) is None
+                   else f"inside {bound}" if c["inside"] else f"outside {bound}, but its interval reaches into it"
                    if c.get("consistent") else f"OUTSIDE {bound}, the whole interval: the new seeds contradict it")
         out.print(printable(f"new seeds ({c['n']} runs): {c['quantity']} error {c['rel_error']:+.1%} [{c['ci_lo']:+.1%}, "
                             f"{c['ci_hi']:+.1%}]: {verdict}"), markup=False, highlight=False)

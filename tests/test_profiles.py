@@ -241,3 +241,31 @@ def test_a_bed_settled_without_the_guard_is_not_taken_from_the_cache_by_a_guarde
     unwatched = plan_of(with_engine(quick_dict, timestep_fraction=watched.timestep.fraction, guard={"enabled": False}))
     assert fill_key(watched, FakeEngine()) == fill_key(loose, FakeEngine())          # other limits: the same bed
     assert fill_key(watched, FakeEngine()) != fill_key(unwatched, FakeEngine())
+
+
+def test_publishing_needs_every_bounded_quantity_checked_inside_its_bound(tmp_path, monkeypatch):
+    """benchmarks/publish_fast_profile.py writes the profile only when the new seeds' check put each
+    bounded quantity's error inside its bound; a missing or outside check refuses, writing nothing."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("publish", ROOT / "benchmarks" / "publish_fast_profile.py")
+    publish = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(publish)
+    source, target = tmp_path / "recommended_profile.json", tmp_path / "fast_profile.json"
+    monkeypatch.setattr(publish, "SOURCE", source)
+    monkeypatch.setattr(publish, "TARGET", target)
+    check = dict(rel_error=0.004, ci_lo=-0.03, ci_hi=0.04, bound=0.03, inside=True, consistent=True, n=10)
+    rec = {"candidate": "E1e-1_dt0.1", "meets_tolerances": True, "timestep_fraction": 0.1, "overlap_ratio": 0.026,
+           "error_bounds": {"flow_rate": 0.03, "static_pressure": 0.038},
+           "validation": [dict(check, quantity="flow_rate")]}
+    source.write_text(json.dumps(rec))
+    with pytest.raises(SystemExit, match="not confirmed"):         # static pressure not checked
+        publish.main()
+    rec["validation"].append(dict(check, quantity="static_pressure", inside=False, rel_error=0.05, bound=0.038))
+    source.write_text(json.dumps(rec))
+    with pytest.raises(SystemExit, match="not confirmed"):         # outside its bound, though consistent
+        publish.main()
+    assert not target.exists()
+    rec["validation"][1].update(inside=True, rel_error=0.0)
+    source.write_text(json.dumps(rec))
+    publish.main()
+    assert json.loads(target.read_text())["candidate"] == "E1e-1_dt0.1"

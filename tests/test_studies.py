@@ -245,6 +245,8 @@ def test_validation_says_whether_new_seeds_stay_in_the_bounds():
     assert checks["flow_rate"]["consistent"] and checks["static_pressure"]["consistent"]
     table.loc[1, ["ci_lo", "ci_hi"]] = [-0.12, -0.06]
     assert not {c["quantity"]: c for c in ab.validation(table, rec)}["static_pressure"]["consistent"]
+    table.loc[1, ["ci_lo", "ci_hi", "n_cand"]] = [float("nan"), float("nan"), 1]     # one new fill: no interval
+    assert {c["quantity"]: c for c in ab.validation(table, rec)}["static_pressure"]["consistent"] is None
     assert case_from_dict(ab.candidate_case(yaml.safe_load(SMALL.read_text()),
                                             ab.Candidate("x" + ab.VALIDATION, 0.1), 5)).name.endswith("-s5")
 
@@ -374,7 +376,7 @@ def test_the_bench_plans_fill_only_seeds_after_the_whole_ones(tmp_path, monkeypa
     assert not (tmp_path / "many").exists()            # refused before anything is written
     from typer.testing import CliRunner
     from siloflow.cli import app
-    for option in ("--seeds", "--validate", "--validate-fill-only"):   # refused before the bench runs, not after it
+    for option in ("--seeds", "--validate", "--validate-fill-only", "--fill-only-seeds"):   # before the bench runs
         result = CliRunner().invoke(app, ["bench", str(SMALL), "-o", str(tmp_path / "cli"), option, "1001"])
         assert result.exit_code != 0 and f"{option}: 1001 is more than 1000" in result.output, result.output
     assert not (tmp_path / "cli").exists() and len(ran) == 11
