@@ -8,11 +8,12 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from siloflow.atomic_files import atomic_path  # noqa: E402
+
 
 def save_figure(fig, path, dpi: int = 130) -> None:
     """Write ``fig`` to ``path`` (format from the suffix) atomically (``siloflow.atomic_files.atomic_path``)
     and close it."""
-    from siloflow.atomic_files import atomic_path
     path = Path(path)
     try:
         with atomic_path(path) as tmp:
