@@ -154,7 +154,7 @@ bench-accuracy-mobilised: install
 # the second, larger case (2000 grains, about 30 min per reference run on 2 cores): LARGE_SEEDS
 # fills a side, resumed from the committed table (a new machine starts from it), results committed
 ACCURACY_LARGE = runs/bench_accuracy_large
-LARGE_SEEDS = 2
+LARGE_SEEDS = 4
 # fill-only seeds (half a run each) for its settled bed's quantities: none run yet
 LARGE_FILL_SEEDS = 0
 bench-accuracy-large: install
