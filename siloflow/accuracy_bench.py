@@ -92,6 +92,10 @@ CANDIDATES = (
     Candidate("E1e-2_dt0.02", 0.02, 1e-2),
     Candidate("E1_dt0.1", 0.1, 1.0),
     Candidate("E1_dt0.05", 0.05, 1.0),
+    # the longest tested step (0.3 t_c, 0.6 of the stability edge) at a tenth of the stiffness and at full
+    # stiffness: whether the profile's 1/10 or the full contact can take a longer step for free
+    Candidate("E1e-1_dt0.3", 0.3, 1e-1),
+    Candidate("E1_dt0.3", 0.3, 1.0),
 )
 
 
