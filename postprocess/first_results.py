@@ -324,8 +324,9 @@ def profile_line(p: dict | None) -> str:
             f"stiffness x {_fmt(p['stiffness_scale'], 'g')}")
     if p["name"] == "fast":
         bounds = ", ".join(f"{q} {b:.1%}" for q, b in (p.get("error_bounds") or {}).items())
-        line += (f"; 95 % error bounds against the papers' settings: {bounds} (siloflow bench, {p.get('benchmark')})"
-                 if bounds else "; its error bounds are not measured yet")
+        line += (f"; 95 % error bounds against the papers' settings: {bounds}, measured on the benchmark's case "
+                 f"(siloflow bench, {p.get('benchmark')}), not on this one" if bounds
+                 else "; its error bounds are not measured yet")
     return line
 
 

@@ -96,6 +96,11 @@ CANDIDATES = (
     # stiffness: whether the profile's 1/10 or the full contact can take a longer step for free
     Candidate("E1e-1_dt0.3", 0.3, 1e-1),
     Candidate("E1_dt0.3", 0.3, 1.0),
+    # around 100x, where the static error changes sign (1/100: +3 to +6 %, 1/1000: -12 to -13 %, rained):
+    # 3/1000 of the stiffness, and steps up to the stability edge (0.5 t_c, margin 1.4 to the first unstable)
+    Candidate("E3e-3_dt0.3", 0.3, 3e-3),
+    Candidate("E3e-3_dt0.5", 0.5, 3e-3),
+    Candidate("E1e-2_dt0.5", 0.5, 1e-2),
 )
 
 
