@@ -60,7 +60,6 @@ bench: install
 	$(PY) benchmarks/coarse_graining_speed.py
 	$(PY) benchmarks/dust_density_scaling.py
 
-# the dust time-step remedy alone (two real runs, about 10 minutes)
 # particle-steps per second of LIGGGHTS and LAMMPS (granular and gran/hertz/history), 1 and 2 ranks;
 # six runs of about a minute, resumable (benchmarks/results/engines/: throughput.csv, .png)
 bench-engines: install
@@ -70,6 +69,9 @@ bench-engines: install
 bench-deck: install
 	$(PY) benchmarks/deck_costs.py
 
+# the dust time-step remedy (issue 16): the clump silo's dust at its true density, x25 and x200, and the two
+# scales at the true density's time step, 5 seeds each, paired by seed (about 35 min on 2 cores; resumable in
+# runs/bench_dust; benchmarks/results/dust/: runs.csv, comparison.csv, dust.png)
 bench-dust: install
 	$(PY) benchmarks/dust_density_scaling.py
 
@@ -89,8 +91,9 @@ bench-fill: install
 # LAMMPS engine to 10 seeds (runs paired by seed), the reference and the two best to 12, the 1/100-stiffness
 # candidates to ACCURACY_SEEDS (27), fill-only seeds for the settled beds (the time step alone and the stiffness
 # alone included), and the recommendation at the issue's 3 % on flow rate and 5 % on static band pressure,
-# checked with 10 new seeds and 20 new fill-only ones (the committed table also holds the 3 new seeds that checked
-# the earlier recommendation at 8 %, E1e-2_dt0.1: README); static_bands.py splits the static load by band and
+# checked with 10 new seeds and 20 new fill-only ones (the committed table also holds the 3 new seeds of each
+# earlier recommendation: E1e-2_dt0.2, recommended at 10 fills a side (a6fc6da), and E1e-2_dt0.1, at 8 %; a bench
+# run from scratch checks only what it recommends at each step); static_bands.py splits the static load by band and
 # compares the settled beds' force balance, the wall friction's share (needs the run folders). Resumable, and it starts from the committed table
 # (runs/bench_accuracy; about 6 h on 2 cores from scratch, 6-14 min per reference run). The tables and figure go to
 # benchmarks/results/accuracy/, the recommendation to siloflow/fast_profile.json (refused unless proven and confirmed)
@@ -109,6 +112,10 @@ ACCURACY_STATIC_TOL = 0.05
 # the recommendation's check: new whole seeds (seeds 1100, ...) and new fill-only ones (3100, ...)
 ACCURACY_VALIDATE = 10
 ACCURACY_VALIDATE_FILL = 20
+# around 100x: 3/1000 of the stiffness at 0.3 t_c, steps of 0.5 t_c (the guard's stability edge) and 1/1000 to the
+# full ensemble, with two more reference seeds (127, 128) timed on the machine that ran these candidates
+HUNDREDX_SEEDS = 29
+HUNDREDX_CANDIDATES = reference,E3e-3_dt0.3,E3e-3_dt0.5,E1e-2_dt0.5,E1e-3_dt0.3,E1e-3_dt0.2
 FAST_CANDIDATES = E1e-3_dt0.3,E1e-3_dt0.2,E1e-3_dt0.1,E3e-4_dt0.2,E1e-2_dt0.1,E1e-4_dt0.2_past_guard,E1e-3_dt0.2_1rank,E1e-3_dt0.2_lean
 PAIRED_CANDIDATES = reference,E1e-2_dt0.1,E1e-2_dt0.3,E1e-2_dt0.2,E1e-2_dt0.2_lammps,E1e-2_dt0.1_lammps
 # static_bands.py BENCH ARGS: it reads the run folders, the reference's included, so it runs only where the
@@ -129,6 +136,9 @@ bench-accuracy: install
 	  --flow-tolerance 0.06 --static-tolerance 0.06 --validate 3
 	$(VENV)/bin/siloflow bench benchmarks/cases/accuracy_small.yaml -o $(ACCURACY) --seeds 3 --candidates $(KNOB_CANDIDATES) \
 	  --flow-tolerance 0.06 --static-tolerance 0.06 --fill-only-seeds $(ACCURACY_FILL_SEEDS)
+	$(VENV)/bin/siloflow bench benchmarks/cases/accuracy_small.yaml -o $(ACCURACY) --seeds $(HUNDREDX_SEEDS) \
+	  --candidates $(HUNDREDX_CANDIDATES) --flow-tolerance $(ACCURACY_FLOW_TOL) \
+	  --static-tolerance $(ACCURACY_STATIC_TOL) --fill-only-seeds $(ACCURACY_FILL_SEEDS)
 	$(VENV)/bin/siloflow bench benchmarks/cases/accuracy_small.yaml -o $(ACCURACY) --seeds $(ACCURACY_SEEDS) \
 	  --candidates $(ACCURACY_CANDIDATES) --flow-tolerance $(ACCURACY_FLOW_TOL) \
 	  --static-tolerance $(ACCURACY_STATIC_TOL) --fill-only-seeds $(ACCURACY_FILL_SEEDS) \
@@ -136,6 +146,7 @@ bench-accuracy: install
 	mkdir -p benchmarks/results/accuracy
 	cd $(ACCURACY) && cp runs.csv comparison.csv run_errors.csv pareto.png recommended_profile.json $(CURDIR)/benchmarks/results/accuracy/
 	$(PY) benchmarks/publish_fast_profile.py
+	$(PY) benchmarks/accuracy_table.py benchmarks/results/accuracy --readme README.md
 	$(call static_bands,$(ACCURACY),)
 
 # the static over-load's cause (issue 16): the small case with its wall friction mobilised after settling
@@ -147,7 +158,7 @@ bench-accuracy: install
 ACCURACY_MOBILISED = runs/bench_accuracy_mobilised
 MOBILISED_SEEDS = 2
 MOBILISED_FILL_SEEDS = 16
-MOBILISED_CANDIDATES = reference,E1e-1_dt0.1,E1e-2_dt0.1,E1e-2_dt0.2,E1e-2_dt0.3,E1e-3_dt0.2,E1e-3_dt0.3
+MOBILISED_CANDIDATES = reference,E1e-1_dt0.1,E1e-2_dt0.1,E1e-2_dt0.2,E1e-2_dt0.3,E1e-3_dt0.2,E1e-3_dt0.3,E3e-3_dt0.3
 bench-accuracy-mobilised: install
 	mkdir -p $(ACCURACY_MOBILISED)
 	if [ ! -f $(ACCURACY_MOBILISED)/runs.csv ] && [ -f benchmarks/results/accuracy_mobilised/runs.csv ]; then \

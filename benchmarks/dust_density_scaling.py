@@ -1,58 +1,44 @@
 """The dust time-step remedy, measured: the same clumps + dust silo run with the dust at its own
-density and with the dust density scaled (``particles.dust.density_scale``), each with several
-seeds to show the run-to-run noise any change must exceed.
+density and with the dust density scaled (``particles.dust.density_scale``), over several seeds.
 
-Prints, per run: time step, engine wall time, dust mass share, static wall pressure of the
-lowest band, steady flow rate Wf and settled bulk solid fraction; then per scale the change of
-each against the true density with its standard error.
+``make bench-dust`` (resumable: a (variant, seed) already in the table is not run again; one engine
+job at a time). Each variant is compared with the true density as ``siloflow bench`` compares a
+candidate with its reference (``siloflow.bench_stats.compare``: paired by seed, 95 % intervals,
+"not resolved" when the interval holds 0, the speed-up from the engine's wall time):
 
-    python benchmarks/dust_density_scaling.py [case.yaml] [--scales 25 200] [--seeds 3]
+- ``x25``, ``x200``: the dust density scaled, at the time step it allows (the point of the remedy);
+- ``x25_dt1``, ``x200_dt1``: the dust density scaled at the true density's time step, so the dust's
+  mass is all that changes.
 
-Default case: tests/data/clump_silo.yaml (600 wheat clumps, 60 dust balls, Hertz), scales 25
-and 200 (1000 did not settle in the allowed time), three seeds each, the true density
-included: the seeds give each mean a standard error, and a change is called measured only
-beyond twice the combined error. About 10-15 minutes on this machine (multisphere runs on one
-core). A variant that fails (e.g. a bed that no longer settles) is reported as such.
+    python benchmarks/dust_density_scaling.py [case.yaml] [--scales 25 200] [--seeds 5]
+
+Default case: tests/data/clump_silo.yaml (600 wheat clumps, 60 dust balls, Hertz, multisphere on
+one rank; 1000x did not settle in the allowed time). Work folder runs/bench_dust; results in
+benchmarks/results/dust/: runs.csv (every run, with its time step and the dust's mass share),
+comparison.csv (the bench's columns) and dust.png (error against speed-up, one panel per quantity).
 """
 from __future__ import annotations
 
 import argparse
 import copy
 import sys
-import tempfile
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
-import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from postprocess.first_results import analyse  # noqa: E402
+from siloflow import bench_stats  # noqa: E402
+from siloflow.accuracy_bench import QUANTITIES, run_metrics  # noqa: E402
+from siloflow.atomic_files import write_text  # noqa: E402
 from siloflow.case_file import case_from_dict  # noqa: E402
 from siloflow.derived import derive  # noqa: E402
-from siloflow.engine import LiggghtsEngine  # noqa: E402
-from siloflow.errors import EngineRunError  # noqa: E402
+from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing, run_name  # noqa: E402
 
-
-#: every run's measurements, written before the report is printed
-RAW_TABLE = Path(tempfile.gettempdir()) / "siloflow_dust_density_scaling.csv"
-
-
-def measure(data: dict, folder: Path) -> dict:
-    case = case_from_dict(data)
-    d = derive(case)
-    record = LiggghtsEngine().run(case, folder)
-    summary = analyse(folder)
-    dust_mass = d.fill.dust_count * d.dust.mass
-    fa = summary.get("frame_analyses", {})
-    return {"scale": case.particles.dust.density_scale, "seed": case.seed, "dt": d.dt,
-            "dt_without_dust": d.timestep.without_dust, "wall_s": record.wall_time,
-            "dust_mass_share": dust_mass / d.total_mass,
-            "p_static_band0": summary["bands"][0]["static_pressure"],
-            "flow_rate": summary["flow_rate"]["rate"],
-            "bulk_phi": fa.get("bulk_solid_fraction") if isinstance(fa.get("bulk_solid_fraction"), float) else float("nan")}
+OUT = ROOT / "benchmarks" / "results" / "dust"
+WORK = ROOT / "runs" / "bench_dust"
+TRUE = "true_density"
 
 
 def variant_data(base: dict, scale: float, seed: int, keep_dt: bool) -> dict:
@@ -69,82 +55,56 @@ def variant_data(base: dict, scale: float, seed: int, keep_dt: bool) -> dict:
     return data
 
 
-def main(case_file: Path, scales: list[float], seeds: int, keep_dt: bool = True) -> None:
-    base = yaml.safe_load(case_file.read_text())
-    runs = []
-    with tempfile.TemporaryDirectory() as tmp:
-        variants = [(scale, base["seed"] + k, False) for scale in [1.0] + scales for k in range(seeds)]
-        if keep_dt:
-            variants += [(scale, base["seed"] + k, True) for scale in scales for k in range(seeds)]
-        for k, (scale, seed, same_dt) in enumerate(variants):
-            label = f"{scale:g}" + (" @dt1" if same_dt else "")
-            try:
-                runs.append({"variant": label, **measure(variant_data(base, scale, seed, same_dt), Path(tmp) / f"run{k}")})
-            except EngineRunError as exc:          # a failed variant is a result too: say what failed
-                print(f"density_scale {label} seed {seed}: FAILED: {str(exc).splitlines()[0]}", flush=True)
-                continue
-            r = runs[-1]
-            print(f"density_scale {label} seed {seed}: dt {r['dt']:.3g} s (without dust {r['dt_without_dust']:.3g} s), "
-                  f"engine {r['wall_s']:.1f} s, dust {100 * r['dust_mass_share']:.2f} % of the mass", flush=True)
-    table = pd.DataFrame(runs)
-    if not table.empty:          # the raw runs first: a report that fails below loses nothing
-        table.to_csv(RAW_TABLE, index=False)
-        print(f"runs written to {RAW_TABLE}")
-    report(table)
+def variant_name(scale: float, keep_dt: bool) -> str:
+    return TRUE if scale == 1.0 else f"x{scale:g}" + ("_dt1" if keep_dt else "")
 
 
-def report(table: pd.DataFrame) -> None:
-    """Print the runs and, per scale, the changes against the true density."""
-    if table.empty or not (table.scale == 1.0).any():
-        print("no run at the true dust density finished: nothing to compare against")
-        return
-    if "variant" not in table:                         # a table written before variants had labels
-        table = table.assign(variant=[f"{v:g}" for v in table.scale])
-    table = table.assign(variant=table.variant.astype(str))
-    ref = table[table.variant == "1"].iloc[0]
-    print(f"\n{'scale':>10} {'seed':>6} {'dt/dt1':>7} {'time/t1':>8} {'dust %':>7} {'p0 (Pa)':>9} "
-          f"{'Wf (g/s)':>9} {'phi':>6}")
-    for _, r in table.iterrows():
-        print(f"{r['variant']:>10} {int(r['seed']):>6} {r['dt'] / ref['dt']:>7.2f} {r['wall_s'] / ref['wall_s']:>8.2f} "
-              f"{100 * r['dust_mass_share']:>7.2f} {r['p_static_band0']:>9.1f} {1000 * r['flow_rate']:>9.2f} "
-              f"{r['bulk_phi']:>6.3f}")
-    print(f"\nper scale, over seeds: mean and its standard error; change against the true density with the "
-          f"combined standard error (a change within 2 of them is not measured)")
-    print(f"{'scale':>10} {'runs':>5} {'time/t1':>8} {'p0 change %':>16} {'Wf change %':>16} {'phi change':>18}")
-    one = table[table.variant == "1"]
-    for scale, grp in table[table.variant != "1"].groupby("variant", sort=False):
-        cells = []
-        for col, pct in (("p_static_band0", True), ("flow_rate", True), ("bulk_phi", False)):
-            diff, se = mean_change(grp[col].to_numpy(float), one[col].to_numpy(float))
-            f = 100.0 / one[col].mean() if pct else 1.0
-            flag = "*" if abs(diff) > 2 * se else " "
-            cells.append(f"{diff * f:+7.2f} +/- {se * f:5.2f}{flag}" if pct else f"{diff:+8.4f} +/- {se:6.4f}{flag}")
-        print(f"{scale:>10} {len(grp):>5} {grp.wall_s.mean() / one.wall_s.mean():>8.2f} {cells[0]:>16} {cells[1]:>16} {cells[2]:>18}")
-    print("* : beyond twice the combined standard error; @dt1: the true density's time step kept, so "
-          "only the dust's mass changed")
+def dust_columns(folder: Path) -> dict:
+    """The run's time step (s) and the dust's share of the mass, from its plan."""
+    from siloflow.run_folder import RunFolder
+    plan = RunFolder(folder).plan
+    share = plan.fill.dust_count * plan.dust.mass / plan.total_mass if plan.dust is not None else 0.0
+    return {"dt": plan.dt, "dust_mass_share": share}
 
 
-def mean_change(values: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
-    """Difference of the means and its standard error (each side's sample std / sqrt n; NaN with
-    one run on either side)."""
-    def se2(v):
-        return v.var(ddof=1) / len(v) if len(v) > 1 else float("nan")
-    return float(values.mean() - reference.mean()), float(np.sqrt(se2(values) + se2(reference)))
+def planned_runs(base: dict, scales: list[float], seeds: int, keep_dt: bool) -> list[PlannedRun]:
+    variants = [(1.0, False)] + [(s, False) for s in scales] + ([(s, True) for s in scales] if keep_dt else [])
+    return [PlannedRun(key={"candidate": variant_name(s, k), "seed": base["seed"] + n},
+                       case={**variant_data(base, s, base["seed"] + n, k),
+                             "name": run_name(base["name"], "dust", variant_name(s, k), f"s{base['seed'] + n}")},
+                       columns={"density_scale": s, "keeps_true_dt": k})
+            for n in range(seeds) for s, k in variants]
+
+
+def main(case_file: Path, scales: list[float], seeds: int, keep_dt: bool = True) -> pd.DataFrame:
+    base, _ = read_base_case(case_file)
+    nan = {q: float("nan") for q in QUANTITIES}
+    rows = run_missing(WORK, planned_runs(base, scales, seeds, keep_dt),
+                       lambda f: {**run_metrics(f), **dust_columns(f)},
+                       lambda f, reason: {"wall_s": engine_wall_time(f), **nan}, print, case_digest(base))
+    runs = pd.DataFrame(rows)
+    ok = runs[runs.state == "complete"]
+    table = bench_stats.compare(ok, TRUE, list(QUANTITIES))
+    OUT.mkdir(parents=True, exist_ok=True)
+    write_text(OUT / "runs.csv", runs.to_csv(index=False))
+    write_text(OUT / "comparison.csv", table.to_csv(index=False))
+    bench_stats.pareto_figure(table, OUT / "dust.png")
+    pd.set_option("display.width", 200)
+    print(table[["candidate", "quantity", "n_cand", "speedup", "rel_error", "ci_lo", "ci_hi", "verdict"]]
+          .to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+    print(f"tables and figure: {OUT}")
+    return table
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description="dust density scaling: time step and run time against "
-                                     "static pressure, flow rate and solid fraction")
+    parser = argparse.ArgumentParser(description="dust density scaling: run time against flow rate, wall "
+                                     "pressures, solid fraction and coordination, paired by seed")
     parser.add_argument("case", nargs="?", type=Path, default=ROOT / "tests" / "data" / "clump_silo.yaml")
     parser.add_argument("--scales", type=float, nargs="+", default=[25.0, 200.0])
-    parser.add_argument("--seeds", type=int, default=3, help="runs (seeds) per scale, the true density included")
-    parser.add_argument("--report", type=Path, help="only print the report of a runs table written before")
+    parser.add_argument("--seeds", type=int, default=5, help="runs (seeds) per variant, the true density included")
     parser.add_argument("--no-keep-dt", action="store_true", help="skip the runs that keep the true density's "
                         "time step (they separate the dust's mass from the time step's effect)")
     args = parser.parse_args()
-    if args.report:
-        report(pd.read_csv(args.report))
-        sys.exit(0)
-    if args.seeds < 1 or any(not (1.0 <= s <= 1.0e6) for s in args.scales):
-        parser.error("--seeds must be >= 1 and --scales within [1, 1e6]")
+    if args.seeds < 2 or any(not (1.0 < s <= 1.0e6) for s in args.scales):
+        parser.error("--seeds must be >= 2 and --scales within (1, 1e6]")
     main(args.case, args.scales, args.seeds, keep_dt=not args.no_keep_dt)

@@ -409,10 +409,13 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
                              if r["quantity"] in tolerances else math.nan for _, r in table.iterrows()]
     write_text(out / "comparison.csv", table.to_csv(index=False))
     write_text(out / "run_errors.csv", run_errors(ok[~fill_only]).to_csv(index=False))
-    bench_stats.pareto_figure(table, out / "pareto.png", tolerances)
     barred = {c.name for c in CANDIDATES if not c.profile}
+    # a setting that failed on a seed of the benchmark's own case (stopped by the guard, a bed that never
+    # settled) is not a profile, whatever its completed runs say: they are the survivors
+    barred |= set(table.candidate[(table.failed_runs + table.failed_fill_only) > 0])
     choices = table[~table.candidate.str.endswith(VALIDATION) & ~table.candidate.isin(barred)]
     rec = bench_stats.recommend(choices, tolerances)
+    bench_stats.pareto_figure(table, out / "pareto.png", tolerances, highlight=rec and rec["candidate"])
     if rec is not None:
         cand = next((c for c in CANDIDATES if c.name == rec["candidate"]), None)
         row = ok[ok.candidate == rec["candidate"]].iloc[0]

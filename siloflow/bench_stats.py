@@ -353,10 +353,12 @@ def best_bounds(table: pd.DataFrame, quantity: str) -> pd.DataFrame:
     return rows[cols].sort_values("speedup", ascending=False, kind="stable").reset_index(drop=True)
 
 
-def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None) -> None:
+def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None, highlight: str | None = None) -> None:
     """Relative error (%) against speed-up over the reference (log axis), one panel per quantity:
     error bars are the intervals, filled markers resolved differences, the shaded band +/- the
-    relative tolerance where given. Written atomically to ``path`` (format from the suffix)."""
+    relative tolerance where given. Each candidate is a number (fastest last), keyed beside the
+    panels; ``highlight`` (the recommended profile) is a red star. Written atomically to ``path``
+    (format from the suffix)."""
     import matplotlib
     matplotlib.use("Agg")
     from matplotlib.figure import Figure          # no pyplot: no global figure state
@@ -365,9 +367,14 @@ def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None) -> 
     tolerances = tolerances or {}
     path = Path(path)
     quantities = list(dict.fromkeys(table["quantity"]))
+    fastest = table.groupby("candidate", sort=False)["speedup"].max().fillna(np.inf).sort_values(kind="stable")
+    number = {name: k + 1 for k, name in enumerate(fastest.index)}
     ncols = min(3, max(1, len(quantities)))
     nrows = max(1, -(-len(quantities) // ncols))
-    fig = Figure(figsize=(4.8 * ncols, 3.8 * nrows))
+    key_cols = 1 + len(number) // 24
+    spare = nrows * ncols > len(quantities)          # an empty panel holds the key, else a margin does
+    margin = 0.0 if spare else 2.2 * key_cols
+    fig = Figure(figsize=(4.8 * ncols + margin, 3.8 * nrows))
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
     for ax, q in zip(axes, quantities):
         rows = table[(table["quantity"] == q) & table["rel_error"].notna() & table["speedup"].notna()]
@@ -378,15 +385,33 @@ def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None) -> 
             x, y = r.speedup, 100 * r.rel_error
             xerr = [[np.nan_to_num(x - r.speedup_lo)], [np.nan_to_num(r.speedup_hi - x)]]
             yerr = [[np.nan_to_num(y - 100 * r.ci_lo)], [np.nan_to_num(100 * r.ci_hi - y)]]
-            ax.errorbar(x, y, xerr=xerr, yerr=yerr, fmt="o", color="tab:blue", capsize=2, lw=0.8,
-                        mfc="tab:blue" if r.resolved else "none")
-            ax.annotate(str(r.candidate), (x, y), xytext=(3, 3), textcoords="offset points", fontsize=7)
+            star = r.candidate == highlight
+            colour = "tab:red" if star else "tab:blue"
+            ax.errorbar(x, y, xerr=xerr, yerr=yerr, fmt="*" if star else "o", color=colour, capsize=2,
+                        lw=0.8, ms=10 if star else 5, mfc=colour if r.resolved else "none", zorder=3 if star else 2)
+            ax.annotate(str(number[r.candidate]), (x, y), xytext=(3, 2), textcoords="offset points", fontsize=6,
+                        color=colour)
         ax.set_xscale("log")
         ax.xaxis.set_major_formatter(LogFormatter(labelOnlyBase=False))   # 2, not 2x10^0
         ax.xaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
         ax.set(title=q, xlabel="speed-up over the reference", ylabel="relative error (%)")
     for ax in axes[len(quantities):]:
         ax.set_visible(False)
-    fig.tight_layout()
+    lines = [f"{k:>2}  {name}" + ("  (recommended)" if name == highlight else "") for name, k in number.items()]
+    lines += ["", "open: not resolved, filled: resolved", "bars: 95 % intervals"]
+    per_col = -(-len(lines) // key_cols)
+    keys = ["\n".join(lines[c * per_col:(c + 1) * per_col]) for c in range(key_cols)]
+    if spare:
+        fig.tight_layout()
+        box = axes[len(quantities)].get_position()
+        for c, text in enumerate(keys):
+            fig.text(box.x0 + c * box.width / key_cols, box.y1, text, va="top", ha="left", fontsize=6.5,
+                     family="monospace")
+    else:
+        right = 1 - margin / fig.get_figwidth()
+        for c, text in enumerate(keys):
+            fig.text(right + 0.01 + c * 2.2 / fig.get_figwidth(), 0.97, text, va="top", ha="left", fontsize=6.5,
+                     family="monospace")
+        fig.tight_layout(rect=(0, 0, right, 1))
     from postprocess.figures import save_figure
     save_figure(fig, path)

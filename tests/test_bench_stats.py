@@ -127,6 +127,8 @@ def test_pareto_figure_writes_a_png_atomically(tmp_path):
     path = tmp_path / "pareto.png"
     pareto_figure(table, path, {"flow_rate": 0.05})
     assert path.read_bytes()[:8] == PNG
+    pareto_figure(table, path, {"flow_rate": 0.05}, highlight="fine")     # the recommendation starred, rewritten
+    assert path.read_bytes()[:8] == PNG
     assert [p.name for p in tmp_path.iterdir()] == ["pareto.png"]
     import matplotlib.pyplot as plt
     assert plt.get_fignums() == []

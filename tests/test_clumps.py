@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 from scipy.spatial.transform import Rotation
 
 from postprocess.porosity import MeasureRegion, Porosity, grain_weights
@@ -224,3 +225,21 @@ def test_porosity_of_clumps_counts_each_union_once():
     region = MeasureRegion("all", "sphere", (0.015, 0.015, 0.015), 0.05)      # holds every clump
     phi = Porosity([region]).run([frame]).table.solid_fraction.iloc[0]
     assert phi * region.measure == pytest.approx(len(centers) * grain.volume, rel=1e-6)
+
+
+def test_the_dust_bench_plans_each_variant_per_seed_and_keeps_the_true_time_step():
+    """benchmarks/dust_density_scaling.py: the true density (the compared-with), each scale at its own
+    time step and at the true density's; one run of each per seed, all named apart."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("dust_bench", ROOT / "benchmarks" / "dust_density_scaling.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    base = yaml.safe_load(CLUMPS.read_text())
+    planned = bench.planned_runs(base, [25.0], 2, keep_dt=True)
+    assert [p.key["candidate"] for p in planned] == ["true_density", "x25", "x25_dt1"] * 2
+    assert [p.key["seed"] for p in planned] == [base["seed"]] * 3 + [base["seed"] + 1] * 3
+    assert len({p.case["name"] for p in planned}) == 6
+    true, fast, same = (derive(case_from_dict(p.case)) for p in planned[:3])
+    assert fast.dt / true.dt == pytest.approx(5.0, rel=0.05)            # x25: the dust's step x sqrt(25)
+    assert same.dt == pytest.approx(true.dt, rel=1e-9)                  # the true density's step, heavier dust
+    assert same.dust.mass == pytest.approx(25 * true.dust.mass)

@@ -189,3 +189,16 @@ def test_the_guard_keeps_the_largest_speed_and_overlap_it_saw():
     off = guard(enabled=False)
     off.check("settle", 0, ke=1e-6, pe=1.0, speed=9.0, overlap=5e-4)
     assert off.peak_record() == {"max_speed": 9.0, "max_overlap": 5e-4}
+
+
+def test_a_bed_that_never_settles_at_a_long_step_is_told_to_shorten_it():
+    """At 0.5 t_c the accuracy bench's beds kept jittering (KE/PE above 1e-4 after 1 s): the message names the
+    time step and its fix first; at a short step it says what it always said."""
+    from types import SimpleNamespace
+    from siloflow.engine.processes import RESTLESS_FRACTION, not_settled
+    what, cause, fix = not_settled(4.8e-4, SimpleNamespace(timestep=SimpleNamespace(fraction=0.5)))
+    assert "did not settle" in what and "0.00048" in what
+    assert "0.5 of the critical time" in cause and "stability edge" in cause
+    assert fix.startswith(f"lower engine.timestep_fraction to {RESTLESS_FRACTION:g} or less")
+    what, cause, fix = not_settled(4.8e-4, SimpleNamespace(timestep=SimpleNamespace(fraction=0.1)))
+    assert "stability edge" not in cause and fix == "raise fill.settle.max_time or fill.settle.ke_pe_ratio"

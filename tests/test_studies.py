@@ -278,6 +278,20 @@ def test_candidates_that_are_not_profiles_are_never_recommended(tmp_path):
     assert ab.conclude(tmp_path)[1]["candidate"] == "E1e-4_dt0.2"
 
 
+def test_a_candidate_that_failed_on_any_seed_is_never_recommended(tmp_path):
+    """Its completed runs are the survivors: a setting the guard stopped, or whose bed never settled, on one
+    seed of the benchmark's case is no profile. The next fastest proven one is recommended instead."""
+    rows = [{"candidate": c, "seed": k, "state": "complete", "reason": "", "timestep_fraction": 0.2,
+             "stiffness_scale": 1e-4, "ranks": 2, "wall_s": w, "flow_rate": 0.01, "static_pressure": 500.0,
+             "dynamic_pressure_max": 600.0, "solid_fraction": 0.6, "coordination": 5.0}
+            for c, w in (("reference", 100.0), ("E1e-4_dt0.2", 1.0), ("E1e-3_dt0.2", 2.0)) for k in range(4)]
+    pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)
+    assert ab.conclude(tmp_path)[1]["candidate"] == "E1e-4_dt0.2"
+    failed = {**rows[4], "seed": 2100, "state": "failed", "reason": "the bed did not settle", "fill_only": True}
+    pd.DataFrame(rows + [failed]).to_csv(tmp_path / "runs.csv", index=False)
+    assert ab.conclude(tmp_path)[1]["candidate"] == "E1e-3_dt0.2"
+
+
 def test_upscaling_keeps_the_bed_and_scales_the_grains():
     base = yaml.safe_load((ROOT / "benchmarks" / "cases" / "accuracy_small.yaml").read_text())
     cand = next(c for c in ab.CANDIDATES if c.upscale)

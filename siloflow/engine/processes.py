@@ -14,6 +14,25 @@ from ..run_folder import RunFolder, read_status, write_status
 
 #: atoms that may leave the box during the fill (recorded) before the run counts as failed
 FILL_LOSS_LIMIT = 0.01
+#: a time-step fraction above which a bed may never come to rest (measured on the accuracy bench's case, hooke,
+#: e = 0.88: at 0.3 of the critical time every bed settled, at 0.5 most kept jittering above KE/PE 1e-4)
+RESTLESS_FRACTION = 0.3
+
+
+def not_settled(ke_pe: float, plan: RunPlan) -> tuple[str, str, str]:
+    """What, why and the fix of a bed still moving at ``fill.settle.max_time`` (kinetic/potential
+    energy ``ke_pe``): a long time step near the stability edge keeps a bed jittering, so it is named
+    first when the plan's step is above ``RESTLESS_FRACTION`` of the critical time."""
+    what = (f"the bed did not settle: kinetic/potential energy {ke_pe:.3g} is still above the threshold "
+            "after fill.settle.max_time")
+    cause = "settling takes longer than allowed (soft contacts, high restitution, tall bed)"
+    fix = "raise fill.settle.max_time or fill.settle.ke_pe_ratio"
+    fraction = plan.timestep.fraction
+    if fraction > RESTLESS_FRACTION:
+        cause = (f"the time step, {fraction:g} of the critical time, is near the stability edge: the contacts "
+                 f"gain energy each step and the bed keeps jittering; or {cause}")
+        fix = f"lower engine.timestep_fraction to {RESTLESS_FRACTION:g} or less, or {fix}"
+    return what, cause, fix
 
 
 def read_plan(folder: Path) -> RunPlan:

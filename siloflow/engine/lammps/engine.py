@@ -19,7 +19,7 @@ from ...errors import EngineRunError, ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
 from ...run_folder import LAMMPS_FILES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree, run_state, write_status
 from ..base import Engine, ProgressCallback, RunRecord
-from ..processes import FILL_LOSS_LIMIT, die_with_parent, read_plan, stop
+from ..processes import FILL_LOSS_LIMIT, die_with_parent, not_settled, read_plan, stop
 from ..liggghts.tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 from . import deck as lammps_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, RESUME_LOG_NAME
@@ -273,10 +273,7 @@ class LammpsEngine(Engine):
             record.warnings.append(f"siloflow: {lost} of {requested} spheres left the box during the fill; "
                                    "the bed settled without them")
         if state.get("not_settled_ke_pe") is not None:
-            fail(f"the bed did not settle: kinetic/potential energy {state['not_settled_ke_pe']:.3g} is still "
-                 "above the threshold after fill.settle.max_time",
-                 "settling takes longer than allowed (soft contacts, high restitution, tall bed)",
-                 "raise fill.settle.max_time or fill.settle.ke_pe_ratio")
+            fail(*not_settled(state["not_settled_ke_pe"], plan))
         if not state.get("completed"):
             fail("the run ended before the discharge stage finished", "the engine stopped early",
                  f"read the end of {LOG_NAME}")

@@ -18,7 +18,7 @@ from ...run_folder import (LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RESTART
                            run_state, write_status)
 from ...guard import RunGuard
 from ..base import Engine, ProgressCallback, RunRecord
-from ..processes import FILL_LOSS_LIMIT, die_with_parent, read_plan, stop
+from ..processes import FILL_LOSS_LIMIT, die_with_parent, not_settled, read_plan, stop
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
@@ -317,10 +317,7 @@ class LiggghtsEngine(Engine):
             record.fill_losses = lost            # recorded: the bed is what settled, and it is reported
             record.warnings.append(f"siloflow: {where}; the bed settled without them")
         if state.not_settled_ke_pe is not None:
-            fail(f"the bed did not settle: kinetic/potential energy {state.not_settled_ke_pe:.3g} is still "
-                 f"above the threshold after fill.settle.max_time",
-                 "settling takes longer than allowed (soft contacts, high restitution, tall bed)",
-                 "raise fill.settle.max_time or fill.settle.ke_pe_ratio")
+            fail(*not_settled(state.not_settled_ke_pe, plan))
         if not state.done:
             fail("the run ended before the discharge stage finished", "the engine stopped early",
                  "read the end of log.liggghts")
