@@ -269,11 +269,17 @@ def test_without_a_proven_candidate_the_reference_stays_the_recommendation(tmp_p
     assert rec["candidate"] == "reference" and rec["speedup"] == 1.0
 
 
-def test_candidates_that_are_not_profiles_are_never_recommended(tmp_path):
-    rows = [{"candidate": c, "seed": k, "state": "complete", "reason": "", "timestep_fraction": 0.2,
+def _identical_runs(walls: dict, seeds: int) -> list[dict]:
+    """Complete runs of every candidate (name: engine wall time, s), equal in every quantity: all within any
+    tolerance, so the recommendation is the fastest one allowed."""
+    return [{"candidate": c, "seed": k, "state": "complete", "reason": "", "timestep_fraction": 0.2,
              "stiffness_scale": 1e-4, "ranks": 2, "wall_s": w, "flow_rate": 0.01, "static_pressure": 500.0,
              "dynamic_pressure_max": 600.0, "solid_fraction": 0.6, "coordination": 5.0}
-            for c, w in (("reference", 100.0), ("E1e-4_dt0.2_1rank", 1.0), ("E1e-4_dt0.2", 2.0)) for k in range(3)]
+            for c, w in walls.items() for k in range(seeds)]
+
+
+def test_candidates_that_are_not_profiles_are_never_recommended(tmp_path):
+    rows = _identical_runs({"reference": 100.0, "E1e-4_dt0.2_1rank": 1.0, "E1e-4_dt0.2": 2.0}, 3)
     pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)
     assert ab.conclude(tmp_path)[1]["candidate"] == "E1e-4_dt0.2"
 
@@ -281,10 +287,7 @@ def test_candidates_that_are_not_profiles_are_never_recommended(tmp_path):
 def test_a_candidate_that_failed_on_any_seed_is_never_recommended(tmp_path):
     """Its completed runs are the survivors: a setting the guard stopped, or whose bed never settled, on one
     seed of the benchmark's case is no profile. The next fastest proven one is recommended instead."""
-    rows = [{"candidate": c, "seed": k, "state": "complete", "reason": "", "timestep_fraction": 0.2,
-             "stiffness_scale": 1e-4, "ranks": 2, "wall_s": w, "flow_rate": 0.01, "static_pressure": 500.0,
-             "dynamic_pressure_max": 600.0, "solid_fraction": 0.6, "coordination": 5.0}
-            for c, w in (("reference", 100.0), ("E1e-4_dt0.2", 1.0), ("E1e-3_dt0.2", 2.0)) for k in range(4)]
+    rows = _identical_runs({"reference": 100.0, "E1e-4_dt0.2": 1.0, "E1e-3_dt0.2": 2.0}, 4)
     pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)
     assert ab.conclude(tmp_path)[1]["candidate"] == "E1e-4_dt0.2"
     failed = {**rows[4], "seed": 2100, "state": "failed", "reason": "the bed did not settle", "fill_only": True}
