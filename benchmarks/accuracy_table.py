@@ -42,11 +42,15 @@ def error_cell(row) -> str:
     return f"not resolved (bound {bound} %; {_pct(row.rel_error)} %)"
 
 
+def _figures3(v: float) -> str:
+    """Three significant figures, trailing zeros kept (5.00, 14.0, 109)."""
+    return "?" if not math.isfinite(v) else f"{v:.0f}" if abs(v) >= 99.95 else f"{v:#.3g}"
+
+
 def speedup_cell(row) -> str:
     if row is None or not math.isfinite(row.speedup):
         return "-"
-    lo, hi = (f"{v:.3g}" if math.isfinite(v) else "?" for v in (row.speedup_lo, row.speedup_hi))
-    return f"{row.speedup:.3g} ({lo}-{hi})"
+    return f"{_figures3(row.speedup)} ({_figures3(row.speedup_lo)}-{_figures3(row.speedup_hi)})"
 
 
 def _reason(text) -> str:
@@ -81,13 +85,15 @@ def table(folder: Path) -> str:
             label = f"**{label}: the recommended profile**"
         elif name.endswith(VALIDATION):
             label += ": new seeds, the check of " + name[: -len(VALIDATION)]
-        cells = [label, runs_cell(by_q, int(first.failed_runs), int(first.failed_fill_only)),
+        failed = [int(getattr(first, c, 0)) if getattr(first, c, 0) == getattr(first, c, 0) else 0
+                  for c in ("failed_runs", "failed_fill_only")]          # tables before the columns: none
+        cells = [label, runs_cell(by_q, *failed),
                  speedup_cell(by_q.get("flow_rate", first))] + [error_cell(by_q.get(q)) for q in QUANTITIES]
         rows.append((float(first.speedup) if math.isfinite(first.speedup) else math.inf, name, cells))
     for name, group in runs[~runs.candidate.isin(comp.candidate)].groupby("candidate", sort=False):
         why = "; ".join(sorted({_reason(t) for t in group.reason}))
         label = f"{name} ({group.timestep_fraction.iloc[0]:g}, {group.stiffness_scale.iloc[0]:g})"
-        rows.append((math.inf, name, [label, f"0 of {len(group)} complete", "-", why] + [""] * (len(QUANTITIES) - 1)))
+        rows.append((math.inf, name, [label, f"0 of {len(group)} complete: {why}", "-"] + ["-"] * len(QUANTITIES)))
     rows.sort(key=lambda r: (r[0], r[1]))
     return "\n".join([HEADER] + ["| " + " | ".join(cells) + " |" for _, _, cells in rows])
 

@@ -15,7 +15,8 @@ candidate with its reference (``siloflow.bench_stats.compare``: paired by seed, 
 Default case: tests/data/clump_silo.yaml (600 wheat clumps, 60 dust balls, Hertz, multisphere on
 one rank; 1000x did not settle in the allowed time). Work folder runs/bench_dust; results in
 benchmarks/results/dust/: runs.csv (every run, with its time step and the dust's mass share),
-comparison.csv (the bench's columns) and dust.png (error against speed-up, one panel per quantity).
+comparison.csv (the bench's columns, and ``failed_runs``: a variant is compared on the runs that
+completed) and dust.png (error against speed-up, one panel per quantity).
 """
 from __future__ import annotations
 
@@ -83,14 +84,19 @@ def main(case_file: Path, scales: list[float], seeds: int, keep_dt: bool = True)
                        lambda f: {**run_metrics(f), **dust_columns(f)},
                        lambda f, reason: {"wall_s": engine_wall_time(f), **nan}, print, case_digest(base))
     runs = pd.DataFrame(rows)
-    ok = runs[runs.state == "complete"]
-    table = bench_stats.compare(ok, TRUE, list(QUANTITIES))
     OUT.mkdir(parents=True, exist_ok=True)
-    write_text(OUT / "runs.csv", runs.to_csv(index=False))
+    write_text(OUT / "runs.csv", runs.to_csv(index=False))       # every run first: a failed comparison loses none
+    ok = runs[runs.state == "complete"] if not runs.empty else runs
+    if ok.empty or not (ok.candidate == TRUE).any():
+        raise SystemExit(f"no run at the true dust density completed: nothing to compare with ({OUT / 'runs.csv'})")
+    table = bench_stats.compare(ok, TRUE, list(QUANTITIES))
+    # a variant compared on its completed runs only: say how many failed (their reasons are in runs.csv)
+    failed = runs[runs.state != "complete"].groupby("candidate").size()
+    table["failed_runs"] = [int(failed.get(name, 0)) for name in table.candidate]
     write_text(OUT / "comparison.csv", table.to_csv(index=False))
     bench_stats.pareto_figure(table, OUT / "dust.png")
     pd.set_option("display.width", 200)
-    print(table[["candidate", "quantity", "n_cand", "speedup", "rel_error", "ci_lo", "ci_hi", "verdict"]]
+    print(table[["candidate", "quantity", "n_cand", "failed_runs", "speedup", "rel_error", "ci_lo", "ci_hi", "verdict"]]
           .to_string(index=False, float_format=lambda v: f"{v:.3g}"))
     print(f"tables and figure: {OUT}")
     return table

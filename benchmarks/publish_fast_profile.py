@@ -5,7 +5,7 @@ benchmark's recommendation, benchmarks/results/accuracy/recommended_profile.json
 
 It refuses a recommendation that is the reference itself (nothing faster proven), that did not meet
 its tolerances, or whose check with new seeds (``siloflow bench --validate``) is missing for a bounded
-quantity or put its error outside the bound. tests/test_profiles.py checks that the two files agree.
+quantity or put its error outside the bound, or any of whose new seeds' runs failed. tests/test_profiles.py checks that the two files agree.
 """
 from __future__ import annotations
 
@@ -30,6 +30,8 @@ def main() -> None:
     checked = {c["quantity"] for c in checks if c["inside"]}
     if not checks or set(rec.get("error_bounds", {})) - checked:
         raise SystemExit(f"{SOURCE}: the recommendation was not confirmed with new seeds (siloflow bench --validate)")
+    if any(c.get("failed") for c in checks):
+        raise SystemExit(f"{SOURCE}: runs of the recommendation's new seeds failed (runs.csv says why)")
     out = {k: rec[k] for k in KEEP if k in rec}
     fills = f" (and {rec['fill_only_seeds']} fill-only fills of the profile)" if rec.get("fill_only_seeds") else ""
     out["benchmark"] = (f"benchmarks/cases/accuracy_small.yaml, {rec.get('reference_seeds')} reference runs and "

@@ -325,7 +325,7 @@ def profile_line(p: dict | None) -> str:
     if p["name"] == "fast":
         bounds = ", ".join(f"{q} {b:.1%}" for q, b in (p.get("error_bounds") or {}).items())
         line += (f"; 95 % error bounds against the papers' settings: {bounds}, measured on the benchmark's case "
-                 f"(siloflow bench, {p.get('benchmark')}), not on this one" if bounds
+                 f"(siloflow bench, {p.get('benchmark')}); another case's own error is not measured" if bounds
                  else "; its error bounds are not measured yet")
     return line
 

@@ -287,7 +287,7 @@ def validation(table, rec: dict) -> list[dict]:
     within the recommendation's 95 % bound (``inside``), and whether their own 95 % interval reaches
     into [-bound, bound] (``consistent``: False when the new seeds contradict the bound, None when
     they have no interval, fewer than 2 fills; a few new seeds' point estimate may well fall outside a
-    bound their interval does not refute)."""
+    bound their interval does not refute), and how many of the new seeds' runs ``failed``."""
     name = rec["candidate"] + VALIDATION
     out = []
     for q, bound in rec["error_bounds"].items():
@@ -299,7 +299,7 @@ def validation(table, rec: dict) -> list[dict]:
                     "bound": float(bound), "inside": bool(abs(r.rel_error) <= bound),
                     "consistent": (bool(r.ci_lo <= bound and r.ci_hi >= -bound)
                                    if math.isfinite(r.ci_lo) and math.isfinite(r.ci_hi) else None),
-                    "n": int(r.n_cand)})
+                    "n": int(r.n_cand), "failed": int(r.get("failed_runs", 0) + r.get("failed_fill_only", 0))})
     return out
 
 
@@ -347,6 +347,16 @@ def fill_only_rows(runs):
     if "fill_only" not in runs.columns:
         return pd.Series(False, index=runs.index, dtype=bool)
     return runs["fill_only"].map(lambda v: v is True or str(v).strip().lower() in ("true", "1", "1.0")).astype(bool)
+
+
+def failing_candidates(table) -> set[str]:
+    """The candidates of a bench's comparison (``table``) that failed on any seed of the benchmark's own
+    case (stopped by the guard, a bed that never settled, the engine), whole or fill-only, and the
+    recommendation whose new seeds did: such a setting is no profile, whatever its completed runs say
+    (they are the survivors). A failure that was not the setting's (a full disk, a killed machine) is
+    dropped from runs.csv by hand: the bench then runs that seed again."""
+    failing = set(table.candidate[(table.failed_runs + table.failed_fill_only) > 0])
+    return failing | {name[: -len(VALIDATION)] for name in failing if name.endswith(VALIDATION)}
 
 
 def run_counts(runs) -> Callable[[str, bool], int]:
@@ -409,13 +419,13 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
                              if r["quantity"] in tolerances else math.nan for _, r in table.iterrows()]
     write_text(out / "comparison.csv", table.to_csv(index=False))
     write_text(out / "run_errors.csv", run_errors(ok[~fill_only]).to_csv(index=False))
-    barred = {c.name for c in CANDIDATES if not c.profile}
-    # a setting that failed on a seed of the benchmark's own case (stopped by the guard, a bed that never
-    # settled) is not a profile, whatever its completed runs say: they are the survivors
-    barred |= set(table.candidate[(table.failed_runs + table.failed_fill_only) > 0])
+    barred = {c.name for c in CANDIDATES if not c.profile} | failing_candidates(table)
     choices = table[~table.candidate.str.endswith(VALIDATION) & ~table.candidate.isin(barred)]
     rec = bench_stats.recommend(choices, tolerances)
-    bench_stats.pareto_figure(table, out / "pareto.png", tolerances, highlight=rec and rec["candidate"])
+    failed = table.drop_duplicates("candidate").set_index("candidate")
+    notes = {name: f"({int(r.failed_runs + r.failed_fill_only)} failed)" for name, r in failed.iterrows()
+             if r.failed_runs + r.failed_fill_only > 0}
+    bench_stats.pareto_figure(table, out / "pareto.png", tolerances, highlight=rec and rec["candidate"], notes=notes)
     if rec is not None:
         cand = next((c for c in CANDIDATES if c.name == rec["candidate"]), None)
         row = ok[ok.candidate == rec["candidate"]].iloc[0]

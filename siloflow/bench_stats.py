@@ -353,12 +353,13 @@ def best_bounds(table: pd.DataFrame, quantity: str) -> pd.DataFrame:
     return rows[cols].sort_values("speedup", ascending=False, kind="stable").reset_index(drop=True)
 
 
-def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None, highlight: str | None = None) -> None:
+def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None, highlight: str | None = None,
+                  notes: dict[str, str] | None = None) -> None:
     """Relative error (%) against speed-up over the reference (log axis), one panel per quantity:
     error bars are the intervals, filled markers resolved differences, the shaded band +/- the
     relative tolerance where given. Each candidate is a number (fastest last), keyed beside the
-    panels; ``highlight`` (the recommended profile) is a red star. Written atomically to ``path``
-    (format from the suffix)."""
+    panels with its ``notes`` (candidate: text); ``highlight`` (the recommended profile) is a red
+    star. Written atomically to ``path`` (format from the suffix)."""
     import matplotlib
     matplotlib.use("Agg")
     from matplotlib.figure import Figure          # no pyplot: no global figure state
@@ -397,7 +398,9 @@ def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None, hig
         ax.set(title=q, xlabel="speed-up over the reference", ylabel="relative error (%)")
     for ax in axes[len(quantities):]:
         ax.set_visible(False)
-    lines = [f"{k:>2}  {name}" + ("  (recommended)" if name == highlight else "") for name, k in number.items()]
+    notes = notes or {}
+    lines = [f"{k:>2}  {name}" + ("  (recommended)" if name == highlight else "")
+             + (f"  {notes[name]}" if name in notes else "") for name, k in number.items()]
     lines += ["", "open: not resolved, filled: resolved", "bars: 95 % intervals"]
     per_col = -(-len(lines) // key_cols)
     keys = ["\n".join(lines[c * per_col:(c + 1) * per_col]) for c in range(key_cols)]

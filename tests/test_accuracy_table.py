@@ -52,10 +52,10 @@ def test_cells_rows_and_order(tmp_path):
     lines = mod.table(tmp_path).splitlines()
     assert len(lines) == 2 + 3                                 # header, rule, three candidates; no reference
     slow, fast, soft = lines[2:]                               # by speed-up; a candidate that never ran last
-    assert slow.startswith("| slow (0.05, 1) | 6 paired (1 failed) | 3 (2.7-3.3) |")
+    assert slow.startswith("| slow (0.05, 1) | 6 paired (1 failed) | 3.00 (2.70-3.30) |")
     assert "not resolved (bound 22.0 %; +1.0 %)" in slow and "| - |" in slow     # no static value: a dash
-    assert fast.startswith("| **fast (0.1, 0.01): the recommended profile** | 6 (+4 fill-only) paired | 20 (18-22) |")
+    assert fast.startswith("| **fast (0.1, 0.01): the recommended profile** | 6 (+4 fill-only) paired | 20.0 (18.0-22.0) |")
     assert "not resolved (bound 3.04 %; -0.5 %)" in fast       # a bound just past 3 % is not printed as 3.0 %
     assert "+4.3 % (+1.0, +7.7)" in fast                       # resolved: the interval
-    assert soft.startswith("| soft (0.2, 0.0001) | 0 of 1 complete | - | the run was stopped by siloflow's guard "
-                           "(overlap) |")
+    assert soft == ("| soft (0.2, 0.0001) | 0 of 1 complete: the run was stopped by siloflow's guard (overlap) "
+                    "| - | - | - | - | - | - |")

@@ -180,7 +180,7 @@ def test_the_report_names_the_profile_and_its_bounds():
             "error_bounds": {"flow_rate": 0.041, "static_pressure": 0.12}, "benchmark": "accuracy_small"}
     line = profile_line(fast)
     assert "profile fast" in line and "flow_rate 4.1%" in line and "static_pressure 12.0%" in line
-    assert "measured on the benchmark's case" in line and "not on this one" in line     # not this run's error
+    assert "measured on the benchmark's case" in line and "another case's own error is not measured" in line
     assert "not measured yet" in profile_line({**fast, "error_bounds": {}})
     assert "custom" in profile_line({"name": "custom", "timestep_fraction": 0.15, "stiffness_scale": 1.0})
     assert "older siloflow" in profile_line(None)
@@ -192,7 +192,8 @@ def test_the_run_line_says_the_bounds_are_the_benchmark_cases():
     fast = SimpleNamespace(name="fast", timestep_fraction=0.1, stiffness_scale=0.1, overlap_ratio=0.026,
                            error_bounds={"flow_rate": 0.03}, speedup=11.2, benchmark="accuracy_small.yaml")
     line = profile_note(fast)
-    assert "flow_rate within 3.0%" in line and "on the benchmark's case, not measured on this one" in line
+    assert "flow_rate within 3.0%" in line and "measured on the benchmark's case" in line
+    assert "another case's own error is not measured" in line
     assert "11.2x faster there: accuracy_small.yaml" in line
     assert "not measured yet" in profile_note(SimpleNamespace(**{**vars(fast), "error_bounds": {}}))
 
@@ -277,7 +278,12 @@ def test_publishing_needs_every_bounded_quantity_checked_inside_its_bound(tmp_pa
     with pytest.raises(SystemExit, match="not confirmed"):         # outside its bound, though consistent
         publish.main()
     assert not target.exists()
-    rec["validation"][1].update(inside=True, rel_error=0.0)
+    rec["validation"][1].update(inside=True, rel_error=0.0, failed=1)
+    source.write_text(json.dumps(rec))
+    with pytest.raises(SystemExit, match="new seeds failed"):     # inside, but a new seed's run failed
+        publish.main()
+    assert not target.exists()
+    rec["validation"][1].update(failed=0)
     source.write_text(json.dumps(rec))
     publish.main()
     assert json.loads(target.read_text())["candidate"] == "E1e-1_dt0.1"

@@ -243,6 +243,9 @@ def test_validation_says_whether_new_seeds_stay_in_the_bounds():
     assert checks["flow_rate"]["inside"] and not checks["static_pressure"]["inside"]
     # the static interval (-12 %, -4 %) reaches into the 5 % bound: outside, but not a contradiction
     assert checks["flow_rate"]["consistent"] and checks["static_pressure"]["consistent"]
+    assert checks["flow_rate"]["failed"] == 0                         # a table without the failure columns
+    table["failed_runs"], table["failed_fill_only"] = 1, 2
+    assert {c["quantity"]: c for c in ab.validation(table, rec)}["flow_rate"]["failed"] == 3
     table.loc[1, ["ci_lo", "ci_hi"]] = [-0.12, -0.06]
     assert not {c["quantity"]: c for c in ab.validation(table, rec)}["static_pressure"]["consistent"]
     table.loc[1, ["ci_lo", "ci_hi", "n_cand"]] = [float("nan"), float("nan"), 1]     # one new fill: no interval
@@ -293,6 +296,11 @@ def test_a_candidate_that_failed_on_any_seed_is_never_recommended(tmp_path):
     failed = {**rows[4], "seed": 2100, "state": "failed", "reason": "the bed did not settle", "fill_only": True}
     pd.DataFrame(rows + [failed]).to_csv(tmp_path / "runs.csv", index=False)
     assert ab.conclude(tmp_path)[1]["candidate"] == "E1e-3_dt0.2"
+    # the recommendation's new seeds count too: one of them failing bars it as well
+    check = [{**r, "candidate": "E1e-3_dt0.2" + ab.VALIDATION, "seed": 1100 + r["seed"]} for r in rows[8:]]
+    check[0].update(state="failed", reason="the run was stopped by siloflow's guard (escape)")
+    pd.DataFrame(rows + [failed] + check).to_csv(tmp_path / "runs.csv", index=False)
+    assert ab.conclude(tmp_path)[1]["candidate"] == "reference"
 
 
 def test_upscaling_keeps_the_bed_and_scales_the_grains():
