@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-engines bench-deck bench-rank-fill golden paper-a-quick paper-b-quick paper-a paper-b clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill golden paper-a-quick paper-b-quick paper-a paper-b clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -201,6 +201,16 @@ bench-stability: install
 	mkdir -p benchmarks/results/stability
 	for s in 100 101; do for f in envelope.csv edges.json envelope.png; do \
 	  cp $(STABILITY)-s$$s/$$f benchmarks/results/stability/s$$s-$$f; done; done
+	$(MAKE) bench-stability-dust
+
+# the envelope over the dust's density scale: the clump silo (paper A's wheat grains and dust balls, Hertz,
+# one rank) at its own stiffness, dust at its true density, x25 and x200, seeds 777 and 778
+bench-stability-dust: install
+	for s in 777 778; do $(VENV)/bin/siloflow stability tests/data/clump_silo.yaml -o $(STABILITY)-dust-s$$s \
+	  --seed $$s --fractions 0.1,0.2,0.3,0.5,0.7,1 --stiffness 1 --dust 1,25,200; done
+	mkdir -p benchmarks/results/stability
+	for s in 777 778; do for f in envelope.csv edges.json envelope.png; do \
+	  cp $(STABILITY)-dust-s$$s/$$f benchmarks/results/stability/dust-s$$s-$$f; done; done
 
 # rewrite tests/golden/ (the decks every shipped case renders) after a change that alters decks on
 # purpose; commit them with the change (tests/test_golden_decks.py compares)

@@ -420,36 +420,3 @@ def test_a_fill_only_run_keeps_the_whole_runs_automatic_dump_interval():
     lean = {**base, "outputs": {"results": ["flow_rate", "force_balance"]}}
     assert "dump_interval" not in ab.fill_only_case(lean)["outputs"]   # no frames needed: nothing pinned
 
-
-@pytest.mark.engine
-def test_siloflow_bench_runs_the_reference_and_a_candidate_and_compares_them(tmp_path):
-    """`siloflow bench` end to end on the engine: a small soft silo (400 glass beads, Hertz at 5 MPa), the
-    reference (dt = t_c/50) and the full stiffness at dt = t_c/10 over 3 seeds, paired by seed. The
-    candidate must be faster by about the time step's ratio, load the walls of its settled bed, and flow
-    within 15 % of the reference (Beverloo's flow rate does not depend on the contact's time step); the
-    command prints the table and what it recommends."""
-    from typer.testing import CliRunner
-    from siloflow.cli import app
-    data = yaml.safe_load(SMALL.read_text())
-    data.update(name="bench_small")
-    data["fill"]["count"] = 400
-    data["discharge"] = {"duration": 0.2}
-    data["engine"] = {"ranks": 1}
-    case_file = tmp_path / "case.yaml"
-    case_file.write_text(yaml.safe_dump(data))
-    out = tmp_path / "bench"
-    result = CliRunner().invoke(app, ["bench", str(case_file), "-o", str(out), "--seeds", "3",
-                                      "--candidates", "E1_dt0.1", "--flow-tolerance", "0.15",
-                                      "--static-tolerance", "0.5"])
-    assert result.exit_code == 0, result.output
-    runs = pd.read_csv(out / "runs.csv")
-    assert len(runs) == 6 and (runs.state == "complete").all(), runs[["candidate", "seed", "state", "reason"]]
-    table = pd.read_csv(out / "comparison.csv").set_index(["candidate", "quantity"])
-    flow = table.loc[("E1_dt0.1", "flow_rate")]
-    assert flow.method == "paired" and flow.n_cand == 3
-    assert abs(flow.rel_error) < 0.15, flow.rel_error
-    assert 2.5 < flow.speedup < 6.0, flow.speedup          # 5x fewer steps, less the per-run overhead
-    by = runs.set_index(["candidate", "seed"])
-    assert all(by.loc[("E1_dt0.1", s), "static_pressure"] > 0 for s in runs.seed.unique())
-    assert "recommended fast profile: E1_dt0.1" in result.output or "no candidate faster" in result.output
-    assert "E1_dt0.1" in result.output and (out / "pareto.png").is_file()
