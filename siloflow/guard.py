@@ -58,8 +58,8 @@ class RunGuard:
 
     def peak_record(self) -> Optional[dict]:
         """The peaks as the run record keeps them (``max_speed`` m/s, ``max_overlap`` m; no contact yet
-        reads 0), None when no row was checked."""
-        if not math.isfinite(self.peaks["speed"]):
+        reads 0), None when no row with a grain was checked (LIGGGHTS' max over no atoms is -1e20)."""
+        if not math.isfinite(self.peaks["speed"]) or self.peaks["speed"] < 0:
             return None
         return {"max_speed": self.peaks["speed"], "max_overlap": max(self.peaks["overlap"], 0.0)}
 

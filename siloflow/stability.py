@@ -84,6 +84,8 @@ def peaks(folder: Path) -> dict:
     if g is None or not seen:
         return out
     speed, overlap = seen["max_speed"], seen["max_overlap"]
+    if speed < 0:                     # no grain seen: LIGGGHTS' max over no atoms is -1e20
+        speed = nan
     return {"max_speed": speed, "max_overlap_fraction": overlap / g.grain_radius, "speed_ratio": speed / g.max_speed,
             "overlap_ratio": overlap / g.max_overlap}
 
@@ -114,6 +116,8 @@ def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIF
     rows = run_missing(out, planned, measure, failed, report, case_digest(base))
     for r in rows:
         r["verdict"] = "stable" if r["state"] == "complete" else r.get("verdict") or classify(r["reason"])[0]
+        if (r.get("max_speed") or 0.0) < 0:      # LIGGGHTS' max over no grain (-1e20), kept by older rows
+            r.update(max_speed=math.nan, speed_ratio=math.nan)
     return rows
 
 
@@ -149,29 +153,42 @@ def conclude(out: Path, rows: list[dict]) -> list[dict]:
 
 
 def envelope_figure(df, edges: list[dict], path: Path) -> None:
-    """Time-step fraction (x, log) against stiffness scale (y, log): stable points green circles, unstable
-    red crosses labelled with their signal, inconclusive grey squares; the safe edge per stiffness as a bar."""
+    """Time-step fraction (x, log) against the grid's rows (y: one per stiffness scale, and dust
+    density scale where the case has dust): stable points green circles, unstable red crosses labelled
+    with their signal, inconclusive grey squares; the safe edge of each row as a bar."""
     import matplotlib
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
-    fig = Figure(figsize=(7.5, 4.2))
+
+    def key(stiffness, dust) -> tuple:
+        dust = None if dust is None or dust != dust else float(dust)
+        return float(stiffness), dust
+
+    rows = sorted({key(s, d) for s, d in zip(df.stiffness_scale, df.get("dust_scale", [None] * len(df)))},
+                  key=lambda k: (-k[0], k[1] or 0.0))
+    y_of = {k: i for i, k in enumerate(rows)}
+    labels = [f"stiffness x{s:g}" + (f", dust x{d:g}" if d is not None else "") for s, d in rows]
+    dust_col = df["dust_scale"] if "dust_scale" in df else [None] * len(df)
+    ys = [y_of[key(s, d)] for s, d in zip(df.stiffness_scale, dust_col)]
+    fig = Figure(figsize=(7.5, 1.6 + 0.55 * len(rows)))
     ax = fig.add_subplot()
     for verdict, style in (("stable", dict(marker="o", color="tab:green")),
                            ("unstable", dict(marker="x", color="tab:red")),
                            ("inconclusive", dict(marker="s", color="0.6"))):
-        d = df[df.verdict == verdict]
-        ax.scatter(d.timestep_fraction, d.stiffness_scale, s=60, label=verdict, **style)
+        pick = [i for i, v in enumerate(df.verdict) if v == verdict]
+        ax.scatter([df.timestep_fraction.iloc[i] for i in pick], [ys[i] for i in pick], s=60, label=verdict, **style)
         if verdict == "unstable":
-            for r in d.itertuples():
-                ax.annotate(str(r.signal), (r.timestep_fraction, r.stiffness_scale), fontsize=7,
+            for i in pick:
+                ax.annotate(str(df.signal.iloc[i]), (df.timestep_fraction.iloc[i], ys[i]), fontsize=7,
                             xytext=(3, 4), textcoords="offset points")
     for e in edges:
-        if math.isfinite(e["safe"]):
-            ax.plot([e["safe"]] * 2, [e["stiffness_scale"] / 1.6, e["stiffness_scale"] * 1.6], color="k", lw=2)
+        if e["safe"] is not None and math.isfinite(e["safe"]):          # None: read back from edges.json
+            y = y_of[key(e["stiffness_scale"], e.get("dust_scale"))]
+            ax.plot([e["safe"]] * 2, [y - 0.3, y + 0.3], color="k", lw=2)
     ax.set_xscale("log")
-    ax.set_yscale("log")
+    ax.set_yticks(range(len(rows)), labels)
+    ax.set_ylim(-0.6, len(rows) - 0.4)
     ax.set_xlabel("time step / critical time")
-    ax.set_ylabel("stiffness scale")
     ax.set_title("stability envelope (bar: largest safe time step)")
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()

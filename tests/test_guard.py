@@ -202,3 +202,17 @@ def test_a_bed_that_never_settles_at_a_long_step_is_told_to_shorten_it():
     assert fix.startswith(f"lower engine.timestep_fraction to {RESTLESS_FRACTION:g} or less")
     what, cause, fix = not_settled(4.8e-4, SimpleNamespace(timestep=SimpleNamespace(fraction=0.1)))
     assert "stability edge" not in cause and fix == "raise fill.settle.max_time or fill.settle.ke_pe_ratio"
+
+
+def test_rows_before_any_grain_leave_no_peak_speed():
+    """LIGGGHTS' max over no atoms is -1e20: a run stopped before its first grain has no peaks (the stability
+    envelope had printed a speed ratio of -1.5e19 for such runs)."""
+    from siloflow.guard import RunGuard
+    from siloflow.plan import Guard
+    limits = Guard(enabled=True, max_speed=10.0, max_overlap=1e-3, max_overlap_fraction=0.5, grain_radius=2e-3,
+                   energy_growth=10.0, escape_z=1.0)
+    guard = RunGuard(limits)
+    assert guard.check("fill", 0, 0.0, 0.0, speed=-1e20, overlap=-1e20) is None
+    assert guard.peak_record() is None
+    guard.check("fill", 100, 1e-3, 1.0, speed=2.0, overlap=1e-4)
+    assert guard.peak_record() == {"max_speed": 2.0, "max_overlap": 1e-4}
