@@ -21,11 +21,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from siloflow.accuracy_bench import QUANTITIES, VALIDATION
+
 ROOT = Path(__file__).resolve().parents[1]
-QUANTITIES = ("flow_rate", "static_pressure", "dynamic_pressure_max", "solid_fraction", "coordination")
 HEADER = ("| candidate (dt / t_c, stiffness) | runs | speed-up | flow rate | static band pressure | max dynamic band "
           "pressure | solid fraction | coordination |\n|---|---|---|---|---|---|---|---|")
-VALIDATION = "_new_seeds"
 
 
 def _pct(x: float) -> str:
@@ -85,8 +85,8 @@ def table(folder: Path) -> str:
             label = f"**{label}: the recommended profile**"
         elif name.endswith(VALIDATION):
             label += ": new seeds, the check of " + name[: -len(VALIDATION)]
-        failed = [int(getattr(first, c, 0)) if getattr(first, c, 0) == getattr(first, c, 0) else 0
-                  for c in ("failed_runs", "failed_fill_only")]          # tables before the columns: none
+        # failed whole and fill-only runs (0 in a table written before the columns)
+        failed = group.reindex(columns=["failed_runs", "failed_fill_only"]).iloc[0].fillna(0).astype(int)
         cells = [label, runs_cell(by_q, *failed),
                  speedup_cell(by_q.get("flow_rate", first))] + [error_cell(by_q.get(q)) for q in QUANTITIES]
         rows.append((float(first.speedup) if math.isfinite(first.speedup) else math.inf, name, cells))
@@ -102,10 +102,14 @@ def markers(folder: str) -> tuple[str, str]:
     return f"<!-- accuracy-table {folder} -->", "<!-- end accuracy-table -->"
 
 
+def _pattern(folder: str) -> re.Pattern:
+    start, end = markers(folder)
+    return re.compile(re.escape(start) + r"\n(.*?)" + re.escape(end), flags=re.S)
+
+
 def readme_table(readme_text: str, folder: str) -> str | None:
     """The table between ``folder``'s markers in the README text (None when the markers are missing)."""
-    start, end = markers(folder)
-    m = re.search(re.escape(start) + r"\n(.*?)" + re.escape(end), readme_text, flags=re.S)
+    m = _pattern(folder).search(readme_text)
     return m.group(1).rstrip("\n") if m else None
 
 
@@ -122,8 +126,7 @@ def main() -> None:
     if readme_table(readme, args.folder) is None:
         raise SystemExit(f"{args.readme}: no markers {' ... '.join(markers(args.folder))}")
     start, end = markers(args.folder)
-    new = re.sub(re.escape(start) + r"\n.*?" + re.escape(end), lambda _: f"{start}\n{text}\n{end}", readme,
-                 flags=re.S)
+    new = _pattern(args.folder).sub(lambda _: f"{start}\n{text}\n{end}", readme)
     from siloflow.atomic_files import write_text
     write_text(args.readme, new)
     print(f"{args.readme}: table of {args.folder} rewritten")

@@ -355,8 +355,15 @@ def failing_candidates(table) -> set[str]:
     recommendation whose new seeds did: such a setting is no profile, whatever its completed runs say
     (they are the survivors). A failure that was not the setting's (a full disk, a killed machine) is
     dropped from runs.csv by hand: the bench then runs that seed again."""
-    failing = set(table.candidate[(table.failed_runs + table.failed_fill_only) > 0])
+    failed = failed_totals(table)
+    failing = set(failed.index[failed > 0])
     return failing | {name[: -len(VALIDATION)] for name in failing if name.endswith(VALIDATION)}
+
+
+def failed_totals(table):
+    """Per candidate of a bench's comparison: its failed runs, whole and fill-only (a pandas Series)."""
+    rows = table.drop_duplicates("candidate").set_index("candidate")
+    return (rows.failed_runs + rows.failed_fill_only).astype(int)
 
 
 def run_counts(runs) -> Callable[[str, bool], int]:
@@ -422,9 +429,7 @@ def conclude(out: Path, tolerances: dict = TOLERANCES, confidence: float = 0.95,
     barred = {c.name for c in CANDIDATES if not c.profile} | failing_candidates(table)
     choices = table[~table.candidate.str.endswith(VALIDATION) & ~table.candidate.isin(barred)]
     rec = bench_stats.recommend(choices, tolerances)
-    failed = table.drop_duplicates("candidate").set_index("candidate")
-    notes = {name: f"({int(r.failed_runs + r.failed_fill_only)} failed)" for name, r in failed.iterrows()
-             if r.failed_runs + r.failed_fill_only > 0}
+    notes = {name: f"({n} failed)" for name, n in failed_totals(table).items() if n > 0}
     bench_stats.pareto_figure(table, out / "pareto.png", tolerances, highlight=rec and rec["candidate"], notes=notes)
     if rec is not None:
         cand = next((c for c in CANDIDATES if c.name == rec["candidate"]), None)

@@ -404,17 +404,15 @@ def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None, hig
     lines += ["", "open: not resolved, filled: resolved", "bars: 95 % intervals"]
     per_col = -(-len(lines) // key_cols)
     keys = ["\n".join(lines[c * per_col:(c + 1) * per_col]) for c in range(key_cols)]
-    if spare:
+    if spare:                       # the key's left edge, top and column width, in figure fractions
         fig.tight_layout()
         box = axes[len(quantities)].get_position()
-        for c, text in enumerate(keys):
-            fig.text(box.x0 + c * box.width / key_cols, box.y1, text, va="top", ha="left", fontsize=6.5,
-                     family="monospace")
+        x0, top, width = box.x0, box.y1, box.width / key_cols
     else:
         right = 1 - margin / fig.get_figwidth()
-        for c, text in enumerate(keys):
-            fig.text(right + 0.01 + c * 2.2 / fig.get_figwidth(), 0.97, text, va="top", ha="left", fontsize=6.5,
-                     family="monospace")
         fig.tight_layout(rect=(0, 0, right, 1))
+        x0, top, width = right + 0.01, 0.97, 2.2 / fig.get_figwidth()
+    for c, text in enumerate(keys):
+        fig.text(x0 + c * width, top, text, va="top", ha="left", fontsize=6.5, family="monospace")
     from postprocess.figures import save_figure
     save_figure(fig, path)

@@ -84,8 +84,6 @@ def peaks(folder: Path) -> dict:
     if g is None or not seen:
         return out
     speed, overlap = seen["max_speed"], seen["max_overlap"]
-    if speed < 0:                     # no grain seen: LIGGGHTS' max over no atoms is -1e20
-        speed = nan
     return {"max_speed": speed, "max_overlap_fraction": overlap / g.grain_radius, "speed_ratio": speed / g.max_speed,
             "overlap_ratio": overlap / g.max_overlap}
 
@@ -164,12 +162,11 @@ def envelope_figure(df, edges: list[dict], path: Path) -> None:
         dust = None if dust is None or dust != dust else float(dust)
         return float(stiffness), dust
 
-    rows = sorted({key(s, d) for s, d in zip(df.stiffness_scale, df.get("dust_scale", [None] * len(df)))},
-                  key=lambda k: (-k[0], k[1] or 0.0))
+    keys = [key(s, d) for s, d in zip(df.stiffness_scale, df["dust_scale"] if "dust_scale" in df else [None] * len(df))]
+    rows = sorted(set(keys), key=lambda k: (-k[0], k[1] or 0.0))
     y_of = {k: i for i, k in enumerate(rows)}
     labels = [f"stiffness x{s:g}" + (f", dust x{d:g}" if d is not None else "") for s, d in rows]
-    dust_col = df["dust_scale"] if "dust_scale" in df else [None] * len(df)
-    ys = [y_of[key(s, d)] for s, d in zip(df.stiffness_scale, dust_col)]
+    ys = [y_of[k] for k in keys]
     fig = Figure(figsize=(7.5, 1.6 + 0.55 * len(rows)))
     ax = fig.add_subplot()
     for verdict, style in (("stable", dict(marker="o", color="tab:green")),
