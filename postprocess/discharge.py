@@ -66,9 +66,14 @@ def straight_line_fit(time, values) -> LineFit:
 
 @dataclass
 class FlowRate:
-    """Steady mass flow rate from a straight-line fit of discharged mass vs time.
+    """Steady mass flow rate: a straight-line fit of discharged mass vs time in the steady window.
 
-    rate, stderr: kg/s; t_start, t_end: fit window, s; r2: coefficient of determination.
+    rate: the fit's slope, kg/s; stderr: its standard error by batch means of the window's
+    sample-to-sample rates (the samples are autocorrelated; this is the error that matches the
+    spread of seeds, ``benchmarks/results/coverage``), kg/s, NaN when the window holds too few
+    samples for batches (``batches`` 0); fit_stderr: the straight line's own standard error,
+    which takes the samples as independent and understates the error several times, kg/s;
+    t_start, t_end: window, s; r2: coefficient of determination.
     """
 
     rate: float
@@ -77,7 +82,8 @@ class FlowRate:
     t_end: float
     n_samples: int
     r2: float
-    batch_stderr: float = float("nan")     # kg/s: batch means of the window's sample rates (autocorrelation kept)
+    fit_stderr: float = float("nan")
+    batches: int = 0
 
 
 def steady_flow_rate(time, mass, t_open: float, skip: float = 0.2, min_remaining: float = 0.2,
@@ -86,8 +92,9 @@ def steady_flow_rate(time, mass, t_open: float, skip: float = 0.2, min_remaining
 
     The window starts ``skip`` s after ``t_open`` (or after a fifth of the discharge, if
     shorter) and ends when less than ``min_remaining`` of ``initial_mass`` is left in the
-    silo (the flow slows as the silo empties). The fit is ``straight_line_fit``; rate and
-    stderr in kg/s (for mass in kg). Returns NaN rate if fewer than 5 samples fit.
+    silo (the flow slows as the silo empties). The rate is ``straight_line_fit``'s slope (kg/s
+    for mass in kg); its error is the batch-means error of the sample rates (:class:`FlowRate`).
+    Returns NaN rate if fewer than 5 samples fit.
     """
     time = np.asarray(time, float)
     mass = np.asarray(mass, float)
@@ -102,9 +109,8 @@ def steady_flow_rate(time, mass, t_open: float, skip: float = 0.2, min_remaining
     fit = straight_line_fit(t, m)
     # the straight line's stderr treats the samples' residuals as independent; they are not (a run's
     # rate fluctuates over many samples), so the batch means of the sample-to-sample rates say more
-    rates = np.diff(m) / np.diff(t)
-    batch_se, _ = batch_means_stderr(rates)
-    return FlowRate(fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples, fit.r2, batch_se)
+    batch_se, batches = batch_means_stderr(np.diff(m) / np.diff(t))
+    return FlowRate(fit.slope, batch_se, fit.t_start, fit.t_end, fit.n_samples, fit.r2, fit.stderr, batches)
 
 
 def discharge_table(flow: pd.DataFrame, timestep: float, t_open: float) -> pd.DataFrame:

@@ -8,6 +8,8 @@ whichever engine wrote it.
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import asdict
 
 import numpy as np
@@ -22,6 +24,7 @@ from .discharge import discharge_table, steady_flow_rate
 from .dump_results import MIN_STEADY_SAMPLES, analyse_dumps, steady_resolution
 from .flow_rate import rate_series, steady_window
 from .janssen import compare_with_measurement
+from .numbers import mass_rate, pressure
 from .wall_pressure import band_mean, band_pressures, vertical_load, wide_forces
 
 
@@ -72,27 +75,46 @@ def pressure_window(steady: dict | None, rate) -> dict | None:
 
 
 #: the pressure-statistics columns of bands.csv, after the first six
-BAND_STATISTICS = ["static_pressure_stderr", "static_samples", "static_batches", "dynamic_mean_pressure",
+BAND_STATISTICS = ["static_pressure_stderr", "static_pressure_batch_stderr", "static_pressure_sector_stderr",
+                   "static_samples", "static_batches", "static_sectors", "dynamic_mean_pressure",
                    "dynamic_std_pressure", "dynamic_p95_pressure", "dynamic_max_pressure", "dynamic_samples"]
 
 
-def band_statistics(bands: pd.DataFrame, dynamic_mask, static_mask) -> pd.DataFrame:
+def static_stderr(batch: float, sector: float) -> float:
+    """The headline standard error of a band's static pressure (Pa) from its two parts: the
+    window's time series (``batch``, batch means) and the band's sectors (``sector``, their spread
+    around the wall over the square root of their number), added in quadrature; NaN when either
+    part is unknown (a window too short for batches, a band of one sector), so that no error that
+    leaves out the bed's packing is stated. ``benchmarks/results/coverage`` measures it against the
+    spread of seeds."""
+    return float(math.hypot(batch, sector)) if np.isfinite(batch) and np.isfinite(sector) else float("nan")
+
+
+def band_statistics(bands: pd.DataFrame, dynamic_mask, static_mask, sector_means=None) -> pd.DataFrame:
     """Per band (index ``band``) of a tidy band table (step, band, pressure Pa): the static
     window's sample count and the batch-means standard error of its mean pressure
-    (:func:`batch_means_stderr`), and over the dynamic window the mean, standard deviation
-    (ddof 1), 95th percentile (linear interpolation, numpy's default), maximum and count of
-    the pressure (Pa): the columns :data:`BAND_STATISTICS`."""
+    (:func:`batch_means_stderr`); from ``sector_means`` (the static window's mean pressure per
+    band and sector, Pa, a Series indexed by (band, sector)) the sectors' standard error,
+    sd(sectors, ddof 1) / sqrt(sectors); their sum in quadrature (:func:`static_stderr`); and
+    over the dynamic window the mean, standard deviation (ddof 1), 95th percentile (linear
+    interpolation, numpy's default), maximum and count of the pressure (Pa): the columns
+    :data:`BAND_STATISTICS`."""
     def aligned(mask):
         return pd.Series(np.broadcast_to(np.asarray(mask, bool), (len(bands),)), index=bands.index)
 
     static_mask, dynamic_mask = aligned(static_mask), aligned(dynamic_mask)
     rows = {}
+    nan = float("nan")
     for band, grp in bands.groupby("band"):
         st = grp[static_mask[grp.index]].sort_values("step").pressure.to_numpy(float)
         dy = grp[dynamic_mask[grp.index]].pressure.to_numpy(float)
         se, nb = batch_means_stderr(st)
-        nan = float("nan")
-        rows[band] = {"static_pressure_stderr": se, "static_samples": len(st), "static_batches": nb,
+        per_sector = np.asarray(sector_means.loc[band], float) if sector_means is not None and \
+            band in sector_means.index.get_level_values(0) else np.array([])
+        sector_se = float(per_sector.std(ddof=1) / math.sqrt(len(per_sector))) if len(per_sector) > 1 else nan
+        rows[band] = {"static_pressure_stderr": static_stderr(se, sector_se), "static_pressure_batch_stderr": se,
+                      "static_pressure_sector_stderr": sector_se, "static_samples": len(st), "static_batches": nb,
+                      "static_sectors": len(per_sector),
                       "dynamic_mean_pressure": float(dy.mean()) if len(dy) else nan,
                       "dynamic_std_pressure": float(dy.std(ddof=1)) if len(dy) > 1 else nan,
                       "dynamic_p95_pressure": float(np.percentile(dy, 95)) if len(dy) else nan,
@@ -148,7 +170,8 @@ def analyse(folder, measured_pressure=None) -> dict:
         window = pressure_window(steady, rate)
         dyn_mask = bands.step > run.stage_steps["open"] + run.sample_steps
         dyn_mask &= (bands.time >= window["t_start"]) & (bands.time <= window["t_end"]) if window else False
-        table = table.join(band_statistics(bands, dyn_mask, static_mask)).reset_index()
+        sector_means = sectors[static_window(sectors, run)].groupby(["band", "sector"]).pressure.mean()
+        table = table.join(band_statistics(bands, dyn_mask, static_mask, sector_means)).reset_index()
         n_dyn = int(table.dynamic_samples.min()) if len(table) else 0
         pressure_stats = {
             "dynamic_window": {**(window or {"source": "none: no steady or flow-rate window"}),
@@ -156,8 +179,9 @@ def analyse(folder, measured_pressure=None) -> dict:
             "static_window": {"t_start": float(bands.time[static_mask].min()),
                               "t_end": float(bands.time[static_mask].max()),
                               "n_samples": int(table.static_samples.min()) if len(table) else 0},
-            "static_stderr": "batch means: contiguous batches (10 from 40 samples, 5 from 10), "
-                             "SE = sd(batch means) / sqrt(batches); the samples are autocorrelated"}
+            "static_stderr": "the window's batch means (contiguous batches, 10 from 40 samples, 5 from 10: "
+                             "SE = sd(batch means) / sqrt(batches); the samples are autocorrelated) and the "
+                             "band's sectors (sd / sqrt(sectors): the packing around the wall) in quadrature"}
 
     # force balance of the settled bed
     balance = None
@@ -260,11 +284,44 @@ def en1991_comparison(run: RunOutputs, table: pd.DataFrame, summary: dict, out) 
     except ValueError as exc:
         return {"computed": False, "reason": str(exc)}
     compared = compare_with_dem(loads, table)
+    state, verdicts = en_band_verdicts(plan, loads, compared, table, summary, surface)
+    compared = compared.assign(static_verdict=[v["static_verdict"] for v in verdicts],
+                               static_causes=["; ".join(v["static_causes"]) for v in verdicts],
+                               dynamic_verdict=[v["dynamic_verdict"] for v in verdicts])
     write_text(out / "design_vs_dem.csv", compared.to_csv(index=False))
     design_figure(loads, out / "design_loads.png", table)
     return {"computed": True, "solid": what, "classification": loads.classification, "C_h": loads.C_h,
-            "C_w": loads.C_w, "fill_height_m": surface, "notes": list(loads.notes),
+            "C_w": loads.C_w, "fill_height_m": surface, "notes": list(loads.notes), "bed_state": state,
             "bands": compared.to_dict(orient="records")}
+
+
+def en_band_verdicts(plan, loads, compared, table, summary: dict, surface: float):
+    """The settled bed's state (``en_verdicts.bed_state``) and a verdict per band of ``compared``."""
+    from .en_verdicts import band_verdicts, bed_state
+    g = plan.geometry
+    diameter = 2.0 * g.half_width
+    protocol = "mobilised (fill.mobilise)" if plan.fill.mobilise is not None else (
+        f"{plan.fill.protocol}" + (", poured frictionless" if plan.fill.frictionless else ""))
+    max_case = loads.values["max_horizontal"]
+    fa = summary.get("frame_analyses", {})
+    flat_cylinder = g.kind == "cylinder" and g.hopper_height == 0
+    state = bed_state(summary.get("force_balance") if flat_cylinder else None, wall_normal_force(plan, table),
+                      fa.get("janssen_static"), surface, diameter, max_case.mu, max_case.K, protocol)
+    grains_across = diameter / (2.0 * max(gr.radius for gr in plan.grains))
+    se = table.set_index("band").reindex(compared.band).static_pressure_stderr.to_numpy(float)
+    return state, band_verdicts(compared, se, state, diameter, loads.material.gamma, grains_across)
+
+
+def wall_normal_force(plan, table) -> float | None:
+    """The settled bed's normal force on a cylinder's vertical wall (N): each band's static
+    pressure over its area 2 pi R (z1 - z0); None for another silo or without bands."""
+    g = plan.geometry
+    if g.kind != "cylinder" or table.empty:
+        return None
+    spans = {w.band: (w.z0, w.z1) for w in plan.walls if w.role == "band"}
+    pressure = table.set_index("band").static_pressure
+    return float(sum(pressure[b] * 2.0 * math.pi * g.half_width * (z1 - z0) for b, (z0, z1) in spans.items()
+                     if b in pressure.index and np.isfinite(pressure[b])))
 
 
 def _fmt(value, spec: str = ".4g") -> str:
@@ -330,6 +387,75 @@ def profile_line(p: dict | None) -> str:
     return line
 
 
+def flow_rate_line(fr: dict) -> str:
+    """The report's flow-rate line: the one steady rate, its batch-means error, its window."""
+    line = (f"- steady flow rate Wf = {mass_rate(fr['rate'], fr.get('stderr'))} (t = {_fmt(fr['t_start'], '.3g')}-"
+            f"{_fmt(fr['t_end'], '.3g')} s, {fr.get('n_samples')} samples, r2 {_fmt(fr['r2'], '.4f')}")
+    if fr.get("batches"):
+        line += (f"; standard error by batch means of {fr['batches']} batches, the error that matches the spread "
+                 f"of seeds (the straight line's own, {mass_rate(fr.get('fit_stderr'), float('nan')).split(' (')[0]},"
+                 " takes the samples as independent)")
+    elif "batches" in fr:
+        line += "; its error is not resolved: the window holds too few samples for batch means"
+    return line + ")"
+
+
+def steady_window_line(steady: dict, fr: dict) -> str:
+    """The detected steady window, the dynamic pressures' window; not a second flow rate: its
+    median sample rate is compared with Wf in units of Wf's error."""
+    line = (f"- steady discharge detected (the window of the dynamic pressures): t = {_fmt(steady['t_start'], '.3g')}-"
+            f"{_fmt(steady['t_end'], '.3g')} s")
+    if not steady.get("resolved", True):
+        return line + f": not resolved: {steady['reason']}"
+    line += f" ({steady['n_samples']} samples)"
+    diff = steady["median_rate"] - fr["rate"]
+    se = fr.get("stderr")
+    if se is not None and math.isfinite(se) and se > 0 and abs(diff) > 2 * se:
+        line += (f"; its median sample rate {mass_rate(steady['median_rate'], float('nan')).split(' (')[0]} differs "
+                 f"from Wf by {diff / se:+.1f} standard errors: the rate drifts over Wf's window (the silo empties "
+                 "or the flow is still starting), so Wf is an average over that window")
+    return line
+
+
+def static_cell(b: dict) -> str:
+    """A band's static pressure with its error, or why its error is not resolved."""
+    value, se = b.get("static_pressure"), b.get("static_pressure_stderr")
+    if se is not None and math.isfinite(se):
+        return pressure(value, se)
+    why = []
+    if b.get("static_batches") == 0:
+        why.append(f"the static window holds {b.get('static_samples')} samples (batch means need 10)")
+    if b.get("static_sectors", 2) < 2:
+        why.append("a band of one sector shows no spread around the wall")
+    return f"{_fmt(value, '.1f')} Pa (error not resolved: {'; '.join(why) or 'see bands.csv'})"
+
+
+def en_verdict_lines(en: dict) -> list[str]:
+    """The report's bed state and per-band verdicts of the EN comparison (no ratio without one)."""
+    state, lines = en.get("bed_state") or {}, []
+    if state:
+        line = f"The settled bed ({state['protocol']} fill)"
+        if state.get("mu_eff") is not None:
+            line += (f": the wall carries {state['wall_friction_share']:.2f} of its weight by friction (Janssen with "
+                     f"EN's mu = {state['mu_en']:.3g} and K = {state['K_en']:.3g}: {state['janssen_share_en']:.2f}); "
+                     f"its friction over its normal force, the mobilised mu_eff, is {state['mu_eff']:.2g} "
+                     f"({state['mu_eff'] / state['mu_en']:.2f} of EN's mu), and Janssen's law carries that share with "
+                     f"K_eff = {_fmt(state.get('K_eff'), '.2g')}")
+        else:
+            line += ": its wall friction's mobilisation is not measured (needs the force balance of a flat-bottomed cylinder)"
+        if state.get("K_bed") is not None:
+            line += f"; its own K = {state['K_bed']:.3g}"
+        lines += ["", line + "."]
+    verdicts = [b for b in en.get("bands", []) if b.get("static_verdict")]
+    if verdicts:
+        lines += ["", "Verdicts per band:"]
+        for b in verdicts:
+            causes = f"; cause: {b['static_causes']}" if b.get("static_causes") else ""
+            lines.append(f"- band {b['band']}: static {b['static_verdict']}{causes}; maximum dynamic "
+                         f"{b['dynamic_verdict']}")
+    return lines
+
+
 def report_text(summary: dict, run: RunOutputs) -> str:
     """A short human-readable report of a run's results (Markdown)."""
     fb, fr = summary["force_balance"], summary["flow_rate"]
@@ -342,8 +468,7 @@ def report_text(summary: dict, run: RunOutputs) -> str:
              (f"- force balance of the settled bed: walls + bottom carry {_fmt(fb['ratio'], '.4f')} x the weight "
               f"({_fmt(fb['wall_friction_share'], '.2f')} of it by wall friction)" if fb else
               "- force balance: not measured (outputs.results asks for neither force_balance nor wall_pressure)"),
-             f"- steady flow rate Wf = {_fmt(fr['rate'] * 1000)} +/- {_fmt(fr['stderr'] * 1000, '.2g')} g/s "
-             f"(t = {_fmt(fr['t_start'], '.3g')}-{_fmt(fr['t_end'], '.3g')} s, r2 {_fmt(fr['r2'], '.4f')})",
+             flow_rate_line(fr),
              f"- discharged {_fmt(summary['discharged_mass_kg'] * 1000)} g; {_fmt(summary['mass_in_silo_end_kg'] * 1000)} g left"]
     engine = summary.get("engine")
     if engine:
@@ -351,10 +476,7 @@ def report_text(summary: dict, run: RunOutputs) -> str:
     lines += [profile_line(summary.get("numerical_profile"))]
     steady = summary.get("steady_window_detected")
     if steady:
-        lines += [f"- steady discharge detected: t = {_fmt(steady['t_start'], '.3g')}-{_fmt(steady['t_end'], '.3g')} s, "
-                  f"median rate {_fmt(steady['median_rate'] * 1000)} g/s"
-                  + (f" ({steady['n_samples']} samples)" if steady.get("resolved", True)
-                     else f": not resolved: {steady['reason']}")]
+        lines += [steady_window_line(steady, fr)]
     fa = summary.get("frame_analyses", {})
     if "bulk_solid_fraction" in fa:
         if "cross_section_solid_fraction" in fa:
@@ -394,8 +516,8 @@ def report_text(summary: dict, run: RunOutputs) -> str:
         lines += ["", "| band | z (m) | static p | dynamic mean +/- sd | p95 | max (window) | max dynamic | C_h |",
                   "|---|---|---|---|---|---|---|---|"]
         for b in summary["bands"]:
-            lines.append(f"| {b['band']} | {_fmt(b['z_mid'], '.3f')} | {_fmt(b['static_pressure'], '.1f')} +/- "
-                         f"{_fmt(b.get('static_pressure_stderr'), '.2g')} | {_fmt(b.get('dynamic_mean_pressure'), '.1f')} "
+            lines.append(f"| {b['band']} | {_fmt(b['z_mid'], '.3f')} | {static_cell(b)} | "
+                         f"{_fmt(b.get('dynamic_mean_pressure'), '.1f')} "
                          f"+/- {_fmt(b.get('dynamic_std_pressure'), '.2g')} | {_fmt(b.get('dynamic_p95_pressure'), '.1f')} | "
                          f"{_fmt(b.get('dynamic_max_pressure'), '.1f')} | {_fmt(b['max_dynamic_pressure'], '.1f')} | "
                          f"{_fmt(b['discharge_factor'], '.2f')} |")
@@ -409,6 +531,7 @@ def report_text(summary: dict, run: RunOutputs) -> str:
             lines.append(f"| {b['band']} | {_fmt(b['en_p_hf'], '.1f')} | {_fmt(b['static_over_p_hf'], '.2f')} | "
                          f"{_fmt(b['en_p_he'], '.1f')} | {_fmt(b['max_dynamic_over_p_he'], '.2f')} | "
                          f"{_fmt(b['dem_discharge_factor'], '.2f')} |")
+        lines += en_verdict_lines(en)
     elif en:
         lines += ["", f"EN 1991-4 loads: not computed ({en.get('reason')})"]
     if "pressure_comparison" in summary:

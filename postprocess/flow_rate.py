@@ -198,7 +198,9 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None) -> BeverlooFit
     def model(X, C, k):
         return beverloo(X[0], X[1], C, k, X[2], g)
 
-    sigma = None if W_stderr is None else np.asarray(W_stderr, float)
+    sigma = None if W_stderr is None else np.asarray(W_stderr, float) * np.ones(len(W))
+    if sigma is not None and not np.all(np.isfinite(sigma) & (sigma > 0)):
+        sigma = None                # a run without a resolved error: weigh by the residuals instead
     popt, pcov = curve_fit(model, np.vstack([D0, d, rho_b]), W, p0=[c0, k0], sigma=sigma,
                            absolute_sigma=sigma is not None, maxfev=20000)
     res = (W - model(np.vstack([D0, d, rho_b]), *popt)) / W
@@ -225,6 +227,6 @@ def beverloo_table(folders) -> pd.DataFrame:
         if not (rate["rate"] and np.isfinite(rate["rate"])):
             raise ReadError(f"{folder}: no steady flow rate in its results")
         rows.append({"run": str(folder), "D0": 2 * plan.geometry.outlet_radius, "d": 2 * grains[0].radius,
-                     "rho_b": float(rho_b), "W": rate["rate"], "W_stderr": rate["stderr"], "g": plan.gravity,
+                     "rho_b": float(rho_b), "W": rate["rate"], "W_stderr": rate.get("stderr", np.nan), "g": plan.gravity,
                      "rho_b_source": "measured" if fa.get("bulk_density_kg_m3") else "case packing fraction"})
     return pd.DataFrame(rows)

@@ -180,8 +180,10 @@ def run_metrics(folder: Path) -> dict:
     out["wall_s"] = s.get("engine_wall_time_s", nan)
     fr = s.get("flow_rate") or {}
     out["flow_rate"] = fr.get("rate", nan)
-    out["flow_rate_fit_se"] = fr.get("stderr", nan)            # the straight line's (independent samples)
-    out["flow_rate_batch_se"] = fr.get("batch_stderr", nan)    # batch means of the sample rates
+    if "fit_stderr" in fr:      # the headline stderr is batch means (summaries before it: the line's)
+        out["flow_rate_fit_se"], out["flow_rate_batch_se"] = fr["fit_stderr"], fr.get("stderr", nan)
+    else:
+        out["flow_rate_fit_se"], out["flow_rate_batch_se"] = fr.get("stderr", nan), fr.get("batch_stderr", nan)
     bands = [b for b in s.get("bands") or [] if b.get("static_pressure") is not None]
     if bands:
         top = max(b["static_pressure"] for b in bands)
@@ -218,6 +220,28 @@ def check_seed_count(seeds: int, option: str, seed_offset: int = 0) -> None:
                          f"seed, + {VALIDATION_SEED_OFFSET}, + {FILL_ONLY_SEED_OFFSET}); more would reuse another's fills")
 
 
+def choose_candidates(names: Optional[str], option: str = "--candidates") -> list[Candidate]:
+    """The candidates a comma-separated list of names chooses, the reference first (None: all of
+    :data:`CANDIDATES`). An empty list, an empty name, an unknown or repeated one is a
+    ``SetupError`` naming ``option``: a bench of every candidate takes hours, never a slip's default."""
+    if names is None:
+        return list(CANDIDATES)
+    known = {c.name: c for c in CANDIDATES}
+    chosen = [n.strip() for n in names.split(",")]
+    if not any(chosen):
+        raise SetupError(f"{option}: no candidate named in {names!r}; give names from: {', '.join(known)} "
+                         f"(or leave {option} out for all of them)")
+    if not all(chosen):
+        raise SetupError(f"{option}: {names!r} has an empty name (two commas, or a comma at an end)")
+    unknown = [n for n in chosen if n not in known]
+    if unknown:
+        raise SetupError(f"{option}: unknown {', '.join(unknown)}; known: {', '.join(known)}")
+    repeated = sorted({n for n in chosen if chosen.count(n) > 1})
+    if repeated:
+        raise SetupError(f"{option}: {', '.join(repeated)} named more than once")
+    return [REFERENCE] + [known[n] for n in chosen if n != REFERENCE.name]
+
+
 def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
               report: Callable[[str], None] = lambda s: None, skip_reference: bool = False,
               seed_offset: int = 0, fill_only_seeds: int = 0) -> list[dict]:
@@ -230,6 +254,8 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
     from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, read_rows, run_missing
     check_seed_count(seeds, "seeds", seed_offset)
     check_seed_count(fill_only_seeds, "fill-only seeds", FILL_ONLY_SEED_OFFSET + seed_offset)
+    if isinstance(candidates, str) or any(not isinstance(c, Candidate) for c in candidates):
+        raise SetupError("candidates: give Candidate objects (choose_candidates('a,b') reads a list of names)")
     base, case = read_base_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
         raise SetupError("the bench needs the reference candidate (the papers' settings) to compare with")

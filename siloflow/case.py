@@ -50,6 +50,8 @@ MIN_YOUNGS_MODULUS = 1e3
 MAX_YOUNGS_MODULUS = 1e13
 #: below 1/1000 of the contact time the step adds only cost and round-off, no accuracy
 MIN_TIMESTEP_FRACTION = 1e-3
+#: s: the longest stage a case may ask for (discharge.duration and max_time); an interval is never longer
+MAX_STAGE_TIME = 1e5
 GrainRadius = Annotated[Positive, Field(ge=MIN_GRAIN_RADIUS)]
 
 
@@ -436,8 +438,16 @@ class Settle(Strict):
     ke_pe_ratio: Real = Field(1e-5, gt=0, lt=1, allow_inf_nan=False)
     check_interval: Positive = Field(0.02, description="time between checks, s", le=10)
     max_time: Positive = Field(2.0, description="cap on settling time, s", le=1e4)
-    static_window: Positive = Field(0.02, description="time the settled bed is sampled for static "
-                                    "wall loads before the orifice opens, s", le=100)
+    static_window: Positive = Field(None, description="time the settled bed is sampled for static "
+                                    "wall loads before the orifice opens, s; default: STATIC_WINDOW_SAMPLES "
+                                    "samples and at least two settling checks (default_static_window)", le=100)
+
+    @model_validator(mode="after")
+    def _check_within_cap(self):
+        if self.check_interval > self.max_time:
+            raise ValueError(f"fill.settle.check_interval ({self.check_interval} s) is longer than the settling it "
+                             f"checks (fill.settle.max_time {self.max_time} s): the settling would overrun its cap")
+        return self
 
 
 class Mobilise(Strict):
@@ -536,7 +546,8 @@ class Outputs(Strict):
         None, max_length=len(RESULTS), description="what the run is for (flow_rate is always measured): "
         + ", ".join(RESULTS) + "; unset: everything")
     sample_interval: Positive = Field(0.005, description="wall forces and flow sampled this often, s", le=100)
-    dump_interval: Optional[Positive] = Field(None, description="particle dumps this often, s (none if unset)")
+    dump_interval: Optional[Positive] = Field(None, le=MAX_STAGE_TIME, description="particle dumps this often, "
+                                              "s (none if unset; at most the whole run, siloflow.derived)")
     vtk: bool = Field(False, description="also write VTK particle files for ParaView")
     contacts: bool = Field(True, description="with dumps: also dump pair contacts (positions, ids, "
                            "forces) for coordination numbers and force chains")
@@ -696,6 +707,14 @@ class Analysis(Strict):
         "as_printed", description="reading of paper A's Eqs. 36-37 (see postprocess.porosity)")
 
 
+#: physical ranges of the explicit design values (``siloflow.design_loads.bulk_solid`` checks the same):
+#: unit weight N/m3 from expanded-polystyrene beads (~150) to tungsten powder (~1e5); K from well
+#: below the Annex E solids (0.36-0.63; Jaky's 1 - sin phi_i is 0.13 at phi_i 60 deg) to 1, the
+#: hydrostatic ratio (a stored solid is not in a passive state); wall friction mu from PTFE-lined
+#: walls to tan 56 deg (a wall rougher than the solid's internal friction shears the solid instead)
+DESIGN_RANGES = {"unit_weight": (100.0, 1e5), "K": (0.1, 1.0), "mu": (0.05, 1.5)}
+
+
 class DesignSettings(Strict):
     """The bulk solid of the EN 1991-4 design loads (``siloflow design``; never reaches a deck):
     a row of the Annex E table (``material``, see ``siloflow.design_loads.MATERIALS``) or explicit
@@ -704,9 +723,13 @@ class DesignSettings(Strict):
 
     material: Optional[str] = Field(None, max_length=64, description="EN 1991-4 Annex E solid (e.g. wheat, "
                                     "maize, sand, cement); none: the explicit values")
-    unit_weight: Optional[Positive] = Field(None, ge=100, le=1e5, description="bulk unit weight gamma, N/m3")
-    K: Optional[Positive] = Field(None, le=1, description="lateral pressure ratio")
-    mu: Optional[Positive] = Field(None, le=2, description="wall friction coefficient")
+    unit_weight: Optional[Positive] = Field(None, ge=DESIGN_RANGES["unit_weight"][0],
+                                            le=DESIGN_RANGES["unit_weight"][1],
+                                            description="bulk unit weight gamma, N/m3")
+    K: Optional[Positive] = Field(None, ge=DESIGN_RANGES["K"][0], le=DESIGN_RANGES["K"][1],
+                                  description="lateral pressure ratio")
+    mu: Optional[Positive] = Field(None, ge=DESIGN_RANGES["mu"][0], le=DESIGN_RANGES["mu"][1],
+                                   description="wall friction coefficient")
     phi_r_deg: Optional[Positive] = Field(None, lt=90, description="angle of repose, degrees")
     C_op: Optional[NonNegative] = Field(None, le=10, description="patch load solid reference factor")
     wall_type: Literal["D1", "D2", "D3"] = Field("D2", description="wall friction category: D1 low, "
@@ -729,8 +752,45 @@ class DesignSettings(Strict):
         return self
 
 
+#: samples in the default static window: 5 batches of 4 for the batch-means error of each static
+#: band pressure (postprocess.batch_means needs 10 samples at least)
+STATIC_WINDOW_SAMPLES = 20
+
+
+def default_static_window(sample_interval: float, check_interval: float) -> float:
+    """The static window (s) when the case sets none: ``STATIC_WINDOW_SAMPLES`` wall-force samples
+    of ``sample_interval`` (s), and at least two settling checks of ``check_interval`` (s), the
+    time over which the bed was judged settled."""
+    return max(STATIC_WINDOW_SAMPLES * sample_interval, 2 * check_interval)
+
+
+def _with_static_window(data):
+    """The raw case ``data`` with ``fill.settle.static_window`` set to its default if it is not
+    given (a copy; anything malformed is left for validation to name)."""
+    if not isinstance(data, dict) or not isinstance(data.get("fill"), dict):
+        return data
+    fill = dict(data["fill"])
+    settle = fill.get("settle", {})
+    if not isinstance(settle, dict) or settle.get("static_window") is not None:
+        return data
+    outputs = data.get("outputs", {})
+    sample = outputs.get("sample_interval") if isinstance(outputs, dict) else None
+    sample = sample if sample is not None else Outputs.model_fields["sample_interval"].default
+    check = settle.get("check_interval", Settle.model_fields["check_interval"].default)
+    if isinstance(sample, bool) or isinstance(check, bool) or not all(
+            isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in (sample, check)):
+        return data
+    fill["settle"] = {**settle, "static_window": min(default_static_window(float(sample), float(check)), 100.0)}
+    return {**data, "fill": fill}
+
+
 class Case(Strict):
     """A complete, validated silo case (``Case.from_yaml(path)``, ``Case.model_validate(dict)``)."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_static_window(cls, data):
+        return _with_static_window(data)
 
     @classmethod
     def from_yaml(cls, path) -> "Case":

@@ -19,7 +19,7 @@ from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, T
 
 from .case import Case
 from .case_file import load_case
-from .errors import ANSI_ESCAPES, CaseError, ReadError, SiloflowError
+from .errors import ANSI_ESCAPES, CaseError, ReadError, SetupError, SiloflowError
 from .run_folder import RunFolder
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
@@ -230,8 +230,11 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         out.print(f"fill from the cache {cache} (key {key[:12]}): the settled bed is reused, the run starts "
                   "at its static stage")
 
-    _drive(folder, lambda progress: run_with_cache(engine, folder, derived, FillCache(cache), progress, on_hit=hit),
-           post_process)
+    def warn(message: str) -> None:
+        err.print(printable(f"warning: {message}"), markup=False, highlight=False)
+
+    _drive(folder, lambda progress: run_with_cache(engine, folder, derived, FillCache(cache), progress, on_hit=hit,
+                                                   on_warning=warn), post_process)
 
 
 def _drive(folder: Path, work, post_process: bool) -> None:
@@ -287,7 +290,8 @@ def _post(folder: Path, measured: Path | None = None) -> None:
     if fb:
         out.print(f"force balance of the settled bed: walls+bottom carry {fb['ratio']:.4f} x the weight "
                   f"({fb['wall_friction_share']:.2f} of it by wall friction)")
-    out.print(f"steady flow rate: {fr['rate'] * 1000:.2f} +/- {fr['stderr'] * 1000:.2f} g/s; "
+    from postprocess.numbers import mass_rate
+    out.print(f"steady flow rate: {mass_rate(fr['rate'], fr['stderr'])} (standard error by batch means); "
               f"discharged {summary['discharged_mass_kg'] * 1000:.1f} g")
     fa = summary.get("frame_analyses", {})
     if "cross_section_solid_fraction" in fa:
@@ -458,25 +462,51 @@ def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
           seeds: int = typer.Option(1, "--seeds", min=1, help="seeds per combination: the case's seed, +1, +2, ..."),
           cores: Optional[int] = typer.Option(None, "--cores", min=1, help="the engine ranks of the runs at once add "
                                               "up to at most this (default: this machine's cores)"),
-          output: Path = typer.Option(..., "-o", "--output", help="sweep folder: cases/, runs/, logs/, sweep.csv"),
+          output: Path = typer.Option(..., "-o", "--output", help="sweep folder: cases/, runs/, logs/, sweep.csv, "
+                                      "sweep.json"),
           cache: Optional[Path] = typer.Option(None, "--cache", help="fill cache (default OUT/cache)"),
           slurm: bool = typer.Option(False, "--slurm", help="write Slurm job arrays and submit.sh instead of running"),
-          force: bool = typer.Option(False, "--force", help="reuse an existing sweep folder (nothing in it is "
-                                     "deleted; a run folder already there is refused)")) -> None:
+          max_array_size: int = typer.Option(1000, "--max-array-size", min=1, help="--slurm: most tasks of one job "
+                                             "array (below Slurm's MaxArraySize, 1001 by default); more are split "
+                                             "into several arrays, all submitted by submit.sh"),
+          force: bool = typer.Option(False, "--force", help="use a non-empty folder that holds no sweep (nothing in "
+                                     "it is deleted; a run folder already there is refused). Not needed to resume: "
+                                     "run the same command again")) -> None:
     """Run a case over every combination of --set values and seeds: one fill per distinct settled bed, then
-    the other runs from it, in parallel within --cores; the table of results is OUT/sweep.csv."""
+    the other runs from it, in parallel within --cores; the table of results is OUT/sweep.csv. To resume a
+    stopped sweep, run the same command again (same case, --set and --seeds; --force is not needed): complete
+    and failed runs are kept, interrupted ones resumed, the others run; a folder of another sweep is refused.
+    A file siloflow wrote (the Slurm scripts, sweep.csv) is replaced only while unchanged: if you edited one,
+    nothing is written."""
     import os
+    import shlex
     from .sweep import prepare_sweep, run_sweep, table_summary, write_slurm
+    again = shlex.join(["siloflow", "sweep", str(case_file), *[a for spec in set_specs for a in ("--set", spec)],
+                        *(["--seeds", str(seeds)] if seeds != 1 else []), *(["--cores", str(cores)] if cores else []),
+                        "-o", str(output), *(["--cache", str(cache)] if cache else [])])
     cache = cache or output / "cache"
+    running = False
     try:
-        variants, groups = prepare_sweep(case_file, set_specs, seeds, output, force, need_binary=not slurm)
+        from rich.progress import MofNCompleteColumn
+        with Progress(TextColumn("[bold]{task.fields[stage]:>8}"), BarColumn(), MofNCompleteColumn(),
+                      TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), console=err) as bar:
+            task = bar.add_task("prepare", total=None, stage="reading")
+
+            def stage(name: str, done: int, total: int) -> None:
+                bar.update(task, stage=name, completed=done, total=total)
+
+            variants, groups = prepare_sweep(case_file, set_specs, seeds, output, force, need_binary=not slurm,
+                                             progress=stage)
+            if slurm:
+                script = write_slurm(variants, groups, output, cache, max_array_size=max_array_size, progress=stage)
         if slurm:
-            script = write_slurm(variants, groups, output, cache)
-            out.print(f"{len(variants)} runs, {len(groups)} fill(s): submit with {script} (fills.sbatch, then "
-                      "runs.sbatch after them)")
+            arrays = -(-len(groups) // max_array_size) + -(-(len(variants) - len(groups)) // max_array_size)
+            out.print(f"{len(variants)} runs, {len(groups)} fill(s): submit with {script} ({arrays} job array(s): "
+                      "the fills, then the runs after them)")
             return
         signal.signal(signal.SIGTERM, _interrupt)
         out.print(f"{len(variants)} runs, {len(groups)} distinct fill(s); logs in {output / 'logs'}")
+        running = True
         with Progress(TextColumn("[bold]sweep"), BarColumn(), TextColumn("{task.completed}/{task.total} done"),
                       TimeElapsedColumn(), TextColumn("{task.fields[running]}"), console=err) as bar:
             task = bar.add_task("sweep", total=len(variants), running="")
@@ -487,8 +517,14 @@ def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
 
             table = run_sweep(variants, output, cores or os.cpu_count() or 1, cache, progress=progress, groups=groups)
     except KeyboardInterrupt:
-        err.print(f"[yellow]interrupted: the running runs were stopped; their folders under {output / 'runs'} "
-                  "are kept (siloflow status tells each one's state)[/yellow]")
+        if running:
+            err.print(printable(f"interrupted: the running runs were stopped and their folders under "
+                                f"{output / 'runs'} marked interrupted; {output / 'sweep.csv'} lists the runs "
+                                f"finished so far. Resume the sweep with the same command (finished runs are kept, "
+                                f"interrupted ones resumed): {again}"), markup=False, highlight=False)
+        else:
+            err.print(printable(f"interrupted before any run started; run the same command again: {again}"),
+                      markup=False, highlight=False)
         raise typer.Exit(130)
     except SiloflowError as exc:
         _fail(exc)
@@ -526,23 +562,17 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
     """Run time against error: each candidate setting (time step, stiffness, ranks) over --seeds fills, against
     the reference (dt = t_c/50, full stiffness); errors with 95 % intervals, a Pareto figure and the fastest
     profile within the tolerances."""
-    from .accuracy_bench import CANDIDATES, REFERENCE, check_seed_count, conclude, failing_candidates, run_bench, validate
+    from .accuracy_bench import (REFERENCE, check_seed_count, choose_candidates, conclude, failing_candidates,
+                                 run_bench, validate)
     from .bench_stats import best_bounds
     try:                            # before hours of runs, not after them
         check_seed_count(seeds, "--seeds")
         check_seed_count(validate_seeds, "--validate")
         check_seed_count(validate_fill_only, "--validate-fill-only")
         check_seed_count(fill_only_seeds, "--fill-only-seeds")
+        chosen = choose_candidates(candidates, "--candidates")
     except SiloflowError as exc:
         _fail(exc)
-    known = {c.name: c for c in CANDIDATES}
-    chosen = list(CANDIDATES)
-    if candidates:
-        names = [n.strip() for n in candidates.split(",") if n.strip()]
-        unknown = [n for n in names if n not in known]
-        if unknown:
-            _fail(SiloflowError(f"--candidates: unknown {', '.join(unknown)}; known: {', '.join(known)}"))
-        chosen = [REFERENCE] + [known[n] for n in names if n != REFERENCE.name]
     signal.signal(signal.SIGTERM, _interrupt)
     tolerances = {"flow_rate": flow_tolerance, "static_pressure": static_tolerance}
     with _study(output, "bench"):
@@ -641,16 +671,20 @@ def stability(case_file: Path = typer.Argument(..., help="YAML case file"),
               burst: float = typer.Option(0.1, "--burst", min=1e-3, max=10.0, help="discharge burst, s")) -> None:
     """The numerical-stability envelope: short runs (fill impacts, settled bed, a discharge burst) over time-step
     fractions x stiffness scales with the instability guard on; the largest safe time step and its margin."""
-    from .stability import conclude, run_envelope
+    from .stability import check_options, conclude, run_envelope
     fr = _numbers(fractions, "--fractions")
     if max(fr) > 1.0 or min(fr) < 1e-3:
         _fail(SiloflowError(f"--fractions: time-step fractions must lie in [0.001, 1], not '{fractions}'"))
     st = _numbers(stiffness, "--stiffness")
     if max(st) > 1.0 or min(st) < 1e-8:
         _fail(SiloflowError(f"--stiffness: stiffness scales must lie in [1e-8, 1], not '{stiffness}'"))
-    ds = _numbers(dust, "--dust") if dust else None
+    ds = _numbers(dust, "--dust") if dust is not None else None
     if ds and min(ds) < 1.0:
         _fail(SiloflowError(f"--dust: dust density scales must be >= 1, not '{dust}'"))
+    try:                            # before any run: a bad option is one message, not one per point
+        check_options(fr, st, ds, seed, burst)
+    except SiloflowError as exc:
+        _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
     with _study(output, "stability"):
         rows = run_envelope(case_file, output, fr, st, ds, seed, burst, report=_note)
@@ -728,11 +762,20 @@ def design(case_file: Path = typer.Argument(..., help="YAML case file (its desig
     from postprocess.design_figure import compare_with_dem, design_figure
     from .atomic_files import write_text
     from .case import DesignSettings
-    from .design_loads import bulk_solid, design_loads
-    from .run_folder import RESULT_TABLES
+    from .design_loads import CASE_FIELDS, bulk_solid, design_loads
+    from .errors import SetupError
+    from .run_folder import RESULT_TABLES, case_differences
     try:
         case = load_case(case_file)
         d = plan_of(case, case_file)
+        differs = case_differences(case, RunFolder(run_folder).case, CASE_FIELDS) if run_folder else []
+        if differs:
+            raise SetupError(f"--run {run_folder} is a run of another case: its {RunFolder(run_folder).case_file.name} "
+                             f"differs from {case_file} in what the design loads and its band pressures depend on:\n"
+                             + "\n".join(f"  {path}: {msg}" for path, msg in differs[:10])
+                             + (f"\n  and {len(differs) - 10} more" if len(differs) > 10 else "")
+                             + f"\ngive a run of this case, or design with the run's own case: "
+                             f"siloflow design {RunFolder(run_folder).case_file}")
         s = case.design or DesignSettings(material="wheat")
         solid = bulk_solid(s.material, unit_weight=s.unit_weight, K=s.K, mu=s.mu, phi_r=s.phi_r_deg, C_op=s.C_op)
         loads = design_loads(d.geometry, solid, d.fill.bed_height_estimate, s.wall_type, s.action_assessment_class,
@@ -775,28 +818,43 @@ CACHE_OPTION = typer.Option(None, "--cache", envvar="SILOFLOW_CACHE", help="cach
 
 @cache_app.command("list")
 def cache_list(cache: Optional[Path] = CACHE_OPTION) -> None:
-    """List the cached fills: key, age, size, the run that made each."""
+    """List the cached fills: key, age, size, the run that made each; and what else is in the
+    cache's folder (not siloflow's, or changed since it wrote it), with the reason."""
     from .fill_cache import FillCache
     store = FillCache(cache)
-    entries = store.entries()
+    entries, other = store.survey()
     for e in entries:
         size = sum(p.stat().st_size for p in e.files.values())
         age = (time.time() - e.info.get("time", time.time())) / 3600
         out.print(printable(f"{e.key[:16]}  {size / 1e6:8.2f} MB  {age:7.1f} h old  from {e.info.get('source')}"),
                   markup=False, highlight=False)
     out.print(f"{len(entries)} fill(s) in {store.fills}")
+    _cache_others(store, other, "not fills (cache clear leaves them)")
+
+
+def _cache_others(store, other: dict, what: str) -> None:
+    if other:
+        out.print(f"{len(other)} other item(s) in {store.fills}, {what}:")
+        for name, why in other.items():
+            out.print(printable(f"  {name}: {why}"), markup=False, highlight=False)
 
 
 @cache_app.command("clear")
 def cache_clear(key: Optional[str] = typer.Argument(None, help="a key (or its first characters); default: all"),
                 cache: Optional[Path] = CACHE_OPTION) -> None:
-    """Remove one cached fill, or all of them."""
+    """Remove one cached fill, or all of them: only entries siloflow wrote whose files are unchanged
+    since; anything else in the cache's folder is listed and left in place."""
     from .fill_cache import FillCache
+    store = FillCache(cache)
     try:
-        n = FillCache(cache).clear(key)
+        done = store.clear(key)
     except SiloflowError as exc:
         _fail(exc)
-    out.print(f"removed {n} fill(s)")
+    out.print(f"removed {len(done.removed)} fill(s) from {store.fills}")
+    _cache_others(store, done.left, "left in place")
+    if key is not None and not done.removed:
+        _fail(SetupError(f"no fill {key!r} was removed" + (": see above" if done.left else
+                                                            f": no cached fill's key starts with it")))
 
 
 def main() -> None:

@@ -525,6 +525,11 @@ def derive(case: Case) -> RunPlan:
     if f.mobilise is not None or f.protocol != "rain":
         plan = plan.model_copy(update={"fill": plan.fill.model_copy(update={
             "protocol": f.protocol, "mobilise": mobilise_plan(case, meshes, dt)})})
+    total = plan.total_planned_steps
+    if out.dump_interval is not None and dump_every is not None and dump_every > total:
+        raise CaseError([("outputs.dump_interval", f"{out.dump_interval:g} s is longer than the whole run (at most "
+                          f"{total * dt:.4g} s with every stage at its cap): no frame would be written after the "
+                          "first; give a shorter interval, or none (the frame analyses then choose one)")])
     plan = plan.model_copy(update={
         "walls": walls, "warnings": physics_warnings(case, plan),
         "sensors": Sensors(bands=len([w for w in walls if w.role == "band"]) // plan.sensors.sectors,

@@ -122,6 +122,13 @@ MATERIALS: dict[str, BulkSolid] = {r.name: r for r in (
     _row("wheat", 7.5, 9.0, 34, 30, 1.12, 0.54, 1.11, 0.24, 0.38, 0.57, 1.16, 0.5),
 )}
 MATERIAL_NAMES = tuple(MATERIALS)
+#: the case fields (dotted paths) the design loads and a run's band pressures beside them depend on:
+#: a run compared with a case's loads must agree with it in these (``siloflow design --run``)
+CASE_FIELDS = ("gravity", "geometry", "materials", "particles", "fill.count", "fill.height",
+               "fill.packing_fraction")
+#: physical ranges [lo, hi] of explicit values (unit weight N/m3), as the case schema's
+#: ``siloflow.case.DESIGN_RANGES`` (why each bound: there); K mu is the divisor of z_o
+EXPLICIT_RANGES = {"unit_weight": (100.0, 1e5), "K": (0.1, 1.0), "mu": (0.05, 1.5)}
 
 
 def _wall_index(wall_type: str) -> int:
@@ -149,8 +156,10 @@ def bulk_solid(name: Optional[str] = None, *, unit_weight: Optional[float] = Non
     """
     given = {k: v for k, v in dict(unit_weight=unit_weight, K=K, mu=mu, phi_r=phi_r, C_op=C_op).items()
              if v is not None}
-    for key, lo, hi in (("unit_weight", 0.0, 1e5), ("K", 0.0, 1.0), ("mu", 0.0, 2.0), ("phi_r", 0.0, 90.0),
-                        ("C_op", -1e-12, 10.0)):
+    for key, (lo, hi) in EXPLICIT_RANGES.items():
+        if key in given and not (lo <= given[key] <= hi and math.isfinite(given[key])):
+            raise ValueError(f"{key} = {given[key]} is outside [{lo:g}, {hi:g}]")
+    for key, lo, hi in (("phi_r", 0.0, 90.0), ("C_op", -1e-12, 10.0)):
         if key in given and not (lo < given[key] <= hi and math.isfinite(given[key])):
             raise ValueError(f"{key} = {given[key]} is outside ({lo:g}, {hi:g}]")
     if name is None:

@@ -25,14 +25,14 @@ import json
 import os
 import shutil
 import time
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator, Optional
 
 import numpy as np
 
-from .errors import SetupError
+from .errors import SetupError, SiloflowError
 
 #: plan fields that come after the fill (or only name or describe it): not in the key
 AFTER_FILL = ("name", "static_steps", "opening", "discharge", "outlet", "walls", "sensors", "outputs",
@@ -113,6 +113,19 @@ class Entry:
         return {name: self.folder / name for name in self.info["files"]}
 
 
+@dataclass(frozen=True)
+class Cleared:
+    """What :meth:`FillCache.clear` did: the keys it removed, and what it left in place
+    (name under ``fills/`` -> why)."""
+
+    removed: list[str]
+    left: dict[str, str]
+
+
+def _is_key(name: str) -> bool:
+    return len(name) == 64 and all(c in "0123456789abcdef" for c in name)
+
+
 class FillCache:
     """The fill cache under ``root`` (see the module docstring)."""
 
@@ -127,33 +140,74 @@ class FillCache:
             raise SetupError(f"cannot make the fill cache {self.fills}: {exc.strerror or exc}") from None
 
     @contextmanager
-    def lock(self, key: str) -> Iterator[None]:
-        """Hold the key's lock (waits while another run fills the same key)."""
+    def lock(self, key: str, wait: bool = True) -> Iterator[bool]:
+        """Hold the key's lock (waits while another run fills the same key); with ``wait=False``
+        it yields False at once if another process holds it. A lock file siloflow did not make
+        (a symlink, a folder) is refused."""
         self._ensure()
-        with open(self.fills / f"{key}.lock", "a") as fh:
-            fcntl.flock(fh, fcntl.LOCK_EX)
+        path = self.fills / f"{key}.lock"
+        if path.is_symlink() or path.exists() and not path.is_file():
+            raise SetupError(f"{path} is in the fill cache's way (it is not a lock file siloflow made): "
+                             "move it away")
+        with open(path, "a") as fh:
             try:
-                yield
+                fcntl.flock(fh, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+            except BlockingIOError:
+                yield False
+                return
+            try:
+                yield True
             finally:
                 fcntl.flock(fh, fcntl.LOCK_UN)
 
-    def get(self, key: str) -> Optional[Entry]:
-        """The entry of ``key`` if it is cached and intact (every file matching its SHA-256)."""
-        folder = self.fills / key
+    def check(self, name: str) -> tuple[Optional[Entry], str]:
+        """The entry stored as ``fills/<name>`` if siloflow wrote it and nothing in it changed
+        since, else ``(None, why not)``. An entry is siloflow's when the folder (not a link)
+        holds exactly ``entry.json``, ``key.json`` and the files ``entry.json`` lists, each
+        matching its SHA-256, and both its record and ``key.json`` (whose hash is the key) give
+        the folder's own name as the key: an entry copied or moved under another key is none."""
+        folder = self.fills / name
+        if folder.is_symlink():
+            return None, "a symbolic link, not a folder siloflow wrote"
+        if not folder.is_dir():
+            return None, "not a folder" if folder.exists() else "no such entry"
+        if not _is_key(name):
+            return None, "its name is not a fill key"
         try:
             info = json.loads((folder / ENTRY_NAME).read_text(encoding="utf-8"))
             files = info["files"]
-        except (OSError, ValueError, KeyError, TypeError):
-            return None
-        for name, digest in files.items():
-            path = folder / name
-            if "/" in name or not path.is_file() or path.is_symlink() or _sha256(path) != digest:
-                return None
-        return Entry(key, folder, info)
+            stored_key = info["key"]
+            inputs = json.loads((folder / KEY_NAME).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+            return None, f"no readable {ENTRY_NAME} and {KEY_NAME} of a fill"
+        if not isinstance(files, dict) or not all(isinstance(n, str) and isinstance(d, str) for n, d in files.items()):
+            return None, f"{ENTRY_NAME} does not list files with their SHA-256"
+        if stored_key != name or not isinstance(inputs, dict) or key_of(inputs) != name:
+            return None, f"stored under another key ({ENTRY_NAME} or {KEY_NAME} names another fill)"
+        expected = set(files) | {ENTRY_NAME, KEY_NAME}
+        present = {p.name for p in folder.iterdir()}
+        if present != expected:
+            extra, missing = sorted(present - expected), sorted(expected - present)
+            return None, ("holds files siloflow did not write: " + ", ".join(extra[:5]) if extra
+                          else "files are missing: " + ", ".join(missing[:5]))
+        for file_name, digest in files.items():
+            path = folder / file_name
+            if path.is_symlink() or not path.is_file():
+                return None, f"{file_name} is not a plain file"
+            if _sha256(path) != digest:
+                return None, f"{file_name} changed since siloflow wrote it"
+        return Entry(name, folder, info), ""
+
+    def get(self, key: str) -> Optional[Entry]:
+        """The entry of ``key`` if it is cached and intact (:meth:`check`)."""
+        return self.check(key)[0]
 
     def put(self, key: str, files: dict[str, bytes], inputs: dict, source: str) -> Entry:
-        """Publish the engine's fill ``files`` (name -> bytes) under ``key``; an entry already
-        there (another run published it first) is kept."""
+        """Publish the engine's fill ``files`` (name -> bytes) under ``key``; an intact entry
+        already there (another run published it first) is kept. A folder in the key's place that
+        is not an intact entry is left as it is and the fill is not published (SetupError)."""
+        if key_of(inputs) != key:
+            raise SetupError(f"the fill cache's key {key[:12]} is not the hash of its inputs")
         self._ensure()
         tmp = self.fills / f".{key}.{os.getpid()}.tmp"
         shutil.rmtree(tmp, ignore_errors=True)
@@ -168,46 +222,99 @@ class FillCache:
             try:
                 os.rename(tmp, self.fills / key)
             except OSError:
-                if self.get(key) is None:          # a broken entry in the way: replace it
-                    shutil.rmtree(self.fills / key, ignore_errors=True)
-                    os.rename(tmp, self.fills / key)
+                pass                               # a folder is in the way: checked below
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-        entry = self.get(key)
+        entry, why = self.check(key)
         if entry is None:
-            raise SetupError(f"the fill cache {self.fills} did not keep the entry {key[:12]}")
+            raise SetupError(f"the fill cache did not take the entry {key[:12]}: {self.fills / key} is in its way "
+                             f"({why}); it is left as it is")
         return entry
+
+    def survey(self) -> tuple[list[Entry], dict[str, str]]:
+        """The intact entries (oldest first), and everything else under ``fills/`` that is
+        neither an entry nor a lock or temporary of siloflow's (name -> why it is no entry)."""
+        if not self.fills.is_dir():
+            return [], {}
+        found, other = [], {}
+        for p in sorted(self.fills.iterdir()):
+            if p.name.endswith(".lock") and _is_key(p.name[:-5]) and p.is_file() and not p.is_symlink():
+                continue
+            if p.name.startswith(".") and p.name.endswith(".tmp"):
+                continue                           # a publication under way (or cut short)
+            entry, why = self.check(p.name)
+            if entry is None:
+                other[p.name] = why
+            else:
+                found.append(entry)
+        return sorted(found, key=lambda e: e.info.get("time", 0)), other
 
     def entries(self) -> list[Entry]:
         """Every intact entry, oldest first."""
-        if not self.fills.is_dir():
-            return []
-        found = [self.get(p.name) for p in self.fills.iterdir() if p.is_dir() and not p.name.startswith(".")]
-        return sorted((e for e in found if e is not None), key=lambda e: e.info.get("time", 0))
+        return self.survey()[0]
 
-    def clear(self, key: Optional[str] = None) -> int:
-        """Remove one entry (a key or a unique prefix of one), or all; return how many went."""
-        if not self.fills.is_dir():
-            return 0
-        targets = [p for p in self.fills.iterdir() if p.is_dir() and (key is None or p.name.startswith(key))]
-        if key is not None and len(targets) > 1:
-            raise SetupError(f"{key!r} names {len(targets)} fills: give more of the key")
-        for p in targets:
-            shutil.rmtree(p)
-            (self.fills / f"{p.name}.lock").unlink(missing_ok=True)
-        return len(targets)
+    def clear(self, key: Optional[str] = None) -> Cleared:
+        """Remove one entry (a key or a unique prefix of one), or all. Only intact entries are
+        removed (:meth:`check`), file by file, and one in use by a running run is left; anything
+        else under ``fills/`` is left in place and reported with the reason."""
+        entries, other = self.survey()
+        if key is not None:
+            if not key:
+                raise SetupError("an empty key names every fill: leave it out to clear them all")
+            entries = [e for e in entries if e.key.startswith(key)]
+            other = {n: why for n, why in other.items() if n.startswith(key)}
+            if len(entries) > 1:
+                raise SetupError(f"{key!r} names {len(entries)} fills: give more of the key")
+        removed, left = [], dict(other)
+        for entry in entries:
+            with self.lock(entry.key, wait=False) as held:
+                if not held:
+                    left[entry.key] = "in use by a running run"
+                    continue
+                fresh, why = self.check(entry.key)     # changed before it was locked?
+                if fresh is None:
+                    left[entry.key] = why
+                    continue
+                for name in [ENTRY_NAME, *entry.info["files"], KEY_NAME]:
+                    (entry.folder / name).unlink(missing_ok=True)
+                try:
+                    entry.folder.rmdir()
+                except OSError:
+                    left[entry.key] = "a file appeared in it while it was cleared; the rest is left"
+                    continue
+                (self.fills / f"{entry.key}.lock").unlink(missing_ok=True)
+                removed.append(entry.key)
+        return Cleared(removed, left)
 
 
-def run_with_cache(engine, folder, plan, cache: FillCache, progress=None, on_hit=None):
+def run_with_cache(engine, folder, plan, cache: FillCache, progress=None, on_hit=None, on_warning=None):
     """Run the rendered ``folder`` of ``plan`` on ``engine`` through the fill cache: from the
     cached settled bed when its key is there (``on_hit(key)`` is told first), else the whole
     run, whose bed is then published. A second run of the same key waits for the first. The
-    run record says which (``fill_cache``). Returns the collected record."""
+    cache is an optimisation: a cache that cannot be locked, read or written (a full disk, say)
+    costs the run its reuse, not its results; ``on_warning(message)`` is told, and the run
+    record says so (``fill_cache``: key, hit, published, warning). Returns the collected record."""
+    from .atomic_files import os_error
     from .run_folder import RunFolder
     inputs = fill_key_inputs(plan, engine)
     key = key_of(inputs)
-    with cache.lock(key):
-        entry = cache.get(key)
+    warnings: list[str] = []
+
+    def warn(what: str, exc: Exception) -> None:
+        why = str(os_error(exc, "it", "use")) if isinstance(exc, OSError) else str(exc)
+        warnings.append(f"{what} ({why}); the run's results are not affected")
+        if on_warning is not None:
+            on_warning(warnings[-1])
+
+    entry, published = None, False
+    with ExitStack() as stack:
+        try:
+            stack.enter_context(cache.lock(key))
+            entry = cache.get(key)
+            usable = True
+        except (OSError, SiloflowError) as exc:
+            warn(f"the fill cache {cache.root} cannot be used: this run fills its own bed", exc)
+            usable = False
         if entry is not None:
             if on_hit is not None:
                 on_hit(key)
@@ -215,7 +322,13 @@ def run_with_cache(engine, folder, plan, cache: FillCache, progress=None, on_hit
         else:
             engine.execute(folder, progress)
             record = engine.collect(folder)
-            cache.put(key, engine.fill_files(folder), inputs, source=str(Path(folder).absolute()))
-    record.fill_cache = {"key": key, "hit": entry is not None, "cache": str(cache.root)}
+            if usable:
+                try:
+                    cache.put(key, engine.fill_files(folder), inputs, source=str(Path(folder).absolute()))
+                    published = True
+                except (OSError, SiloflowError) as exc:
+                    warn(f"the settled bed was not stored in the fill cache {cache.fills}", exc)
+    record.fill_cache = {"key": key, "hit": entry is not None, "cache": str(cache.root), "published": published,
+                         **({"warning": "; ".join(warnings)} if warnings else {})}
     RunFolder(folder).write_record(record)
     return record

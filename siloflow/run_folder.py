@@ -71,7 +71,8 @@ TOP_LEVEL_FILES = frozenset({MANIFEST_NAME, STATUS_NAME, RECORD_NAME} | set(LIGG
 #: the engine's outputs as the deck names them (template in.liggghts.j2), relative to the folder
 ENGINE_OUTPUTS = re.compile(r"output/(flow|wall_forces)\.txt(\.before_resume)?|output/(flow|wall_forces)\.csv"
                             r"|output/dumps/(dump|contacts|wall_contacts)\.\d+\.txt"
-                            r"|output/vtk/particles_\d+\.vtk|output/restart/settled\.restart|output/lammps_state\.json|output/insertion\.data")
+                            r"|output/vtk/particles_\d+\.vtk|output/restart/settled\.restart|output/lammps_state\.json|output/insertion\.data"
+                            r"|restart_forced_liggghts_\d+\.data")    # LIGGGHTS' own on SIGTERM (left by older siloflow)
 #: an atomic write cut short: ``.{name}.{8 random characters}.tmp`` (tempfile.mkstemp)
 _TEMP = re.compile(r"(?P<dir>(?:.*/)?)\.(?P<name>[^/]+)\.[A-Za-z0-9_]{8}\.tmp")
 #: folders siloflow makes in a run folder (results/ may hold sub-folders, e.g. results/cg)
@@ -238,6 +239,27 @@ def remove_siloflow_files(folder: Path) -> list[str]:
     return foreign_entries(folder) if folder.exists() else []
 
 
+def case_differences(mine, theirs, fields) -> list[tuple[str, str]]:
+    """``(field path, message)`` for each dotted case field of ``fields`` (a section or a value)
+    in which the cases ``mine`` and ``theirs`` differ, down to the leaf that differs."""
+    def dump(case, path):
+        value = case.model_dump(mode="json")
+        for key in path.split("."):
+            value = value.get(key) if isinstance(value, dict) else None
+        return value
+
+    def walk(a, b, path):
+        if isinstance(a, dict) and isinstance(b, dict):
+            return [d for k in dict.fromkeys([*a, *b]) for d in walk(a.get(k), b.get(k), f"{path}.{k}")]
+        return [] if a == b else [(path, f"{_shown(a)} here, {_shown(b)} in the run's case")]
+    return [d for f in fields for d in walk(dump(mine, f), dump(theirs, f), f)]
+
+
+def _shown(value) -> str:
+    text = json.dumps(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 # ------------------------------------------------------------------ status and record
 STATES = ("rendered", "running", "complete", "failed", "interrupted")
 
@@ -307,13 +329,32 @@ def read_status(folder: Path) -> dict:
     return data
 
 
+#: what an engine run (or its post-processing) leaves in a run folder, which ``render`` never writes
+RUN_EVIDENCE = (RECORD_NAME, FLOW_TABLE, WALL_FORCES_TABLE, *LIGGGHTS_TABLES, "output/lammps_state.json",
+                LIGGGHTS_FILES["log"], LIGGGHTS_FILES["screen"], *LAMMPS_FILES.values(), RESTART_FILE,
+                f"{RESULTS}/{SUMMARY_NAME}")
+
+
 def run_state(folder: Path) -> dict:
     """The run's status. A ``running`` run whose siloflow process is gone (or whose PID now
     belongs to another process) is reported as ``abandoned``; a deck folder without a status
-    (``siloflow render``) as ``rendered``."""
+    (``siloflow render``) as ``rendered``, unless an engine ran in it (its status was lost):
+    ``unknown``, with the reason and what its run record says."""
     folder = Path(folder)
     if not (folder / STATUS_NAME).exists() and is_siloflow_folder(folder):
-        return {"state": "rendered"}
+        ran = [name for name in RUN_EVIDENCE if (folder / name).is_file()]
+        if not ran:
+            return {"state": "rendered"}
+        try:
+            said = json.loads((folder / RECORD_NAME).read_text(encoding="utf-8")).get("completed")
+        except (OSError, ValueError, AttributeError):
+            said = None
+        record = {True: f"; its {RECORD_NAME} says the engine run completed",
+                  False: f"; its {RECORD_NAME} says the engine run did not complete"}.get(said, "")
+        return {"state": "unknown",
+                "reason": f"{STATUS_NAME} is missing, but an engine ran here ({', '.join(ran[:3])}"
+                          f"{' ...' if len(ran) > 3 else ''}){record}: whether the run finished and was checked "
+                          "cannot be told"}
     status = read_status(folder)
     host = status.get("host")
     if status["state"] == "running" and host not in (None, socket.gethostname()):
@@ -341,7 +382,7 @@ class RunRecord:
     templates_inserted: Optional[int] = None   # grains + dust spheres the insertion placed
     short_batches: dict = field(default_factory=dict)   # per insertion fix: batches placed short (LIGGGHTS)
     fill_losses: int = 0                       # atoms that left the box during the fill (recorded, < 1 %)
-    fill_cache: Optional[dict] = None          # {"key", "hit"}: the settled bed came from (or went to) the cache
+    fill_cache: Optional[dict] = None          # {"key", "hit", "published", "warning"}: the settled bed came from (or went to) the cache
     discharge_stop: Optional[dict] = None      # until_steady: why it stopped (steady, empty, max_time), rate error
     guard: Optional[dict] = None               # the guard stopped the run: signal, stage, step, value, limit
     guard_peaks: Optional[dict] = None         # the fastest grain (m/s) and deepest pair overlap (m) the guard saw
@@ -450,6 +491,19 @@ class RunFolder:
             raise ReadError(f"{self.path} is not a siloflow run folder (no readable {PLAN_NAME}: "
                             f"{exc.strerror or exc})") from None
         return RunPlan.from_json(text, str(self.plan_file))
+
+    @cached_property
+    def case(self):
+        """The validated case the folder was rendered from (its ``case.yaml``); ``ReadError``."""
+        from .case_file import load_case
+        from .errors import CaseError
+        if not self.case_file.is_file():
+            raise ReadError(f"{self.path} is not a siloflow run folder (no {CASE_NAME})")
+        try:
+            return load_case(self.case_file)
+        except CaseError as exc:
+            raise ReadError(f"{self.case_file} is not a valid case (edited, or written by another siloflow "
+                            f"version):\n{exc}") from None
 
     def write_plan(self, plan) -> None:
         from .atomic_files import write_text

@@ -15,21 +15,41 @@ post-processed is analysed on first access.
 """
 from __future__ import annotations
 
+import os
+import warnings
 from functools import cached_property
 from pathlib import Path
 from typing import Iterator, Optional
 
 import pandas as pd
 
-from .errors import ReadError
-from .run_folder import PLAN_NAME, RESULT_TABLES, RunFolder
+from .errors import CaseError, ReadError, SetupError
+from .run_folder import DUMPS, PLAN_NAME, RESULT_TABLES, RunFolder
+
+
+class UnfinishedRunWarning(UserWarning):
+    """The results read are those of a run that is not known to have finished (``Run(unfinished=True)``)."""
+
+
+def _path(value, what: str) -> Path:
+    """``value`` as a path (a str or os.PathLike, not empty), else ``SetupError`` naming ``what``."""
+    if isinstance(value, (bytes, bytearray)) or not isinstance(value, (str, os.PathLike)) or not str(value):
+        raise SetupError(f"{what} must be a folder path (a str or pathlib.Path), not {type(value).__name__} "
+                         f"{value!r:.60}")
+    return Path(value)
 
 
 class Run:
-    """A siloflow run folder, read-only: its state, plan, summary and tables (SI units)."""
+    """A siloflow run folder, read-only: its state, plan, summary and tables (SI units).
 
-    def __init__(self, folder):
-        self.folder = Path(folder)
+    The results (``summary``, ``flow``, ``wall_pressure``, ``bands``) are those of a finished run:
+    of a run in any other state (running, failed, interrupted, abandoned, or ``unknown`` when its
+    status.json is missing) they are refused with a ``ReadError`` saying why, unless the folder is
+    opened with ``unfinished=True``, which reads them with an :class:`UnfinishedRunWarning`."""
+
+    def __init__(self, folder, unfinished: bool = False):
+        self.folder = _path(folder, "the run folder")
+        self.unfinished = bool(unfinished)
         self.run_folder = RunFolder(self.folder)
         if not self.run_folder.is_run_folder():
             raise ReadError(f"{self.folder} is not a siloflow run folder (no {PLAN_NAME})")
@@ -39,8 +59,24 @@ class Run:
 
     @property
     def state(self) -> str:
-        """rendered, running, complete, failed, interrupted or abandoned."""
+        """rendered, running, complete, failed, interrupted, abandoned or unknown (status.json missing)."""
         return self.run_folder.state["state"]
+
+    @property
+    def status(self) -> dict:
+        """The whole status: ``state`` and, where there is one, the ``reason``."""
+        return self.run_folder.state
+
+    def _finished(self) -> None:
+        """Refuse (or, ``unfinished``, warn about) the results of a run not known to be complete."""
+        status = self.status
+        if status["state"] == "complete":
+            return
+        why = f"{self.folder} is {status['state']}" + (f" ({status['reason']})" if status.get("reason") else "")
+        if not self.unfinished:
+            raise ReadError(f"{why}: its results would not be those of a finished run; "
+                            "siloflow.open_run(folder, unfinished=True) reads them anyway, with a warning")
+        warnings.warn(f"{why}: these results are not those of a finished run", UnfinishedRunWarning, stacklevel=3)
 
     @property
     def plan(self):
@@ -53,6 +89,7 @@ class Run:
         return self.run_folder.record
 
     def _results(self) -> Path:
+        self._finished()
         if not self.run_folder.summary_file.is_file():
             from postprocess.first_results import analyse
             analyse(self.folder)
@@ -92,13 +129,19 @@ class Run:
         from postprocess.dumps import read_frames
         files = self.run_folder.dump_files("particles")
         if files is None:
-            raise ReadError(f"{self.folder} has no particle dumps (outputs.dump_interval was not set)")
+            if self.plan.outputs.dump_every is None:
+                raise ReadError(f"{self.folder} has no particle dumps: its case asked for none (no "
+                                "outputs.dump_interval and no result that needs frames in outputs.results)")
+            raise ReadError(f"{self.folder} has no particle dumps in {DUMPS}, though the run was to write one every "
+                            f"{self.plan.outputs.dump_every} steps: they are missing (deleted or moved), or the run "
+                            f"({self.state}) stopped before the first")
         return read_frames(files, columns=columns, every=every)
 
 
-def open_run(folder) -> Run:
-    """The run folder ``folder`` (made by ``siloflow run`` or ``siloflow.run``)."""
-    return Run(folder)
+def open_run(folder, unfinished: bool = False) -> Run:
+    """The run folder ``folder`` (made by ``siloflow run`` or ``siloflow.run``); ``unfinished``:
+    read the results of a run not known to be complete, with a warning (see :class:`Run`)."""
+    return Run(folder, unfinished=unfinished)
 
 
 def run(case, folder, force: bool = False, progress=None, allow_long: bool = False,
@@ -115,6 +158,10 @@ def run(case, folder, force: bool = False, progress=None, allow_long: bool = Fal
     from .engine import get_engine
     from .engine.base import check_case
     keep = []
+    _path(folder, "siloflow.run's folder")
+    if not isinstance(case, (Case, dict, str, os.PathLike)) or isinstance(case, str) and not case:
+        raise CaseError([("(case)", f"give a Case, a dict of case fields or a case-file path, not "
+                                    f"{type(case).__name__} {case!r:.60}")], "siloflow.run")
     if isinstance(case, dict):
         case = case_from_dict(case)
     elif not isinstance(case, Case):

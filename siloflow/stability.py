@@ -31,6 +31,46 @@ _UNSTABLE = [("escape", re.compile(r"left the box|Lost atoms|without passing the
 _GUARD = re.compile(r"siloflow's guard \((\w+)\)")
 
 
+#: most values one axis of the grid may have (every value is a run for each value of the other axes)
+MAX_AXIS_VALUES = 20
+#: the case schema's seed range (``siloflow.case.Case.seed``)
+MAX_SEED = 2 ** 31 - 1
+
+
+def check_options(fractions, stiffness, dust_scales=None, seed: Optional[int] = None, burst: float = 0.1) -> None:
+    """Refuse a grid or option no envelope run could use, before anything runs: ``SetupError``
+    naming the option (``siloflow stability``'s ``--fractions``, ``--stiffness``, ``--dust``,
+    ``--seed``, ``--burst``). Each axis: 1 to :data:`MAX_AXIS_VALUES` distinct values in its range."""
+    from .errors import SetupError
+
+    def number(v) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    axes = (("--fractions", fractions, 1e-3, 1.0, "time-step fractions of the critical time"),
+            ("--stiffness", stiffness, 1e-8, 1.0, "stiffness scales"),
+            ("--dust", dust_scales, 1.0, 1e6, "dust density scales"))
+    for option, values, lo, hi, what in axes:
+        if values is None and option == "--dust":
+            continue
+        values = [values] if isinstance(values, (str, bytes)) else list(values)
+        if not values:
+            raise SetupError(f"{option}: give at least one value ({what})")
+        if len(values) > MAX_AXIS_VALUES:
+            raise SetupError(f"{option}: {len(values)} values, at most {MAX_AXIS_VALUES} (each is a run for every "
+                             "point of the other axes)")
+        bad = [v for v in values if not (number(v) and lo <= v <= hi)]
+        if bad:
+            raise SetupError(f"{option}: {what} must be numbers in [{lo:g}, {hi:g}], not "
+                             + ", ".join(map(repr, bad[:5])))
+        repeated = sorted({float(v) for v in values if sum(float(w) == float(v) for w in values) > 1})
+        if repeated:
+            raise SetupError(f"{option}: {', '.join(f'{v:g}' for v in repeated)} given more than once")
+    if seed is not None and not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed <= MAX_SEED):
+        raise SetupError(f"--seed: must be a whole number from 0 to {MAX_SEED} (a case's seed), not {seed!r}")
+    if not (number(burst) and 1e-3 <= burst <= 10.0):
+        raise SetupError(f"--burst: the discharge burst must be from 0.001 to 10 s, not {burst!r}")
+
+
 def burst_case(base: dict, fraction: float, stiffness: float, seed: int, burst: float,
                dust_scale: Optional[float] = None) -> dict:
     """The case fields of one envelope point: the case at this time-step fraction and stiffness,
@@ -92,17 +132,24 @@ def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIF
                  seed: Optional[int] = None, burst: float = 0.1,
                  report: Callable[[str], None] = lambda s: None) -> list[dict]:
     """Run every grid point not yet in ``out/runs.csv``; return all rows."""
+    from .case_file import case_from_dict
+    from .errors import CaseError, SetupError
     from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing
+    check_options(fractions, stiffness, dust_scales, seed, burst)
     base, case = read_base_case(case_file)
     seed = case.seed if seed is None else seed
     has_dust = getattr(case.particles, "dust", None) is not None
-    if dust_scales and not has_dust:
-        from .errors import CaseError
+    if dust_scales is not None and not has_dust:
         raise CaseError([("--dust", "the case has no dust (particles.dust) to scale")], str(case_file))
-    dusts = list(dust_scales) if dust_scales else [None]
+    dusts = list(dust_scales) if dust_scales is not None else [None]
     planned = [PlannedRun(key={"timestep_fraction": f, "stiffness_scale": s, "dust_scale": ds, "seed": seed},
                           case=burst_case(base, f, s, seed, burst, ds))
                for ds in dusts for s in sorted(stiffness, reverse=True) for f in sorted(fractions)]
+    for p in planned:                   # every point's case is valid before the first one runs
+        try:
+            case_from_dict(p.case)
+        except CaseError as exc:
+            raise CaseError(exc.problems, f"{case_file}, envelope point {p.case['name']}") from None
 
     def measure(folder):
         return {"signal": "", "wall_s": engine_wall_time(folder), **peaks(folder)}
@@ -112,6 +159,9 @@ def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIF
         return {"signal": signal, "verdict": state, "wall_s": engine_wall_time(folder), **peaks(folder)}
 
     rows = run_missing(out, planned, measure, failed, report, case_digest(base))
+    if not rows:
+        raise SetupError("no point of the envelope ran: each was refused before it started (the reasons are "
+                         "above); nothing to conclude")
     for r in rows:
         r["verdict"] = "stable" if r["state"] == "complete" else r.get("verdict") or classify(r["reason"])[0]
         if (r.get("max_speed") or 0.0) < 0:      # LIGGGHTS' max over no grain (-1e20), kept by older rows

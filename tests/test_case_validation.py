@@ -227,3 +227,65 @@ def test_a_needle_hopper_is_refused_before_its_meshes_fill_memory(tmp_path):
     with pytest.raises(CaseError) as info:
         case_from_dict(data)
     assert any(f == "geometry" and "makes the hopper" in m for f, m in info.value.problems), info.value.problems
+
+
+#: every time and interval of the case schema (s): its dotted path and the case fields it needs to be read
+TIME_FIELDS = {
+    "fill.settle.check_interval": {}, "fill.settle.max_time": {}, "fill.settle.static_window": {},
+    "fill.mobilise.time": {"fill.mobilise": {}}, "fill.pour_time": {"fill.protocol": "pour"},
+    "discharge.duration": {}, "discharge.max_time": {"discharge": {"until_empty": True}},
+    "discharge.batch_time": {"discharge": {"until_steady": True}},
+    "discharge.startup_time": {"discharge": {"until_steady": True}},
+    "outputs.sample_interval": {}, "outputs.dump_interval": {},
+}
+
+
+def test_the_time_fields_list_covers_the_schema():
+    """A new time or interval field of the schema joins TIME_FIELDS (and so the bound test below)."""
+    import re
+    from siloflow.case import Case
+    defs = Case.model_json_schema()["$defs"]
+    found = {(model, name) for model, d in defs.items() for name in d.get("properties", {})
+             if re.search(r"time|interval|duration|window", name) and "fraction" not in name}
+    assert found == {("Settle", "check_interval"), ("Settle", "max_time"), ("Settle", "static_window"),
+                     ("Mobilise", "time"), ("Fill", "pour_time"), ("Discharge", "duration"),
+                     ("Discharge", "max_time"), ("Discharge", "batch_time"), ("Discharge", "startup_time"),
+                     ("Outputs", "sample_interval"), ("Outputs", "dump_interval")}, found
+    assert len(TIME_FIELDS) == len(found)
+
+
+@pytest.mark.parametrize("value", [1e308, math.inf, -math.inf, math.nan, 1e9])
+@pytest.mark.parametrize("path", sorted(TIME_FIELDS))
+def test_every_time_and_interval_is_bounded_naming_the_field(quick_dict, path, value):
+    """Issue 34.11: outputs.dump_interval 1e308 ended in an OverflowError traceback in validate."""
+    import copy
+    for where, given in copy.deepcopy(TIME_FIELDS[path]).items():
+        if where == "discharge":
+            quick_dict["discharge"] = given
+        else:
+            set_path(quick_dict, where, given)
+    case_from_dict(quick_dict)                      # the setting itself is valid
+    set_path(quick_dict, path, value)
+    with pytest.raises(CaseError) as info:
+        derive(case_from_dict(quick_dict))
+    section = path.rsplit(".", 1)[0]
+    assert any(p == path or (p == section and path in m) for p, m in info.value.problems), info.value.problems
+
+
+@pytest.mark.parametrize("text", ["1e308", ".inf", ".nan", "1000"])
+def test_validate_refuses_a_huge_dump_interval_without_a_traceback(tmp_path, quick_dict, text):
+    import yaml
+    quick_dict["outputs"]["dump_interval"] = "PLACEHOLDER"
+    path = tmp_path / "case.yaml"
+    path.write_text(yaml.safe_dump(quick_dict).replace("PLACEHOLDER", text))
+    result = runner.invoke(app, ["validate", str(path)], env={"COLUMNS": "300"})
+    assert result.exit_code == 1 and "outputs.dump_interval" in result.output, result.output
+    assert isinstance(result.exception, SystemExit)
+    if text == "1000":
+        assert "longer than the whole run" in result.output
+
+
+def test_a_settling_check_longer_than_the_settling_is_refused(quick_dict):
+    set_path(quick_dict, "fill.settle.check_interval", 2.0)
+    with pytest.raises(CaseError, match="check_interval .* longer than the settling"):
+        case_from_dict(quick_dict)

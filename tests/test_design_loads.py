@@ -278,9 +278,70 @@ def test_cli_design_on_the_quick_case(tmp_path):
     assert (out / "design_loads.png").stat().st_size > 1000
     # with a run's bands.csv beside it
     run = tmp_path / "run"
+    assert CliRunner().invoke(app, ["render", str(QUICK), "-o", str(run)]).exit_code == 0
     (run / "results").mkdir(parents=True)
     pd.DataFrame({"band": [0], "z_mid": [0.05], "static_pressure": [150.0],
                   "max_dynamic_pressure": [300.0]}).to_csv(run / "results" / "bands.csv", index=False)
     result = CliRunner().invoke(app, ["design", str(QUICK), "-o", str(out), "--run", str(run)], env={"COLUMNS": "400"})
     assert result.exit_code == 0, result.output
     assert pd.read_csv(out / "design_vs_dem.csv").dem_discharge_factor[0] == pytest.approx(2.0)
+
+
+def test_explicit_design_values_are_physically_bounded(quick_dict, write_case, tmp_path):
+    """Issue 34.7: K = mu = 1e-300 passed the schema and K mu underflowed to 0 (ZeroDivisionError)."""
+    from siloflow.case import DESIGN_RANGES
+    from siloflow.design_loads import EXPLICIT_RANGES
+    from siloflow.errors import CaseError
+    assert DESIGN_RANGES == EXPLICIT_RANGES
+    for values, fields in (({"K": 1.0e-300, "mu": 1.0e-300}, {"design.K", "design.mu"}),
+                           ({"K": 0.05}, {"design.K"}), ({"K": 1.2}, {"design.K"}),
+                           ({"mu": 0.01}, {"design.mu"}), ({"mu": 1.6}, {"design.mu"}),
+                           ({"unit_weight": 50.0}, {"design.unit_weight"}),
+                           ({"unit_weight": 2e5}, {"design.unit_weight"})):
+        quick_dict["design"] = {"unit_weight": 100.0, "K": 0.5, "mu": 0.4, **values}
+        with pytest.raises(CaseError) as info:
+            case_from_dict(quick_dict)
+        assert {path for path, _ in info.value.problems} == fields, info.value.problems
+        with pytest.raises(ValueError, match="outside"):
+            bulk_solid(None, **{"unit_weight": 100.0, "K": 0.5, "mu": 0.4, **values})
+    quick_dict["design"] = {"unit_weight": 100.0, "K": 1.0e-300, "mu": 1.0e-300}
+    result = CliRunner().invoke(app, ["design", str(write_case(quick_dict)), "-o", str(tmp_path / "d")])
+    assert result.exit_code == 1 and "design.K" in result.output and "design.mu" in result.output
+    assert "Traceback" not in result.output and not isinstance(result.exception, ZeroDivisionError)
+    for K, mu in ((0.1, 0.05), (1.0, 1.5)):          # the bounds themselves are loads
+        quick_dict["design"] = {"unit_weight": 100.0, "K": K, "mu": mu}
+        case = case_from_dict(quick_dict)
+        loads = design_loads(cylinder(3.0), bulk_solid(None, unit_weight=100.0, K=K, mu=mu), 20.0)
+        assert case.design.K == K and np.isfinite(loads.p_hf[loads.z < 20.0]).all()
+
+
+def test_design_refuses_a_run_of_another_case(tmp_path, quick_dict, write_case):
+    """Issue 34.7: ``design case.yaml --run R`` took the band pressures of a run of another silo."""
+    run = tmp_path / "run"
+    assert CliRunner().invoke(app, ["render", str(QUICK), "-o", str(run)]).exit_code == 0
+    (run / "results").mkdir()
+    pd.DataFrame({"band": [0], "z_mid": [0.05], "static_pressure": [150.0],
+                  "max_dynamic_pressure": [300.0]}).to_csv(run / "results" / "bands.csv", index=False)
+    wider = write_case({**quick_dict, "geometry": {**quick_dict["geometry"], "radius": 0.02}}, "wider.yaml")
+    result = CliRunner().invoke(app, ["design", str(wider), "-o", str(tmp_path / "d"), "--run", str(run)],
+                                env={"COLUMNS": "400"})
+    assert result.exit_code == 1, result.output
+    assert "run of another case" in result.output and "geometry.radius: 0.02 here, 0.015 in the run's case" \
+        in result.output
+    assert not (tmp_path / "d").exists()
+    heavier = dict(quick_dict, materials={**quick_dict["materials"],
+                                          "particle": {**quick_dict["materials"]["particle"], "density": 2600.0}})
+    result = CliRunner().invoke(app, ["design", str(write_case(heavier, "heavier.yaml")), "-o", str(tmp_path / "d"),
+                                      "--run", str(run)], env={"COLUMNS": "400"})
+    assert result.exit_code == 1 and "materials.particle.density" in result.output
+    # what the design does not depend on may differ (the run's length, its outputs, its name)
+    other = dict(quick_dict, name="other", discharge={"duration": 2.0}, design={"material": "maize"})
+    result = CliRunner().invoke(app, ["design", str(write_case(other, "other.yaml")), "-o", str(tmp_path / "d"),
+                                      "--run", str(run)], env={"COLUMNS": "400"})
+    assert result.exit_code == 0, result.output
+    # a folder that is not a run folder (no case.yaml) is refused, not taken as this case's
+    bare = tmp_path / "bare"
+    (bare / "results").mkdir(parents=True)
+    (run / "results" / "bands.csv").replace(bare / "results" / "bands.csv")
+    result = CliRunner().invoke(app, ["design", str(QUICK), "-o", str(tmp_path / "d"), "--run", str(bare)])
+    assert result.exit_code == 1 and "case.yaml" in result.output and result.exception.__class__ is SystemExit

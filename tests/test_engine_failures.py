@@ -322,3 +322,36 @@ def test_engine_accepts_the_templates_of_tiny_grains(tmp_path, quick_dict):
     out = proc.stdout.decode("utf-8", "replace")
     assert proc.returncode == 0 and "ERROR" not in out, out[-2000:]
     assert "volume_limit" in (folder / "in.cut").read_text()
+
+
+#: stands in for LIGGGHTS stopped by SIGTERM: like its signal handler, it writes a forced restart into
+#: its working directory (the run folder) before it quits
+_TERM_WRITES_RESTART = """trap 'echo bed > restart_forced_liggghts_$$.data; touch "$TERMINATED"; exit 1' TERM
+echo 'SILOFLOW_STAGE fill 100'
+while :; do echo '   50 0.1 10 0 0 0 0 0'; sleep 0.05; done
+"""
+
+
+def test_an_interrupted_run_leaves_no_forced_restart_of_liggghts(tmp_path, quick_dict):
+    """Issue 34 (smaller): with outputs.vtk false, an interrupted LIGGGHTS run left
+    restart_forced_liggghts_<n>.data in the run folder; siloflow wrote it (its engine did), so it goes,
+    and one that was there before the run is kept."""
+    from siloflow.run_folder import foreign_entries
+    quick_dict["engine"]["ranks"] = 1
+    quick_dict["outputs"]["vtk"] = False
+    terminated = tmp_path / "terminated"
+    engine = LiggghtsEngine(executable=_fake_engine(tmp_path, f"TERMINATED='{terminated}'\n" + _TERM_WRITES_RESTART))
+    folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
+    (folder / "restart_forced_liggghts_7.data").write_text("not this run's")
+
+    def interrupt(stage, step, total):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        engine.execute(folder, progress=interrupt)
+    assert read_status(folder)["state"] == "interrupted"
+    assert terminated.is_file()                          # the engine got its SIGTERM and wrote its restart
+    assert sorted(p.name for p in folder.glob("restart_forced_liggghts_*")) == ["restart_forced_liggghts_7.data"]
+    assert (folder / "restart_forced_liggghts_7.data").read_text() == "not this run's"
+    (folder / "restart_forced_liggghts_7.data").unlink()
+    assert foreign_entries(folder) == []

@@ -3,15 +3,19 @@ it hits; entries are published whole, checked, listed and cleared; two runs of o
 from __future__ import annotations
 
 import copy
+import json
 import shutil
 import threading
 import time
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from siloflow.case_file import case_from_dict
 from siloflow.derived import derive
-from siloflow.fill_cache import FillCache, fill_key, fill_key_inputs
+from siloflow.errors import SetupError
+from siloflow.fill_cache import FillCache, fill_key, fill_key_inputs, key_of
 
 
 class FakeEngine:
@@ -95,37 +99,50 @@ def test_a_hopper_orifice_shapes_the_fill(quick_dict):
     assert "outlet_radius" in inputs["geometry"]
 
 
+def put(cache, inputs, files, source="run"):
+    """Publish ``files`` under the key of ``inputs`` (as run_with_cache does)."""
+    return cache.put(key_of(inputs), files, inputs, source=source)
+
+
 def test_entries_are_published_whole_checked_listed_and_cleared(tmp_path, quick_dict):
     cache = FillCache(tmp_path / "cache")
-    k = key(quick_dict)
+    inputs = fill_key_inputs(derive(case_from_dict(quick_dict)), FakeEngine())
+    k = key_of(inputs)
     assert cache.get(k) is None and cache.entries() == []
-    entry = cache.put(k, {"settled.restart": b"\x00bed", "log.liggghts": b"log\n"}, {"what": 1}, source="run1")
+    entry = cache.put(k, {"settled.restart": b"\x00bed", "log.liggghts": b"log\n"}, inputs, source="run1")
     assert entry.files["settled.restart"].read_bytes() == b"\x00bed"
-    again = cache.put(k, {"settled.restart": b"other"}, {}, source="run2")        # first one stays
+    again = cache.put(k, {"settled.restart": b"other"}, inputs, source="run2")        # first one stays
     assert again.info["source"] == "run1" and [e.key for e in cache.entries()] == [k]
     (entry.folder / "settled.restart").write_bytes(b"tampered")
     assert cache.get(k) is None                                   # a changed file is no entry
-    assert cache.clear(k[:10]) == 1 and cache.entries() == []
+    cleared = cache.clear(k[:10])                                 # ... and is not cleared either
+    assert cleared.removed == [] and "changed since siloflow wrote it" in cleared.left[k]
+    (entry.folder / "settled.restart").write_bytes(b"\x00bed")
+    assert cache.clear(k[:10]).removed == [k] and cache.entries() == []
+    assert not (tmp_path / "cache" / "fills" / k).exists()
     assert not list((tmp_path / "cache" / "fills").glob(".*.tmp"))
+    with pytest.raises(SetupError, match="not the hash of its inputs"):
+        cache.put("ab" * 32, {"bed": b"1"}, inputs, source="x")
 
 
 def test_a_second_run_of_the_same_key_waits_for_the_first(tmp_path):
     cache = FillCache(tmp_path)
     order = []
+    k = key_of({"bed": 1})
 
     def first():
-        with cache.lock("k"):
+        with cache.lock(k):
             order.append("first in")
             time.sleep(0.3)
-            cache.put("k", {"bed": b"1"}, {}, source="first")
+            put(cache, {"bed": 1}, {"bed": b"1"}, source="first")
             order.append("first out")
 
     t = threading.Thread(target=first)
     t.start()
     time.sleep(0.05)
-    with cache.lock("k"):
+    with cache.lock(k):
         order.append("second in")
-        assert cache.get("k") is not None           # the first one's bed is there for it
+        assert cache.get(k) is not None           # the first one's bed is there for it
     t.join()
     assert order == ["first in", "first out", "second in"]
 
@@ -134,12 +151,156 @@ def test_cache_commands_list_and_clear(tmp_path, quick_dict):
     from typer.testing import CliRunner
     from siloflow.cli import app
     cache = FillCache(tmp_path)
-    cache.put("ab" * 32, {"bed": b"12345"}, {}, source="/runs/x")
+    k = put(cache, {"bed": 1}, {"bed": b"12345"}, source="/runs/x").key
     runner = CliRunner()
     listed = runner.invoke(app, ["cache", "list", "--cache", str(tmp_path)], env={"COLUMNS": "400"})
-    assert listed.exit_code == 0 and "abababab" in listed.output and "/runs/x" in listed.output
+    assert listed.exit_code == 0 and k[:16] in listed.output and "/runs/x" in listed.output
     cleared = runner.invoke(app, ["cache", "clear", "--cache", str(tmp_path)])
     assert cleared.exit_code == 0 and "removed 1" in cleared.output and cache.entries() == []
+    missing = runner.invoke(app, ["cache", "clear", "0123", "--cache", str(tmp_path)])
+    assert missing.exit_code == 1 and "no fill '0123' was removed" in missing.output
+
+
+@pytest.mark.parametrize("via_env", [False, True], ids=["--cache", "SILOFLOW_CACHE"])
+def test_cache_clear_leaves_a_users_folder_and_a_link(tmp_path, via_env):
+    """Issue 34.1: a folder siloflow never wrote under fills/ (and a symbolic link there, and the
+    folder it points to) survives ``cache clear``, listed with the reason; the real entry goes."""
+    from typer.testing import CliRunner
+    from siloflow.cli import app
+    proj = tmp_path / "proj"
+    thesis = proj / "fills" / "important_data" / "chapter1.tex"
+    thesis.parent.mkdir(parents=True)
+    thesis.write_text("thesis")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "data.csv").write_text("1,2\n")
+    (proj / "fills" / ("cd" * 32)).symlink_to(elsewhere, target_is_directory=True)
+    k = put(FillCache(proj), {"bed": 2}, {"bed": b"bytes"}).key
+    args, env = (["--cache", str(proj)], {}) if not via_env else ([], {"SILOFLOW_CACHE": str(proj)})
+    runner = CliRunner()
+    listed = runner.invoke(app, ["cache", "list", *args], env={"COLUMNS": "400", **env})
+    assert listed.exit_code == 0 and "1 fill(s)" in listed.output and "important_data" in listed.output
+    cleared = runner.invoke(app, ["cache", "clear", *args], env={"COLUMNS": "400", **env})
+    assert cleared.exit_code == 0, cleared.output
+    assert "removed 1 fill(s)" in cleared.output and "2 other item(s)" in cleared.output
+    assert "important_data: its name is not a fill key" in cleared.output
+    assert "symbolic link" in cleared.output
+    assert thesis.read_text() == "thesis" and (elsewhere / "data.csv").read_text() == "1,2\n"
+    assert (proj / "fills" / ("cd" * 32)).is_symlink()
+    assert not (proj / "fills" / k).exists()
+
+
+def test_a_fill_stored_under_another_key_is_no_entry(tmp_path, quick_dict):
+    """Issue 34.3: the density-1500 bed copied over the density-2500 bed's key is not used for
+    the 2500 case (nor listed, nor cleared); the true entry of another key is still found."""
+    cache = FillCache(tmp_path)
+    dense = fill_key_inputs(derive(case_from_dict(quick_dict)), FakeEngine())
+    light = fill_key_inputs(derive(case_from_dict(changed(quick_dict, "materials.particle.density", 1500.0))),
+                            FakeEngine())
+    a = put(cache, dense, {"bed": b"dense bed"})
+    b = put(cache, light, {"bed": b"light bed"})
+    shutil.rmtree(a.folder)
+    shutil.copytree(b.folder, a.folder)
+    assert cache.get(a.key) is None and cache.get(b.key) is not None
+    assert "another key" in cache.check(a.key)[1]
+    assert [e.key for e in cache.entries()] == [b.key]
+    done = cache.clear()
+    assert done.removed == [b.key] and a.folder.is_dir() and "another key" in done.left[a.key]
+
+
+def test_an_entry_with_a_foreign_file_or_a_missing_one_is_left(tmp_path):
+    cache = FillCache(tmp_path)
+    a = put(cache, {"bed": 1}, {"bed": b"1", "log": b"2"})
+    (a.folder / "notes.txt").write_text("mine")
+    assert cache.get(a.key) is None and "notes.txt" in cache.check(a.key)[1]
+    assert cache.clear().removed == [] and (a.folder / "notes.txt").read_text() == "mine"
+    (a.folder / "notes.txt").unlink()
+    (a.folder / "log").unlink()
+    assert "missing: log" in cache.check(a.key)[1] and cache.clear().removed == []
+    # a folder in a key's place is never replaced by a publication: it is left, and said
+    with pytest.raises(SetupError, match="in its way"):
+        put(cache, {"bed": 1}, {"bed": b"1", "log": b"2"})
+    assert sorted(p.name for p in a.folder.iterdir()) == ["bed", "entry.json", "key.json"]
+
+
+def test_an_entry_in_use_is_not_cleared(tmp_path):
+    cache = FillCache(tmp_path)
+    a = put(cache, {"bed": 1}, {"bed": b"1"})
+    held = threading.Event()
+    release = threading.Event()
+
+    def run():
+        with cache.lock(a.key):
+            held.set()
+            release.wait(5)
+
+    t = threading.Thread(target=run)
+    t.start()
+    held.wait(5)
+    try:
+        done = cache.clear()
+    finally:
+        release.set()
+        t.join()
+    assert done.removed == [] and done.left == {a.key: "in use by a running run"} and cache.get(a.key)
+
+
+class FillEngine(FakeEngine):
+    """A fake engine that 'runs' a fill: it writes a record and hands the bed to the cache."""
+
+    def execute(self, folder, progress=None):
+        (folder / "bed.restart").write_bytes(b"settled bed")
+
+    def collect(self, folder):
+        from siloflow.run_folder import RunRecord
+        return RunRecord(folder=str(folder), engine=self.name, command=["fake"], returncode=0, wall_time=1.0,
+                         stage_steps={"fill": 0}, inserted=10, settled_ke_pe=1e-7, completed=True)
+
+    def fill_files(self, folder):
+        return {"bed.restart": (folder / "bed.restart").read_bytes()}
+
+    def start_from_fill(self, folder, files, progress=None):
+        return self.collect(folder)
+
+
+def test_a_full_cache_disk_costs_the_reuse_not_the_run(tmp_path, quick_dict, monkeypatch):
+    """Issue 34.4: the engine finished, then the cache cannot take its bed (the disk is full):
+    a warning naming the cache, the run's record is written, and the run says it published nothing."""
+    import errno
+    import json
+    from siloflow.fill_cache import run_with_cache
+    plan = derive(case_from_dict(quick_dict))
+    cache = FillCache(tmp_path / "cache")
+    folder = tmp_path / "run"
+    folder.mkdir()
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(cache.fills / "x"))
+
+    # the engine writes its bed before the disk fills: only the cache's writes fail
+    warnings = []
+    engine = FillEngine()
+    real_put = FillCache.put
+
+    def put_on_full_disk(self, key, files, inputs, source):
+        with monkeypatch.context() as m:
+            m.setattr("pathlib.Path.write_bytes", full)
+            return real_put(self, key, files, inputs, source)
+
+    monkeypatch.setattr(FillCache, "put", put_on_full_disk)
+    record = run_with_cache(engine, folder, plan, cache, on_warning=warnings.append)
+    assert record.completed and record.fill_cache["published"] is False and record.fill_cache["hit"] is False
+    assert len(warnings) == 1 and str(cache.fills) in warnings[0] and "the disk is full" in warnings[0]
+    assert "results are not affected" in warnings[0]
+    written = json.loads((folder / "run_record.json").read_text())
+    assert written["fill_cache"]["warning"] == warnings[0]
+    assert cache.entries() == [] and not list(cache.fills.glob(".*.tmp"))
+    # a cache that cannot even be made (a file where its folder should be): the run runs uncached
+    blocked = tmp_path / "blocked"
+    blocked.write_text("a file")
+    warnings.clear()
+    record = run_with_cache(engine, folder, plan, FillCache(blocked), on_warning=warnings.append)
+    assert record.completed and "cannot be used" in warnings[0] and blocked.read_text() == "a file"
 
 
 @pytest.mark.engine
@@ -192,3 +353,69 @@ def test_a_cached_fill_gives_the_same_bed_and_a_lean_early_stopped_discharge(sma
     # Beverloo's (D0 - 1.5 d)^2.5 gives 1.84 x the 11 mm orifice's rate
     ratio = result["flow_rate"]["rate"] / summary["flow_rate"]["rate"]
     assert 1.45 < ratio < 2.3, ratio
+
+
+KINDS = ("intact", "foreign_folder", "foreign_keyed_folder", "foreign_file", "link", "swapped", "truncated",
+         "edited", "extra_file", "bad_record")
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(kinds=st.lists(st.sampled_from(KINDS), min_size=1, max_size=8), data=st.data())
+def test_cache_folders_of_any_make_end_in_a_refusal_or_a_right_answer(tmp_path_factory, kinds, data):
+    """Whatever is under fills/ (foreign files and folders, links, swapped, truncated and edited
+    entries), get() answers only with an intact entry of its own key, and clear() removes exactly
+    the intact entries: every byte of everything else, and of what links point to, survives."""
+    root = tmp_path_factory.mktemp("cache")
+    outside = tmp_path_factory.mktemp("outside")
+    (outside / "keep.txt").write_bytes(b"outside")
+    cache = FillCache(root)
+    intact = set()
+    for n, kind in enumerate(kinds):
+        blob = data.draw(st.binary(min_size=1, max_size=64), label=f"bytes {n}")
+        entry = put(cache, {"n": n, "kind": kind}, {"bed": blob, "log": b"log %d" % n}, source=f"run{n}")
+        if kind == "intact":
+            intact.add(entry.key)
+        elif kind in ("foreign_folder", "foreign_keyed_folder", "foreign_file", "link"):
+            shutil.rmtree(entry.folder)
+            name = entry.key if kind == "foreign_keyed_folder" else f"user_{n}"
+            if kind == "foreign_file":
+                (cache.fills / name).write_bytes(blob)
+            elif kind == "link":
+                (cache.fills / entry.key).symlink_to(outside, target_is_directory=True)
+            else:
+                (cache.fills / name).mkdir()
+                (cache.fills / name / "thesis.tex").write_bytes(blob)
+        elif kind == "swapped":
+            other = put(cache, {"n": n, "other": True}, {"bed": blob + b"x"})
+            shutil.rmtree(entry.folder)
+            shutil.copytree(other.folder, entry.folder)
+            intact.add(other.key)
+        elif kind == "truncated":
+            (entry.folder / "bed").write_bytes(blob[:-1])
+        elif kind == "edited":
+            (entry.folder / "log").write_bytes(b"LOG %d" % n)
+        elif kind == "extra_file":
+            (entry.folder / "mine.txt").write_bytes(blob)
+        elif kind == "bad_record":
+            (entry.folder / "entry.json").write_bytes(blob)
+
+    def snapshot():
+        files = {}
+        for base in (root, outside):
+            for p in base.rglob("*"):
+                if p.is_file() and not p.is_symlink():
+                    files[str(p)] = p.read_bytes()
+        return files
+
+    for p in cache.fills.iterdir():
+        got = cache.get(p.name)
+        assert (got is not None) == (p.name in intact)
+        if got is not None:
+            assert got.key == p.name and key_of(json.loads((got.folder / "key.json").read_text())) == p.name
+    before = snapshot()
+    done = cache.clear()
+    assert set(done.removed) == intact
+    after = snapshot()
+    kept = {path: b for path, b in before.items() if not any(f"/fills/{k}/" in path for k in intact)}
+    assert {path: after.get(path) for path in kept} == kept
+    assert cache.entries() == []

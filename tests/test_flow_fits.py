@@ -140,7 +140,9 @@ def test_steady_flow_rate_is_the_line_fit_of_its_window():
     keep = (t >= t_open + 0.2) & (M0 - mass >= 0.2 * M0)
     fit = straight_line_fit(t[keep], mass[keep])
     assert isinstance(rate, FlowRate) and isinstance(fit, LineFit)
-    assert astuple(rate)[:6] == (fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples, fit.r2)
+    assert (rate.rate, rate.fit_stderr, rate.t_start, rate.t_end, rate.n_samples, rate.r2) == \
+        (fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples, fit.r2)
+    assert rate.batches == 10 and rate.stderr > 0
     assert rate.rate == pytest.approx(0.3, abs=4 * rate.stderr)
 
 
@@ -188,8 +190,27 @@ def test_the_batch_means_error_of_a_flow_rate_stands_for_the_spread_of_realizati
         mass = np.concatenate([[0.0], np.cumsum((0.3 + e[1:]) * dt)])
         fr = steady_flow_rate(t, mass, t_open=0.0, skip=0.0)
         rates.append(fr.rate)
-        batch.append(fr.batch_stderr)
-        line.append(fr.stderr)
+        batch.append(fr.stderr)                 # the headline error: batch means
+        line.append(fr.fit_stderr)
     spread = np.std(rates, ddof=1)
     assert np.mean(batch) == pytest.approx(spread, rel=0.35)
     assert np.mean(line) < 0.3 * spread
+
+
+def test_a_report_gives_one_flow_rate_with_its_batch_error_in_a_readable_unit():
+    """Issue 35: the headline error is the batch-means one, printed to two figures in a unit of the
+    rate's size; a detected window whose median rate differs from Wf by more than 2 errors says why,
+    one within them gives no second rate."""
+    from postprocess.first_results import flow_rate_line, steady_window_line
+    fr = {"rate": 29.04471, "stderr": 0.52, "fit_stderr": 0.04, "batches": 10, "t_start": 1.0, "t_end": 3.0,
+          "n_samples": 400, "r2": 0.999}
+    line = flow_rate_line(fr)
+    assert "Wf = 29.04 +/- 0.52 kg/s" in line and "batch means of 10 batches" in line and "29044" not in line
+    small = {**fr, "rate": 0.03615, "stderr": 0.00113, "fit_stderr": 0.00009}
+    assert "Wf = 36.1 +/- 1.1 g/s" in flow_rate_line(small)
+    assert "not resolved" in flow_rate_line({**small, "stderr": float("nan"), "batches": 0})
+    steady = {"t_start": 0.76, "t_end": 1.43, "n_samples": 130, "median_rate": 0.03832, "resolved": True}
+    assert "+2.0 standard errors" not in steady_window_line(steady, small)
+    drift = steady_window_line(steady, {**small, "stderr": 0.0005})
+    assert "differs from Wf by +4.3 standard errors" in drift and "median rate" not in steady_window_line(
+        {**steady, "median_rate": 0.0362}, small)

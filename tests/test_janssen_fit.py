@@ -253,7 +253,10 @@ def test_band_statistics_of_a_synthetic_series():
                           "pressure": np.concatenate([base, 2 * base + 5])}).sample(frac=1.0, random_state=1)
     static = bands.step < 20
     dynamic = (bands.step >= 30) & (bands.step <= 50)
-    t = band_statistics(bands, dynamic, static)
+    # the static window's sector means: band 0's four sectors 98, 100, 102, 104 (sd sqrt(20/3), SE / 2)
+    sector_means = pd.Series([98.0, 100.0, 102.0, 104.0, 7.0], index=pd.MultiIndex.from_tuples(
+        [(0, 0), (0, 1), (0, 2), (0, 3), (1, 0)], names=["band", "sector"]))
+    t = band_statistics(bands, dynamic, static, sector_means)
     assert list(t.columns) == BAND_STATISTICS and list(t.index) == [0, 1]
     b0 = t.loc[0]
     assert b0.dynamic_samples == 21 and b0.dynamic_mean_pressure == pytest.approx(11.0)
@@ -261,11 +264,15 @@ def test_band_statistics_of_a_synthetic_series():
     assert b0.dynamic_p95_pressure == pytest.approx(20.0) and b0.dynamic_max_pressure == 21.0
     # static: batch means 100, 101, ..., 104 (sorted by step whatever the row order): SE sd/sqrt(5)
     assert b0.static_samples == 20 and b0.static_batches == 5
-    assert b0.static_pressure_stderr == pytest.approx(math.sqrt(2.5) / math.sqrt(5))
+    assert b0.static_pressure_batch_stderr == pytest.approx(math.sqrt(2.5) / math.sqrt(5))
+    assert b0.static_sectors == 4 and b0.static_pressure_sector_stderr == pytest.approx(math.sqrt(20 / 3) / 2)
+    assert b0.static_pressure_stderr == pytest.approx(math.hypot(math.sqrt(0.5), math.sqrt(20 / 3) / 2))
     b1 = t.loc[1]
     assert b1.dynamic_mean_pressure == pytest.approx(27.0) and b1.dynamic_p95_pressure == pytest.approx(45.0)
     assert b1.dynamic_std_pressure == pytest.approx(2 * math.sqrt(38.5))
-    assert b1.static_pressure_stderr == pytest.approx(2 * math.sqrt(2.5) / math.sqrt(5))
+    assert b1.static_pressure_batch_stderr == pytest.approx(2 * math.sqrt(2.5) / math.sqrt(5))
+    # one sector shows no spread around the wall: no headline error rather than one too small
+    assert b1.static_sectors == 1 and math.isnan(b1.static_pressure_stderr)
     # no dynamic window: counts 0, statistics NaN
     none = band_statistics(bands, False, static)
     assert (none.dynamic_samples == 0).all() and none.dynamic_mean_pressure.isna().all()
@@ -323,7 +330,8 @@ def test_report_says_not_resolved_with_the_reason_and_never_saturated():
     text = report_text(summary, SimpleNamespace(folder=Path("runs/quick")))
     assert "saturated" not in text
     assert "free-surface flow rate Wr: not resolved: the free surface descended" in text
-    assert "steady discharge detected: t = 0.7-0.72 s, median rate 20 g/s: not resolved: the steady window holds 5" in text
+    assert "steady discharge detected (the window of the dynamic pressures): t = 0.7-0.72 s: not resolved: the " \
+        "steady window holds 5" in text
     assert "Janssen fit of the settled profile (band-averaged below the free surface, 2 band(s) 1-2; corner band " \
            "excluded): not resolved: only 2 loaded band(s) used" in text, text
     z0 = np.arange(16) * 0.01

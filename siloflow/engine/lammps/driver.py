@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ...atomic_files import write_text
+from ...errors import ReadError
 from ...guard import RunGuard
 from ...plan import RunPlan
 from ..liggghts.tables import FLOW_COLUMNS, wall_force_columns
@@ -281,7 +282,9 @@ class Driver:
         self.section("dump_first")
         self.state.step = int(self.lmp.get_thermo("step"))
         if self.state.step != step:
-            raise RuntimeError(f"the restart file is at step {self.state.step}, the first part's record at {step}")
+            raise ReadError(f"{STATE_NAME} gives restart_step {step}, but the restart file it resumes from is at "
+                            f"step {self.state.step}: the state was edited or belongs to another run; run the case "
+                            "anew")
         self.expected_atoms = int(self.lmp.get_natoms())
 
     def _after_settling(self) -> None:

@@ -3,6 +3,7 @@ through the wheel's own ``mpirun`` and :mod:`.worker` on several."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -90,6 +91,8 @@ class LammpsEngine(Engine):
                              "re-render it with 'siloflow render'")
         check_plain_tree(folder)
         self.check_deck_files(folder, resume)
+        if resume:
+            resume_state(folder)        # before LAMMPS starts: a bad state is a message, not a traceback
         ranks = plan.engine.ranks
         start = time.perf_counter()
         if ranks == 1:
@@ -197,7 +200,7 @@ class LammpsEngine(Engine):
         if state in ("running", "complete"):
             raise SetupError(f"{folder} is {state}: there is nothing to resume")
         verify_deck(folder)
-        first = _read_state(folder)
+        first = resume_state(folder)
         if first.get("restart_step") is None or not (folder / RESTART_FILE).is_file():
             self.execute(folder, progress)
         else:
@@ -309,6 +312,109 @@ def diagnose(error: str) -> tuple[str, str, str]:
         if key.lower() in error.lower():
             return f"LAMMPS stopped: {first}", cause, fix
     return f"LAMMPS stopped: {first}", "", f"read {LOG_NAME} in the run folder"
+
+
+#: the stages of a LAMMPS run in order; the restart point follows the last of BEFORE_RESTART it ran
+STAGES = ("fill", "settle", "shrink") + AFTER_RESTART
+BEFORE_RESTART = ("fill", "settle")
+
+
+def resume_state(folder: Path) -> dict:
+    """The driver's state of an interrupted run, checked before a resume uses it: {} when the run
+    left none (it starts afresh), else an object whose fields a resume reads have their types and
+    ranges, whose stages fit its ``restart_step``, and whose ``restart_step`` is the step of the
+    restart file (when present and readable). ``ReadError`` naming the file and the field."""
+    path = Path(folder) / STATE_NAME
+    if not path.exists():
+        return {}
+    try:
+        state = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ReadError(f"{path} is not readable JSON ({exc}): it records where the run can resume; "
+                        "run the case anew") from None
+    if not isinstance(state, dict):
+        raise ReadError(f"{path} is not a siloflow LAMMPS state (a JSON object): run the case anew")
+    step = state.get("restart_step")
+    if step is None:
+        return state                    # no restart point: the resume starts from the beginning
+
+    def whole(value, lo: int = 0) -> bool:
+        return isinstance(value, int) and not isinstance(value, bool) and value >= lo
+
+    problems = []
+    if not whole(step, 1):
+        problems.append(f"restart_step must be a whole number >= 1 (a step after the settling), not {step!r}")
+    for key in ("inserted", "templates_inserted", "lost_at_restart"):
+        if not whole(state.get(key)):
+            problems.append(f"{key} must be a whole number >= 0, not {state.get(key)!r}")
+    ke_pe = state.get("settled_ke_pe")
+    if isinstance(ke_pe, bool) or not isinstance(ke_pe, (int, float)) or not 0 <= ke_pe < math.inf:
+        problems.append(f"settled_ke_pe must be a finite number >= 0, not {ke_pe!r}")
+    warnings = state.get("warnings")
+    if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+        problems.append("warnings must be a list of texts")
+    stages = state.get("stage_steps")
+    if not isinstance(stages, dict) or not all(k in STAGES and whole(v) for k, v in stages.items()):
+        problems.append(f"stage_steps must map stages ({', '.join(STAGES)}) to whole steps >= 0, not {stages!r}")
+    elif whole(step, 1):
+        for name in BEFORE_RESTART + ("shrink",):
+            if name in BEFORE_RESTART and name not in stages:
+                problems.append(f"stage_steps lacks '{name}', which ran before the restart point")
+            elif name in stages and stages[name] >= step:
+                problems.append(f"stage_steps.{name} ({stages[name]}) must come before restart_step ({step})")
+        for name in AFTER_RESTART:
+            if name in stages and stages[name] < step:
+                problems.append(f"stage_steps.{name} ({stages[name]}) must not come before restart_step ({step})")
+    restart = Path(folder) / RESTART_FILE
+    at = restart_file_step(restart) if not problems and restart.is_file() else None
+    if at is not None and at != step:
+        problems.append(f"restart_step is {step}, but the restart file {RESTART_FILE} is at step {at}")
+    if problems:
+        raise ReadError(f"{path} does not describe a run that can resume (edited, or damaged?):\n  "
+                        + "\n  ".join(problems) + "\nrun the case anew (siloflow run CASE -o NEW_FOLDER)")
+    return state
+
+
+#: LAMMPS' binary restart files (src/lmprestart.h): magic string, header flags VERSION 0, SMALLINT 1,
+#: TAGINT 2, BIGINT 3, UNITS 4, NTIMESTEP 5, IMAGEINT 48
+_RESTART_MAGIC = b"LammpS RestartT\0"
+_RESTART_STRINGS, _RESTART_INTS, _RESTART_NTIMESTEP = (0, 4), (1, 2, 3, 48), 5
+
+
+def restart_file_step(path: Path) -> Optional[int]:
+    """The time step a LAMMPS binary restart file was written at, read from its header; None when
+    the header is not the layout known here (another format revision, byte order or a damaged file)."""
+    import struct
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return None
+    if not head.startswith(_RESTART_MAGIC):
+        return None
+    pos = len(_RESTART_MAGIC) + 8                   # the byte-order mark (1) and the format revision
+    if head[len(_RESTART_MAGIC):pos][:4] != struct.pack("<i", 1):
+        return None
+    bigint = 8
+    try:
+        for _ in range(16):
+            flag, = struct.unpack_from("<i", head, pos)
+            pos += 4
+            if flag in _RESTART_STRINGS:
+                n, = struct.unpack_from("<i", head, pos)
+                pos += 4 + n
+            elif flag in _RESTART_INTS:
+                value, = struct.unpack_from("<i", head, pos)
+                pos += 4
+                bigint = value if flag == 3 else bigint
+            elif flag == _RESTART_NTIMESTEP and bigint in (4, 8):
+                step, = struct.unpack_from("<q" if bigint == 8 else "<i", head, pos)
+                return step
+            else:
+                return None
+    except struct.error:
+        return None
+    return None
 
 
 def _read_state(folder: Path) -> dict:

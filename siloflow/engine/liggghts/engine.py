@@ -33,6 +33,25 @@ RESUME_LOG_NAME = LIGGGHTS_FILES["resume_log"]
 RESUME_SCREEN_NAME = LIGGGHTS_FILES["resume_screen"]
 #: the ave/time tables a resumed run continues (the first part's rows are kept up to the restart)
 CONTINUED_TABLES = LIGGGHTS_TABLES
+#: the restart file LIGGGHTS' own signal handler writes into its working directory when SIGTERM (siloflow's
+#: stop) or SIGINT reaches it, at its next output step, before it quits; a resume never reads it (it starts
+#: from the settled bed's RESTART_FILE), so siloflow removes the ones its run left
+FORCED_RESTART = "restart_forced_liggghts_*.data"
+
+
+def forced_restarts(folder: Path) -> set[str]:
+    """The names of the forced restart files (:data:`FORCED_RESTART`) in ``folder``."""
+    return {p.name for p in Path(folder).glob(FORCED_RESTART) if p.is_file() and not p.is_symlink()}
+
+
+def remove_forced_restarts(folder: Path, before: set[str]) -> None:
+    """Delete the forced restart files the engine wrote into ``folder`` during a run: those not among
+    ``before`` (the names there when it started; a file that was there is not siloflow's to delete)."""
+    for name in forced_restarts(folder) - set(before):
+        try:
+            (Path(folder) / name).unlink()
+        except OSError:
+            pass
 
 
 class LiggghtsEngine(Engine):
@@ -143,6 +162,7 @@ class LiggghtsEngine(Engine):
                          count_lost=not plan.has_clumps)
         tail: deque[str] = deque(maxlen=25)
         start = time.perf_counter()
+        forced_before = forced_restarts(folder)
         proc = subprocess.Popen(cmd, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, env=self.profile.environment(), start_new_session=True, preexec_fn=die_with_parent)
         write_status(folder, "running", command=cmd, engine_pid=proc.pid)     # siloflow's own pid: added there
@@ -177,6 +197,8 @@ class LiggghtsEngine(Engine):
             stop(proc)
             write_status(folder, "interrupted", step=state.step, stage=state.stage)
             raise
+        finally:                # a stopped LIGGGHTS wrote a restart of its own: the resume does not use it
+            remove_forced_restarts(folder, forced_before)
         wall = time.perf_counter() - start
         disk_full = disk_full or _disk_full(folder)
         record = RunRecord(folder=str(folder), engine=self.name, command=cmd, returncode=returncode,

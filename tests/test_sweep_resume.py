@@ -1,0 +1,476 @@
+"""Sweeps (issue 34, items 2, 5, 6): the files a sweep wrote are replaced only while unchanged
+(sweep.json records them), an interrupted sweep resumes, a folder of another sweep is refused,
+large Slurm sweeps are split into arrays of at most --max-array-size tasks, and the plans are made
+once per distinct case and silo. A fake `siloflow run` (with --resume) stands in for the engine."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from siloflow import sweep
+from siloflow.cli import app
+from siloflow.errors import SetupError
+from siloflow.run_folder import MANIFEST_NAME, RESULTS, SUMMARY_NAME, run_state, write_status
+from siloflow.sweep import expand, group_by_fill, parse_set, run_sweep, write_slurm
+
+from conftest import QUICK
+
+runner = CliRunner(env={"COLUMNS": "400"})
+
+
+class FakeEngine:
+    """The parts of an engine a sweep asks for, without the engine."""
+
+    name = "fake"
+
+    def fill_key_parts(self, plan):
+        return {"name": "fake", "version": "1"}
+
+    def check(self, case, plan=None):
+        return []
+
+
+@pytest.fixture
+def fake_engine(monkeypatch):
+    monkeypatch.setattr(sweep, "sweep_engine", lambda variants, need_binary=True: FakeEngine())
+
+
+def files_of(folder: Path) -> dict:
+    return {f.name: f.read_bytes() for f in folder.iterdir() if f.is_file()}
+
+
+SLURM_ARGS = ["--set", "geometry.orifice_radius=0.006,0.008", "--set", "particles.radius=0.0015,0.0014", "--seeds", "2"]
+
+
+# ------------------------------------------------------------------ item 2: files siloflow wrote
+def test_an_edited_sbatch_is_refused_and_nothing_is_written(tmp_path, fake_engine):
+    out = tmp_path / "sweep"
+    args = ["sweep", str(QUICK), *SLURM_ARGS, "-o", str(out), "--slurm"]
+    assert runner.invoke(app, args).exit_code == 0
+    runs = out / "runs.sbatch"
+    runs.write_text(runs.read_text().replace("#SBATCH --nodes=1", "#SBATCH --account=myproj\n#SBATCH --nodes=1"))
+    (out / "submit.sh").write_text((out / "submit.sh").read_text() + "# mine\n")
+    before = files_of(out)
+    cases = {f.name: f.read_bytes() for f in (out / "cases").iterdir()}
+    for force in ([], ["--force"]):         # another cache: every script would change
+        result = runner.invoke(app, [*args, "--cache", str(tmp_path / "elsewhere"), *force])
+        assert result.exit_code == 1, result.output
+        assert "runs.sbatch (edited since siloflow wrote it)" in result.output
+        assert "submit.sh (edited since siloflow wrote it)" in result.output
+        assert "fills.sbatch" not in result.output and "move the file(s) out" in result.output.lower()
+        assert files_of(out) == before                     # nothing written, fills.sbatch included
+        assert {f.name: f.read_bytes() for f in (out / "cases").iterdir()} == cases
+    assert "#SBATCH --account=myproj" in runs.read_text()
+    # moved away: written anew
+    runs.rename(tmp_path / "my_runs.sbatch")
+    (out / "submit.sh").unlink()
+    result = runner.invoke(app, [*args, "--cache", str(tmp_path / "elsewhere")])
+    assert result.exit_code == 0, result.output
+    assert f"--cache {tmp_path / 'elsewhere'}" in runs.read_text() and "myproj" not in runs.read_text()
+
+
+def test_unchanged_files_are_replaced_and_identical_runs_are_harmless(tmp_path, fake_engine):
+    out = tmp_path / "sweep"
+    args = ["sweep", str(QUICK), *SLURM_ARGS, "-o", str(out), "--slurm"]
+    assert runner.invoke(app, args).exit_code == 0
+    first = files_of(out)
+    assert runner.invoke(app, args).exit_code == 0 and files_of(out) == first
+    result = runner.invoke(app, [*args, "--cache", str(tmp_path / "elsewhere")])
+    assert result.exit_code == 0, result.output
+    assert f"--cache {tmp_path / 'elsewhere'}" in (out / "fills.sbatch").read_text()
+    record = json.loads((out / "sweep.json").read_text())
+    for name in ("fills.sbatch", "runs.sbatch", "fills.txt", "runs.txt", "submit.sh"):
+        assert record["files"][name] == [sweep._sha256_text((out / name).read_text())]
+    assert os.access(out / "submit.sh", os.X_OK)
+
+
+def test_a_file_siloflow_did_not_write_is_refused(tmp_path, quick_dict):
+    variants = expand(quick_dict, [parse_set("particles.radius=0.0015,0.0014")])
+    groups = group_by_fill(variants, FakeEngine())
+    out = tmp_path / "s"
+    out.mkdir()
+    (out / "submit.sh").write_text("#!/bin/bash\necho mine\n")
+    with pytest.raises(SetupError, match=r"submit\.sh \(not written by siloflow\)"):
+        write_slurm(variants, groups, out, out / "cache")
+    assert sorted(p.name for p in out.iterdir()) == ["submit.sh"]          # nothing written
+    # the same text siloflow would write is harmless
+    write_slurm(variants, groups, tmp_path / "ref", out / "cache")
+    (out / "submit.sh").write_bytes((tmp_path / "ref" / "submit.sh").read_bytes())
+    write_slurm(variants, groups, out, out / "cache")
+    (out / "sweep.json").write_text("{}")
+    with pytest.raises(SetupError, match="not a sweep record siloflow wrote"):
+        write_slurm(variants, groups, out, out / "cache")
+
+
+def test_a_write_cut_short_leaves_files_siloflow_still_owns(tmp_path, quick_dict, monkeypatch):
+    variants = expand(quick_dict, [parse_set("particles.radius=0.0015,0.0014"), parse_set("geometry.orifice_radius=0.006,0.008")])
+    groups = group_by_fill(variants, FakeEngine())
+    out = tmp_path / "s"
+    write_slurm(variants, groups, out, tmp_path / "c1")
+    real, calls = sweep.write_text, []
+
+    def failing(path, text):
+        calls.append(path)
+        if Path(path).name == "runs.sbatch":
+            raise OSError("disk full")
+        real(path, text)
+    monkeypatch.setattr(sweep, "write_text", failing)
+    with pytest.raises(OSError):
+        write_slurm(variants, groups, out, tmp_path / "c2")       # fills.sbatch new, runs.sbatch old
+    assert len(json.loads((out / "sweep.json").read_text())["files"]["runs.sbatch"]) == 2    # old and new
+    monkeypatch.setattr(sweep, "write_text", real)
+    write_slurm(variants, groups, out, tmp_path / "c1")         # either way: every file is still siloflow's
+    assert f"--cache {tmp_path / 'c1'}" in (out / "fills.sbatch").read_text()
+    write_slurm(variants, groups, out, tmp_path / "c2")
+    assert f"--cache {tmp_path / 'c2'}" in (out / "runs.sbatch").read_text()
+
+
+# ------------------------------------------------------------------ item 5: resuming
+FAKE_RUN = """
+import json, os, signal, sys, time
+from pathlib import Path
+import yaml
+from siloflow.run_folder import write_status
+args = sys.argv[1:]
+if args[0] == "--resume":
+    folder = Path(args[1])
+    state = json.loads((folder / "status.json").read_text())["state"]
+    assert state not in ("complete", "running"), state
+    case = yaml.safe_load((folder / "case.yaml").read_text())
+    resumed = True
+else:
+    case_file, dash_o, folder, dash_cache, cache = args
+    assert dash_o == "-o" and dash_cache == "--cache", args
+    folder = Path(folder)
+    assert not folder.exists(), "siloflow run refuses an existing folder"
+    case = yaml.safe_load(open(case_file))
+    folder.mkdir(parents=True)
+    (folder / {manifest!r}).write_text(json.dumps({{"files": {{}}}}))
+    (folder / "case.yaml").write_text(yaml.safe_dump(case))
+    resumed = False
+name = case["name"]
+
+
+def stop(signum, frame):
+    write_status(folder, "interrupted")
+    sys.exit(130)
+signal.signal(signal.SIGTERM, stop)
+write_status(folder, "running")
+with open(os.environ["FAKE_STARTED"], "a") as fh:
+    fh.write(name + "\\n")
+start = time.time()
+time.sleep(60 if name in os.environ.get("FAKE_SLOW", "").split(",") else 0.1)
+if name in os.environ.get("FAKE_FAIL", "").split(","):
+    write_status(folder, "failed", reason="fake")
+    sys.exit(1)
+(folder / {results!r}).mkdir(exist_ok=True)
+record = {{"folder": str(folder), "engine": "fake", "command": ["fake"], "returncode": 0,
+          "wall_time": time.time() - start, "stage_steps": {{}}, "inserted": 10, "settled_ke_pe": 1e-6,
+          "completed": True, "fill_cache": {{"key": "k", "hit": resumed}}}}
+(folder / "run_record.json").write_text(json.dumps(record))
+summary = {{"flow_rate": {{"rate": 1000 * case["geometry"]["orifice_radius"], "stderr": 0.001}}}}
+(folder / {results!r} / {summary!r}).write_text(json.dumps(summary))
+write_status(folder, "complete")
+with open(os.environ["FAKE_DONE"], "a") as fh:
+    fh.write(json.dumps({{"name": name, "resumed": resumed}}) + "\\n")
+"""
+
+
+@pytest.fixture
+def fake_run(tmp_path, monkeypatch):
+    """A fake `siloflow run` (and `run --resume`) that keeps a status like siloflow's: the
+    command, and readers of the runs it started and finished."""
+    script = tmp_path / "fake_run.py"
+    script.write_text(FAKE_RUN.format(manifest=MANIFEST_NAME, results=RESULTS, summary=SUMMARY_NAME))
+    started, done = tmp_path / "started.txt", tmp_path / "done.jsonl"
+    monkeypatch.setenv("FAKE_STARTED", str(started))
+    monkeypatch.setenv("FAKE_DONE", str(done))
+
+    def starts() -> list:
+        return started.read_text().split() if started.exists() else []
+
+    def finished() -> list:
+        return [json.loads(line) for line in done.read_text().splitlines()] if done.exists() else []
+    return [sys.executable, str(script)], starts, finished
+
+
+def interrupt_when(starts, name: str):
+    """A progress callback raising Ctrl-C once ``name`` runs (and has started, its handler set)."""
+    def progress(done, total, running):
+        if name in running:
+            deadline = time.monotonic() + 20
+            while name not in starts() and time.monotonic() < deadline:
+                time.sleep(0.02)
+            raise KeyboardInterrupt
+    return progress
+
+
+def four_runs():
+    data = sweep.read_case_data(QUICK)
+    variants = expand(data, [parse_set("geometry.orifice_radius=0.005,0.006,0.007,0.008"), parse_set("engine.ranks=1")])
+    return variants, group_by_fill(variants, FakeEngine())
+
+
+def test_an_interrupted_sweep_resumes_to_a_complete_table(tmp_path, fake_run, monkeypatch):
+    command, starts, finished = fake_run
+    variants, groups = four_runs()
+    out, cache = tmp_path / "sweep", tmp_path / "cache"
+    monkeypatch.setenv("FAKE_SLOW", "quick-002")
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(variants, out, cores=1, cache=cache, command=command, groups=groups,
+                  progress=interrupt_when(starts, "quick-002"))
+    assert [r["name"] for r in finished()] == ["quick-000", "quick-001"]
+    assert run_state(out / "runs" / "quick-002")["state"] == "interrupted"
+    assert not (out / "runs" / "quick-003").exists()
+    partial = pd.read_csv(out / "sweep.csv")              # the runs finished so far
+    assert partial.status.tolist() == ["complete", "complete", "unfinished", "unfinished"]
+    assert partial.flow_rate_kg_s[:2].tolist() == pytest.approx([5.0, 6.0])
+    # the same call again resumes it
+    monkeypatch.delenv("FAKE_SLOW")
+    calls = []
+    table = run_sweep(variants, out, cores=1, cache=cache, command=command, groups=groups,
+                      progress=lambda done, total, running: calls.append((done, total)))
+    assert calls[0] == (2, 4) and calls[-1] == (4, 4)
+    assert finished()[2:] == [{"name": "quick-002", "resumed": True}, {"name": "quick-003", "resumed": False}]
+    assert starts() == ["quick-000", "quick-001", "quick-002", "quick-002", "quick-003"]   # none run twice
+    assert table.status.tolist() == ["complete"] * 4 and table.returncode.tolist() == [0] * 4
+    assert table.flow_rate_kg_s.tolist() == pytest.approx([5.0, 6.0, 7.0, 8.0])
+    saved = pd.read_csv(out / "sweep.csv")
+    assert saved.status.tolist() == ["complete"] * 4
+    assert "--resume" in (out / "logs" / "quick-002.log").read_text()
+    # once more: nothing left to run, the same table
+    again = run_sweep(variants, out, cores=1, cache=cache, command=command, groups=groups)
+    assert len(starts()) == 5 and again.status.tolist() == ["complete"] * 4
+
+
+def test_a_failed_run_is_kept_with_its_exit_code(tmp_path, fake_run, monkeypatch):
+    command, starts, finished = fake_run
+    variants, groups = four_runs()
+    out = tmp_path / "sweep"
+    monkeypatch.setenv("FAKE_FAIL", "quick-001")
+    monkeypatch.setenv("FAKE_SLOW", "quick-002")
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(variants, out, cores=1, cache=tmp_path / "c", command=command, groups=groups,
+                  progress=interrupt_when(starts, "quick-002"))
+    monkeypatch.delenv("FAKE_FAIL")
+    monkeypatch.delenv("FAKE_SLOW")
+    table = run_sweep(variants, out, cores=1, cache=tmp_path / "c", command=command, groups=groups)
+    assert starts().count("quick-001") == 1                    # a failure is a result: not run again
+    assert table.status.tolist() == ["complete", "failed", "complete", "complete"]
+    assert table.returncode.tolist() == [0, 1, 0, 0]
+
+
+def test_run_folders_a_sweep_cannot_resume_are_refused(tmp_path, fake_run):
+    command, starts, finished = fake_run
+    variants, groups = four_runs()
+    out = tmp_path / "sweep"
+    (out / "runs" / "quick-001").mkdir(parents=True)          # not a run
+    live = out / "runs" / "quick-002"
+    live.mkdir()
+    (live / MANIFEST_NAME).write_text("{}")
+    write_status(live, "running")                             # this process: alive
+    with pytest.raises(SetupError) as info:
+        run_sweep(variants, out, cores=1, cache=tmp_path / "c", command=command, groups=groups)
+    assert "quick-001 (no siloflow run" in str(info.value) and "quick-002 (still running" in str(info.value)
+    assert starts() == [] and not (out / "cases").exists() and not (out / "sweep.json").exists()
+
+
+def test_another_sweep_in_the_folder_is_refused(tmp_path, fake_run):
+    command, starts, finished = fake_run
+    variants, groups = four_runs()
+    out = tmp_path / "sweep"
+    run_sweep(variants[:2], out, cores=1, cache=tmp_path / "c", command=command,
+              groups={k: [v for v in g if v.index < 2] for k, g in groups.items()})
+    with pytest.raises(SetupError, match="holds another sweep"):
+        run_sweep(variants, out, cores=1, cache=tmp_path / "c", command=command, groups=groups)
+    with pytest.raises(SetupError, match="holds another sweep"):
+        sweep.check_sweep_folder(out, variants, force=True)
+    assert len(starts()) == 2
+
+
+def test_an_edited_table_is_refused_before_anything_runs(tmp_path, fake_run):
+    command, starts, finished = fake_run
+    variants, groups = four_runs()
+    out = tmp_path / "sweep"
+    run_sweep(variants[:1], out, cores=1, cache=tmp_path / "c", command=command,
+              groups={next(iter(groups)): variants[:1]})
+    (out / "sweep.csv").write_text("my notes\n")
+    with pytest.raises(SetupError, match=r"sweep\.csv \(edited since siloflow wrote it\)"):
+        run_sweep(variants[:1], out, cores=1, cache=tmp_path / "c", command=command,
+                  groups={next(iter(groups)): variants[:1]})
+    assert (out / "sweep.csv").read_text() == "my notes\n"
+
+
+def test_cli_says_how_to_resume_and_the_same_command_resumes(tmp_path, fake_engine, fake_run, monkeypatch):
+    command, starts, finished = fake_run
+    monkeypatch.setattr(sweep, "default_command", lambda: command)
+    monkeypatch.setenv("FAKE_SLOW", "quick-002")
+    real = sweep.run_sweep
+
+    def interrupted(*args, **kwargs):
+        return real(*args, **{**kwargs, "progress": interrupt_when(starts, "quick-002")})
+    monkeypatch.setattr(sweep, "run_sweep", interrupted)
+    out = tmp_path / "sweep"
+    args = ["sweep", str(QUICK), "--set", "geometry.orifice_radius=0.005,0.006,0.007,0.008", "--set", "engine.ranks=1",
+            "--cores", "1", "-o", str(out)]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 130, result.output
+    text = " ".join(result.output.split())
+    assert "Resume the sweep with the same command" in text
+    assert ("siloflow sweep " + str(QUICK) + " --set geometry.orifice_radius=0.005,0.006,0.007,0.008 --set "
+            "engine.ranks=1 --cores 1 -o " + str(out)) in text
+    assert pd.read_csv(out / "sweep.csv").status.tolist() == ["complete", "complete", "unfinished", "unfinished"]
+    monkeypatch.setattr(sweep, "run_sweep", real)
+    monkeypatch.delenv("FAKE_SLOW")
+    result = runner.invoke(app, args)                      # the same command, no --force
+    assert result.exit_code == 0, result.output
+    assert "4 runs complete, 0 failed" in result.output
+    assert pd.read_csv(out / "sweep.csv").status.tolist() == ["complete"] * 4
+    assert starts() == ["quick-000", "quick-001", "quick-002", "quick-002", "quick-003"]
+    other = runner.invoke(app, [*args[:3], "geometry.orifice_radius=0.005,0.006", *args[4:], "--force"])
+    assert other.exit_code == 1 and "holds another sweep" in other.output
+
+
+# ------------------------------------------------------------------ item 6: large sweeps
+def fake_bin(folder: Path, name: str, body: str) -> Path:
+    folder.mkdir(exist_ok=True)
+    path = folder / name
+    path.write_text("#!/bin/bash\n" + textwrap.dedent(body))
+    path.chmod(0o755)
+    return path
+
+
+def submitted(tmp_path: Path, out: Path) -> list[dict]:
+    """Run submit.sh with a fake sbatch: each submission's script, array indices, offset and
+    the jobs it waits for (job ids 1, 2, ... in order)."""
+    bin_dir, calls = tmp_path / "bin", tmp_path / "sbatch_calls"
+    calls.unlink(missing_ok=True)
+    fake_bin(bin_dir, "sbatch", f"""
+        echo "$*" >> {calls}
+        n=$(wc -l < {calls})
+        echo "$n;cluster"
+        """)
+    env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}"}
+    subprocess.run([str(out / "submit.sh")], cwd=tmp_path, env=env, check=True, capture_output=True)
+    jobs = []
+    for k, line in enumerate(calls.read_text().splitlines(), 1):
+        array = re.search(r"--array=(\d+)-(\d+)", line)
+        after = re.search(r"--dependency=afterok:(\S+)", line)
+        script, offset = line.split()[-2:]
+        jobs.append({"job": k, "script": script, "offset": int(offset),
+                     "tasks": range(int(array[1]), int(array[2]) + 1),
+                     "after": [int(j) for j in after[1].split(":")] if after else []})
+    return jobs
+
+
+def run_task(tmp_path: Path, out: Path, script: str, offset: int, task: int) -> str:
+    """The siloflow command a task of ``script`` submitted with ``offset`` runs (fake siloflow)."""
+    bin_dir = tmp_path / "bin"
+    fake_bin(bin_dir, "siloflow", 'echo "$*"\n')
+    env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}", "SLURM_ARRAY_TASK_ID": str(task)}
+    return subprocess.run(["bash", script, str(offset)], cwd=out, env=env, check=True, capture_output=True,
+                          text=True).stdout
+
+
+def test_2500_fills_are_three_arrays_covering_every_line_once(tmp_path, quick_dict):
+    variants = expand(quick_dict, [parse_set("fill.count=" + ",".join(str(4000 + k) for k in range(250)))], seeds=10)
+    groups = {f"key{v.index}": [v] for v in variants}                  # every run its own fill
+    out = tmp_path / "s"
+    write_slurm(variants, groups, out, out / "cache")
+    lines = (out / "fills.txt").read_text().splitlines()
+    assert len(lines) == 2500 and not (out / "runs.sbatch").exists()
+    jobs = submitted(tmp_path, out)
+    assert [(j["script"], j["offset"], len(j["tasks"])) for j in jobs] == [
+        ("fills.sbatch", 0, 1000), ("fills.sbatch", 1000, 1000), ("fills.sbatch", 2000, 500)]
+    assert all(j["tasks"].start == 0 and j["tasks"].stop <= 1000 for j in jobs)   # within MaxArraySize 1001
+    covered = sorted(j["offset"] + k for j in jobs for k in j["tasks"])
+    assert covered == list(range(2500))
+    for j in jobs:                                   # the first and last task of each array: their lines
+        for k in (j["tasks"][0], j["tasks"][-1]):
+            line = lines[j["offset"] + k]
+            assert run_task(tmp_path, out, "fills.sbatch", j["offset"], k).split()[:4] == [
+                "run", line, "-o", f"runs/{Path(line).stem}"]
+    assert re.search(r"^#SBATCH --array=0-999$", (out / "fills.sbatch").read_text(), re.M)
+
+
+def test_split_runs_wait_for_the_fills_they_need(tmp_path, quick_dict):
+    variants = expand(quick_dict, [parse_set("particles.radius=0.0015,0.0014"),
+                                   parse_set("geometry.orifice_radius=0.006,0.007,0.008")], seeds=2)
+    groups = group_by_fill(variants, FakeEngine())                 # 4 fills of 3 runs
+    out = tmp_path / "s"
+    write_slurm(variants, groups, out, out / "cache", max_array_size=3)
+    fills, runs = ((out / f"{kind}.txt").read_text().splitlines() for kind in ("fills", "runs"))
+    jobs = submitted(tmp_path, out)
+    fill_jobs = [j for j in jobs if j["script"] == "fills.sbatch"]
+    run_jobs = [j for j in jobs if j["script"] == "runs.sbatch"]
+    assert [len(j["tasks"]) for j in fill_jobs] == [3, 1] and [len(j["tasks"]) for j in run_jobs] == [3, 3, 2]
+    assert all(not j["after"] for j in fill_jobs)
+    fill_of = {v.name: members[0].name for members in groups.values() for v in members}
+    job_of_fill = {Path(fills[j["offset"] + k]).stem: j["job"] for j in fill_jobs for k in j["tasks"]}
+    seen = []
+    for j in run_jobs:
+        assert all(a < j["job"] for a in j["after"])
+        needed = set()
+        for k in j["tasks"]:
+            name = Path(runs[j["offset"] + k]).stem
+            seen.append(name)
+            needed.add(job_of_fill[fill_of[name]])
+            assert run_task(tmp_path, out, "runs.sbatch", j["offset"], k).split()[1] == runs[j["offset"] + k]
+        assert sorted(needed) == j["after"]                 # exactly the fills arrays it needs
+    assert sorted(seen) == sorted(Path(r).stem for r in runs)
+    assert subprocess.run(["bash", "-n", str(out / "submit.sh")]).returncode == 0
+    with pytest.raises(SetupError, match="--max-array-size"):
+        write_slurm(variants, groups, out, out / "cache", max_array_size=0)
+
+
+def test_cli_max_array_size(tmp_path, fake_engine):
+    out = tmp_path / "sweep"
+    result = runner.invoke(app, ["sweep", str(QUICK), *SLURM_ARGS, "-o", str(out), "--slurm", "--max-array-size", "3"])
+    assert result.exit_code == 0, result.output
+    assert "4 job array(s)" in result.output
+    text = (out / "submit.sh").read_text()
+    assert text.count("fills.sbatch") == 2 and text.count("runs.sbatch") == 2
+    assert "--array=0-2 fills.sbatch 0" in text and "--array=0-0 fills.sbatch 3" in text
+
+
+def test_plans_are_made_once_per_case_and_silo_and_group_as_before(quick_dict, monkeypatch):
+    from siloflow import derived, meshes
+    from siloflow.fill_cache import fill_key
+    variants = expand(quick_dict, [parse_set("geometry.orifice_radius=0.006,0.008"), parse_set("fill.count=4000,4500"),
+                                   parse_set("materials.particle_particle.friction=0.4,0.5")], seeds=3)
+    expected: dict = {}
+    for v in variants:                                    # one plan per variant, as without the sharing
+        expected.setdefault(fill_key(derived.derive(v.case), FakeEngine()), []).append(v.name)
+    counts = {"derive": 0, "meshes": 0}
+    real_derive, real_meshes = derived.derive, meshes.silo_meshes
+
+    def counted_derive(case):
+        counts["derive"] += 1
+        return real_derive(case)
+
+    def counted_meshes(*args, **kwargs):
+        counts["meshes"] += 1
+        return real_meshes(*args, **kwargs)
+    monkeypatch.setattr(derived, "derive", counted_derive)
+    monkeypatch.setattr(meshes, "silo_meshes", counted_meshes)
+    stages = []
+    groups = group_by_fill(variants, FakeEngine(), progress=lambda *a: stages.append(a))
+    assert {k: [v.name for v in g] for k, g in groups.items()} == expected
+    assert counts == {"derive": 8, "meshes": 2}           # 24 variants: 8 cases but the seed, 2 silos
+    assert meshes.silo_meshes is counted_meshes           # put back
+    assert stages[-1] == ("planning", 24, 24) and len(stages) == 24
+    with sweep._shared_meshes():                          # the shared meshes make the same plan
+        for v in variants[:2]:
+            assert real_derive(v.case).model_dump_json() == real_derive(v.case).model_dump_json()
+        shared = real_derive(variants[5].case)
+    assert shared.model_dump_json() == real_derive(variants[5].case).model_dump_json()
