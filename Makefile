@@ -212,6 +212,11 @@ bench-stability-dust: install
 	for s in 777 778; do for f in envelope.csv edges.json envelope.png; do \
 	  cp $(STABILITY)-dust-s$$s/$$f benchmarks/results/stability/dust-s$$s-$$f; done; done
 
+# do a run's stated errors match the spread of seeds? (issue 35): 12 seeds of benchmarks/cases/coverage_small.yaml,
+# about 1 min each, resumable in runs/coverage; benchmarks/results/coverage/: runs.csv, coverage.csv, coverage.png
+bench-coverage: install
+	$(PY) benchmarks/error_coverage.py --seeds 12 --repost
+
 # rewrite tests/golden/ (the decks every shipped case renders) after a change that alters decks on
 # purpose; commit them with the change (tests/test_golden_decks.py compares)
 golden: $(VENV)/.installed
