@@ -24,25 +24,9 @@ from siloflow.run_folder import MANIFEST_NAME, RESULTS, SUMMARY_NAME, run_state,
 from siloflow.sweep import expand, group_by_fill, parse_set, run_sweep, write_slurm
 
 from conftest import QUICK
+from test_sweep import FakeEngine, fake_engine  # noqa: F401  (the sweep tests' fake engine and its fixture)
 
 runner = CliRunner(env={"COLUMNS": "400"})
-
-
-class FakeEngine:
-    """The parts of an engine a sweep asks for, without the engine."""
-
-    name = "fake"
-
-    def fill_key_parts(self, plan):
-        return {"name": "fake", "version": "1"}
-
-    def check(self, case, plan=None):
-        return []
-
-
-@pytest.fixture
-def fake_engine(monkeypatch):
-    monkeypatch.setattr(sweep, "sweep_engine", lambda variants, need_binary=True: FakeEngine())
 
 
 def files_of(folder: Path) -> dict:
