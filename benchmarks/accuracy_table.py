@@ -1,15 +1,17 @@
-"""The README's table of an accuracy bench, made from its committed results so it cannot go stale.
+"""The accuracy table of docs/accuracy.md, made from a bench's committed results so it cannot go stale.
 
     python benchmarks/accuracy_table.py [benchmarks/results/accuracy]          # print the Markdown table
-    python benchmarks/accuracy_table.py benchmarks/results/accuracy --readme README.md   # rewrite it there
+    python benchmarks/accuracy_table.py benchmarks/results/accuracy --doc      # rewrite it in docs/accuracy.md
+    python benchmarks/accuracy_table.py benchmarks/results/accuracy --check    # exit 1 if docs/accuracy.md's differs
 
 It reads ``comparison.csv`` (errors, intervals, speed-ups), ``runs.csv`` (each candidate's time-step
 fraction, stiffness scale and failed runs) and ``recommended_profile.json`` of the bench folder, and
 writes one row per candidate, fastest last: a resolved error as ``+4.3 % (+1.0, +7.7)`` (the 95 %
 interval), an unresolved one as ``not resolved (bound 3.0 %; -0.5 %)``. A candidate none of whose
-runs completed gets a row naming why they stopped. In README.md the table sits between the markers
-``<!-- accuracy-table DIR -->`` and ``<!-- end accuracy-table -->``; tests/test_accuracy_table.py
-checks that it is this script's output for the committed results.
+runs completed gets a row naming why they stopped. In docs/accuracy.md (``--doc PATH`` for another
+file) the table sits between the markers ``<!-- accuracy-table DIR -->`` and
+``<!-- end accuracy-table -->``; tests/test_accuracy_table.py checks that it is this script's output for
+the committed results.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ import pandas as pd
 from siloflow.accuracy_bench import QUANTITIES, VALIDATION
 
 ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "accuracy.md"      # the page whose table this script writes
 HEADER = ("| candidate (dt / t_c, stiffness) | runs | speed-up | flow rate | static band pressure | max dynamic band "
           "pressure | solid fraction | coordination |\n|---|---|---|---|---|---|---|---|")
 
@@ -107,29 +110,41 @@ def _pattern(folder: str) -> re.Pattern:
     return re.compile(re.escape(start) + r"\n(.*?)" + re.escape(end), flags=re.S)
 
 
-def readme_table(readme_text: str, folder: str) -> str | None:
-    """The table between ``folder``'s markers in the README text (None when the markers are missing)."""
-    m = _pattern(folder).search(readme_text)
+def doc_table(doc_text: str, folder: str) -> str | None:
+    """The table between ``folder``'s markers in a page's text (None when the markers are missing)."""
+    m = _pattern(folder).search(doc_text)
     return m.group(1).rstrip("\n") if m else None
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("folder", nargs="?", default="benchmarks/results/accuracy")
-    parser.add_argument("--readme", type=Path, help="rewrite the table between the folder's markers in this file")
+    parser.add_argument("--doc", type=Path, nargs="?", const=DOC, metavar="PATH",
+                        help=f"rewrite the table between the folder's markers in PATH (default {DOC.relative_to(ROOT)})")
+    parser.add_argument("--check", action="store_true",
+                        help="write nothing; exit 1 if the table in --doc PATH (default "
+                             f"{DOC.relative_to(ROOT)}) is not the committed results'")
     args = parser.parse_args()
     text = table(ROOT / args.folder)
-    if args.readme is None:
+    if args.doc is None and not args.check:
         print(text)
         return
-    readme = args.readme.read_text()
-    if readme_table(readme, args.folder) is None:
-        raise SystemExit(f"{args.readme}: no markers {' ... '.join(markers(args.folder))}")
+    path = args.doc or DOC
+    doc = path.read_text()
+    current = doc_table(doc, args.folder)
+    if current is None:
+        raise SystemExit(f"{path}: no markers {' ... '.join(markers(args.folder))}")
+    if args.check:
+        if current != text:
+            raise SystemExit(f"{path}: the table of {args.folder} differs from its committed results; rewrite it: "
+                             f"python benchmarks/accuracy_table.py {args.folder} --doc {path}")
+        print(f"{path}: the table of {args.folder} is the committed results'")
+        return
     start, end = markers(args.folder)
-    new = _pattern(args.folder).sub(lambda _: f"{start}\n{text}\n{end}", readme)
+    new = _pattern(args.folder).sub(lambda _: f"{start}\n{text}\n{end}", doc)
     from siloflow.atomic_files import write_text
-    write_text(args.readme, new)
-    print(f"{args.readme}: table of {args.folder} rewritten")
+    write_text(path, new)
+    print(f"{path}: table of {args.folder} rewritten")
 
 
 if __name__ == "__main__":

@@ -1,8 +1,8 @@
 """Do a run's stated errors stand for the spread of its seeds? (issue 35)
 
     python benchmarks/error_coverage.py [--case benchmarks/cases/coverage_small.yaml] [--seeds 12]
-        [--work runs/coverage] [--out benchmarks/results/coverage] [--repost]
-    (make bench-coverage)
+        [--work runs/coverage/<name>] [--out benchmarks/results/coverage/<name>] [--repost]
+    (make bench-coverage: the small case, which clogs in some seeds, and coverage_flow, which does not)
 
 Runs the case with ``--seeds`` seeds (the case's seed, +1, ...; each ``siloflow run`` into
 ``WORK/runs/s<seed>``; a finished run is kept, so a second call resumes), then compares, per
@@ -51,6 +51,27 @@ def seed_case(base: dict, seed: int) -> dict:
 
 def complete(folder: Path) -> bool:
     return (folder / "results" / "summary.json").is_file()
+
+
+def differences(given, stored, path: str = "") -> list[str]:
+    """Where the run folder's case (``stored``, every field written out) differs from the case this
+    call runs (``given``, only the fields its file sets): the fields' paths."""
+    if isinstance(given, dict):
+        if not isinstance(stored, dict):
+            return [path or "case"]
+        return [d for k, v in given.items() for d in differences(v, stored.get(k), f"{path}.{k}".lstrip("."))]
+    if isinstance(given, (int, float)) and not isinstance(given, bool) and isinstance(stored, (int, float)):
+        return [] if math.isclose(given, stored, rel_tol=1e-12, abs_tol=0.0) else [path]
+    return [] if given == stored else [path]
+
+
+def check_same_case(folder: Path, data: dict) -> None:
+    """Refuse to reuse a finished run of another case (the case file changed since it ran)."""
+    stored = yaml.safe_load((folder / "case.yaml").read_text())
+    changed = differences(data, stored)
+    if changed:
+        raise SystemExit(f"{folder} ran another case ({', '.join(changed[:5])} differ): give another --work, "
+                         f"or remove the old runs")
 
 
 def rows_of(folder: Path, seed: int) -> dict:
@@ -126,26 +147,30 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--case", type=Path, default=ROOT / "benchmarks/cases/coverage_small.yaml")
     ap.add_argument("--seeds", type=int, default=12)
-    ap.add_argument("--work", type=Path, default=ROOT / "runs/coverage")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/coverage")
+    ap.add_argument("--work", type=Path, default=None, help="default runs/coverage/<case name>")
+    ap.add_argument("--out", type=Path, default=None, help="default benchmarks/results/coverage/<case name>")
     ap.add_argument("--repost", action="store_true", help="recompute each run's results first")
     args = ap.parse_args()
     if args.seeds < 3:
         raise SystemExit("--seeds: at least 3 (a spread needs them)")
     base = yaml.safe_load(args.case.read_text())
+    args.work = args.work or ROOT / "runs" / "coverage" / base["name"]
+    args.out = args.out or ROOT / "benchmarks" / "results" / "coverage" / base["name"]
     (args.work / "runs").mkdir(parents=True, exist_ok=True)
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     for seed in range(base.get("seed", 12345), base.get("seed", 12345) + args.seeds):
         folder = args.work / "runs" / f"s{seed}"
-        if not complete(folder):
-            if folder.exists():
-                raise SystemExit(f"{folder} exists but is not finished: remove it or finish it "
-                                 f"(siloflow run --resume {folder})")
+        if complete(folder):
+            check_same_case(folder, seed_case(base, seed))
+            if args.repost:
+                    subprocess.run(siloflow("post", str(folder)), cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+        elif folder.exists():
+            raise SystemExit(f"{folder} exists but is not finished: remove it or finish it "
+                             f"(siloflow run --resume {folder})")
+        else:
             _, wall = run_case(seed_case(base, seed), args.work)
             print(f"seed {seed}: {wall:.0f} s", flush=True)
-        elif args.repost:
-            subprocess.run(siloflow("post", str(folder)), cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
         rows.append(rows_of(folder, seed))
     runs = pd.DataFrame(rows)
     table = coverage(runs)

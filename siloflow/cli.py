@@ -116,7 +116,9 @@ def profile_note(p) -> str:
     """One line on the numerical profile a run uses and the error bounds that come with it."""
     what = f"profile {p.name}: time step {p.timestep_fraction:g} of the critical time, stiffness x {p.stiffness_scale:.3g}"
     if p.name == "fast" and p.overlap_ratio is not None:
-        what += f" (impact overlap {p.overlap_ratio:.3g} of the radius)"
+        what += (f" (impact overlap {p.overlap_ratio:.3g} of the radius)" if p.stiffness_scale < 1.0 else
+                 f" (stiffness kept: the grains are already softer than the profile's impact overlap of "
+                 f"{p.overlap_ratio:.3g} of the radius)")
     if p.name == "fast":
         if p.error_bounds:
             bounds = ", ".join(f"{q} within {b:.1%}" for q, b in p.error_bounds.items())
@@ -367,7 +369,7 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
        nz: int = typer.Option(300, min=1, help="vertical cells"),
        grid: str = typer.Option("rz", help="rz (axisymmetric) or cartesian"),
        method: str = typer.Option("exact", help="rz sums: exact, or lattice (sources on a finer lattice, tabulated "
-                                  "kernel moments: many times faster, small error; see the README)"),
+                                  "kernel moments: many times faster, small error; see docs/coarse_graining.md)"),
        refine: int = typer.Option(2, min=2, help="lattice nodes per grid cell and direction (even; --method lattice)"),
        species: Optional[str] = typer.Option("radius", help="partial fields by radius, type, or none"),
        per_frame: bool = typer.Option(False, help="keep per-frame fields (time evolution) as well"),

@@ -1,4 +1,4 @@
-"""benchmarks/accuracy_table.py: the README's accuracy table is made from the committed results."""
+"""benchmarks/accuracy_table.py: the accuracy table of docs/accuracy.md is made from the committed results."""
 import importlib.util
 import json
 import math
@@ -16,14 +16,15 @@ def _module():
     return mod
 
 
-def test_the_readme_table_is_the_committed_results():
+def test_the_docs_table_is_the_committed_results():
     mod = _module()
     folder = "benchmarks/results/accuracy"
-    in_readme = mod.readme_table((ROOT / "README.md").read_text(), folder)
-    assert in_readme is not None, "README.md lost the accuracy table's markers"
-    assert in_readme == mod.table(ROOT / folder), (
-        "README.md's accuracy table differs from the committed results: "
-        "python benchmarks/accuracy_table.py benchmarks/results/accuracy --readme README.md")
+    assert mod.DOC == ROOT / "docs" / "accuracy.md"
+    in_doc = mod.doc_table(mod.DOC.read_text(), folder)
+    assert in_doc is not None, "docs/accuracy.md lost the accuracy table's markers"
+    assert in_doc == mod.table(ROOT / folder), (
+        "docs/accuracy.md's accuracy table differs from the committed results: "
+        "python benchmarks/accuracy_table.py benchmarks/results/accuracy --doc docs/accuracy.md")
 
 
 def _row(candidate, quantity, err, lo, hi, resolved, speedup=10.0, n=6, method="paired", failed=0):

@@ -466,10 +466,10 @@ def _worst_column_error(a, b):
 
 
 # Measured (this frame, seed 3): Gaussian density 1.21e-3, worst column 1.40e-2 (particles) and
-# 7.5e-3 (contact); per field where rho > 5 % of its max (the README's measure, as in `make bench`):
+# 7.5e-3 (contact); per field where rho > 5 % of its max (docs/coarse_graining.md's measure, as in `make bench`):
 # rho 1.21e-3, kinetic pressure 1.66e-3, partial kinetic pressures 2.10e-3, contact pressure 2.57e-3.
 # Lucy: 1.38e-4, 1.09e-3, 7.3e-4; per field 1.38e-4, 1.49e-4, 1.92e-4, 3.50e-4. Bounds ~1.5x.
-# (The README's 0.16-0.4 % is this per-field measure on the 400,000-sphere benchmark frame, where
+# (docs/coarse_graining.md's 0.16-0.4 % is this per-field measure on the 400,000-sphere benchmark frame, where
 # `make bench` gives 1.61e-3, 1.58e-3 and 4.05e-3. The worst column, each tensor component against
 # its own maximum, is larger: 1.6 % there too. Nodes with almost no mass (rho ~1e-4 of its max,
 # V = P / rho from a few kernel tails) give partial kinetic pressures off by 3.5 %.)

@@ -6,7 +6,7 @@ balance holds within 2 % of the weight. Per engine, the steady flow rate is the 
 seeds, and its standard error is the seeds' spread over sqrt(n): one run's window holds too few
 grains for a rate known to 1.5 % (measured: 3.5-5 % from seed to seed), so the ensemble of 10
 seeds gives the precision. The means agree within 5 %, and the settled beds' bulk solid fractions
-within 0.02. About 5 minutes on 2 cores (README, "Two engines", quotes the numbers).
+within 0.02. About 5 minutes on 2 cores (docs/engines.md quotes the numbers).
 """
 from __future__ import annotations
 

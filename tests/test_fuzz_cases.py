@@ -137,7 +137,7 @@ def _derive_and_render(case):
 
 
 SCALED_BASES = {name: yaml.safe_load((ROOT / name).read_text()) for name in [
-    "decks/quick.yaml", "decks/paper_b_quick.yaml", "tests/data/small_silo.yaml", "tests/data/poly_silo.yaml",
+    "decks/quick.yaml", "decks/demo.yaml", "decks/paper_b_quick.yaml", "tests/data/small_silo.yaml", "tests/data/poly_silo.yaml",
     "tests/data/shrink_silo.yaml", "tests/data/slab_silo.yaml", "tests/data/slab_dust.yaml",
     "tests/data/clump_silo.yaml"]}
 FACTORS = [0.0, 1e-9, 1e-6, 1e-3, 0.1, 0.5, 0.9, 0.99, 1.01, 1.1, 2.0, 10.0, 1e3, 1e6, 1e9, -1.0]

@@ -1,5 +1,5 @@
-"""Where LIGGGHTS can put a fill batch, and what MPI ranks change about it (README "MPI ranks are not
-neutral", docs/engine_facts.md, ``siloflow.engine.liggghts.insertion``).
+"""Where LIGGGHTS can put a fill batch, and what MPI ranks change about it (docs/accuracy.md "MPI ranks are
+not neutral", docs/engine_facts.md, ``siloflow.engine.liggghts.insertion``).
 
 LIGGGHTS' ``fix insert/rate/region`` with ``overlapcheck yes`` inserts no grain within its radius of a
 processor-subdomain border (its default ``check_dist_from_subdomain_border yes``), so grains inserted
