@@ -219,6 +219,7 @@ def run_length_fields(case: Case, critical_source: str, profile: str = "custom")
            "fill": ["fill.count" if case.fill.count is not None else "fill.height",
                     "fill.batch_volume_fraction", "geometry.height", "gravity"],
            "settle": ["fill.settle.max_time"], "shrink": ["fill.settle.max_time"],
+           "mobilise": ["fill.mobilise.time"], "resettle": ["fill.settle.max_time"],
            "static": ["fill.settle.static_window"], "open": ["discharge.opening.speed"],
            "discharge": ["discharge.duration" if dis.duration is not None else "discharge.max_time"]}
     return out

@@ -71,6 +71,24 @@ def test_log_state_tracks_stages_and_total():
     assert s.total_steps(planned) == 150 + 10 + 5 + 200   # settle ended early: total shrinks
 
 
+def test_log_state_counts_the_mobilising_stages_once_in_order():
+    """fill.mobilise adds mobilise and resettle between the settle and the static window: while they
+    run, the stages before them count as they ran and none counts twice."""
+    s = LogState()
+    planned = {"fill": 100, "settle": 1000, "mobilise": 40, "resettle": 1000, "static": 10, "open": 5,
+               "discharge": 200}
+    for line in ["SILOFLOW_STAGE fill 100", "100 0.1 50 0 0 0 0 0", "SILOFLOW_STAGE settle 1000",
+                 "300 0.3 50 0 0 0 0 0"]:
+        s.feed(line)
+    assert s.total_steps(planned) == 100 + 1000 + 40 + 1000 + 10 + 5 + 200
+    for line in ["SILOFLOW_STAGE mobilise 40", "340 0.34 50 0 0 0 0 0"]:
+        s.feed(line)
+    assert s.total_steps(planned) == 300 + 40 + 1000 + 10 + 5 + 200
+    for line in ["SILOFLOW_STAGE resettle 1000", "500 0.5 50 0 0 0 0 0"]:
+        s.feed(line)
+    assert s.total_steps(planned) == 340 + 1000 + 10 + 5 + 200
+
+
 def test_diagnose_known_messages():
     msg, cause, fix = diagnose(["ERROR: Cannot open mesh file meshes/x.stl"], [], 1)
     assert "mesh file" in cause

@@ -3,7 +3,6 @@ guard, resume, and the three silo shapes' force balance. Each engine run is a fe
 and a few seconds, in this process (1 rank)."""
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 
 import numpy as np
@@ -40,15 +39,6 @@ def engine():
 
 
 # ---------------------------------------------------------------- refusals and deck safety
-def test_validate_refuses_what_lammps_cannot_do_naming_the_field(quick_dict):
-    data = copy.deepcopy(quick_dict)
-    data["engine"]["name"] = "lammps"
-    data["fill"]["mobilise"] = {"drop": 0.002}
-    with pytest.raises(CaseError) as err:
-        check_case(case_from_dict(data), engine())
-    assert "fill.mobilise" in str(err.value)
-
-
 def test_validate_refuses_an_stl_insert_on_lammps_before_anything_runs(tmp_path):
     from typer.testing import CliRunner
     from siloflow.cli import app

@@ -19,7 +19,16 @@ sharing its contact parameters:
   in the orifice, open at both ends, touched from outside: its nearest point to a grain above is
   the edge;
 - the orifice plate: a solid disc (slab: a block) under the orifice, grains on its outside, moved
-  down at the opening speed through ``travel`` and then removed.
+  down at the opening speed through ``travel`` and then removed;
+- a mobilised fill (``fill.mobilise``, flat-bottomed cylinders only): the floor's regions (the plane,
+  the orifice's sphere and edge) and the closed plate go down by ``drop`` in :func:`mobilise_jumps`
+  equal jumps over the stage's steps, each region deleted and defined again lower
+  (:func:`floor_commands`), static, under the same wall fixes (the floor's union finds its
+  sub-regions again by name): their forces are sampled as before, and the plate opens from the
+  lowered floor. Moving the sub-regions with ``move`` instead would leave the union's wall
+  velocity unset (``RegUnion::set_velocity`` sets its sub-regions', and the contacts read the
+  union's own: measured on 22 Jul 2025, a grain on a union floor whose sub-regions slid sideways at
+  1 cm/s was not dragged, and took the union's uninitialised velocity, 5e-321 m/s).
 
 Every value passes the deck filters; the rendered deck may only hold :data:`ALLOWED_COMMANDS`.
 """
@@ -120,14 +129,17 @@ def _n(x: float) -> str:
     return repr(float(x))
 
 
-def walls(plan: RunPlan) -> list[LammpsWall]:
-    """The plan's silo as LAMMPS region walls (see the module docstring)."""
+def walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
+    """The plan's silo as LAMMPS region walls (see the module docstring); ``floor_dz``: the flat
+    floor's regions and the plate lowered by that much (m, negative down: ``fill.mobilise``)."""
     g = plan.geometry
     R, hh, top, ro = g.half_width, g.hopper_height, g.top, g.outlet_radius
     d = 2 * plan.particle_radius
     thick = 2 * d                                   # the plate's thickness, m
     out = []
     if g.kind == "planar":
+        if floor_dz:
+            raise ValueError("a slab's floor does not move (fill.mobilise needs a flat-bottomed cylinder)")
         half_y = g.half_depth
         out.append(LammpsWall("side", [("side", "block", [_n(-R), _n(R), _n(-half_y - d), _n(half_y + d),
                                                                _n(hh), _n(top), "open", "3", "open", "4",
@@ -157,21 +169,59 @@ def walls(plan: RunPlan) -> list[LammpsWall]:
     out.append(LammpsWall("side", [("side", "cylinder", ["z", _n(0.0), _n(0.0), _n(R), _n(hh), _n(top),
                                                                  "open", "1", "open", "2"])]))
     if g.kind == "hopper":
+        if floor_dz:
+            raise ValueError("a hopper's outlet does not move (fill.mobilise needs a flat-bottomed cylinder)")
         out.append(LammpsWall("hopper", [("cone", "cone", ["z", _n(0.0), _n(0.0), _n(ro), _n(R), _n(0.0),
                                                                    _n(hh), "open", "1", "open", "2"])]))
     else:
         depth = HOLE_SPHERE_DEPTH * top
         out.append(LammpsWall("bottom", [
-            ("bottom_plane", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(1.0)]),
-            ("bottom_hole", "sphere", [_n(0.0), _n(0.0), _n(-depth), _n(math.sqrt(depth * depth + ro * ro))]),
+            ("bottom_plane", "plane", [_n(0.0), _n(0.0), _n(floor_dz), _n(0.0), _n(0.0), _n(1.0)]),
+            # the sphere's cap at the floor is the orifice whatever the floor's height: its centre moves
+            # with the floor, its radius stays
+            ("bottom_hole", "sphere", [_n(0.0), _n(0.0), _n(floor_dz - depth), _n(math.sqrt(depth * depth + ro * ro))]),
             ("bottom", "union", ["2", "bottom_plane", "bottom_hole"])]))
     # the orifice's edge (a union keeps faces, not the edges where they meet): the side of a vanishingly
     # thin cylinder in the orifice, open above and below, touched from outside
     out.append(LammpsWall("bottom" if g.kind == "cylinder" else "hopper", [
-        ("rim", "cylinder", ["z", _n(0.0), _n(0.0), _n(ro), _n(-RIM_THICKNESS * d), _n(0.0), "open", "1", "open", "2",
-                             "side", "out"])]))
-    out.append(LammpsWall("plate", [("plate", "cylinder", ["z", _n(0.0), _n(0.0), _n(ro), _n(-thick),
-                                                                    _n(0.0), "side", "out"])], plate=True))
+        ("rim", "cylinder", ["z", _n(0.0), _n(0.0), _n(ro), _n(floor_dz - RIM_THICKNESS * d), _n(floor_dz), "open", "1",
+                             "open", "2", "side", "out"])]))
+    out.append(LammpsWall("plate", [("plate", "cylinder", ["z", _n(0.0), _n(0.0), _n(ro), _n(floor_dz - thick),
+                                                                    _n(floor_dz), "side", "out"])], plate=True))
+    return out
+
+
+#: the most steps between two of the mobilising floor's jumps, and the most jumps
+MOBILISE_JUMP_STEPS = 10
+MOBILISE_MAX_JUMPS = 200
+
+
+def mobilise_jumps(steps: int) -> int:
+    """In how many equal jumps the floor goes down over the mobilising stage's ``steps``: one every
+    :data:`MOBILISE_JUMP_STEPS` steps (a fraction of a contact's duration at siloflow's time steps:
+    a jump is that many steps' travel at the planned speed), and at most :data:`MOBILISE_MAX_JUMPS`
+    (then a jump is 1/200 of the drop, at most 1/800 of a diameter)."""
+    return max(1, min(MOBILISE_MAX_JUMPS, math.ceil(steps / MOBILISE_JUMP_STEPS)))
+
+
+def region_command(rid: str, style: str, args: list, moving: bool = False) -> str:
+    """The ``region`` command of one wall region (``moving``: the plate, displaced by ``v_plate_dz``)."""
+    return " ".join(["region", rid, style, *args] + (["move", "NULL", "NULL", "v_plate_dz"] if moving else [])
+                    + ["units", "box"])
+
+
+def floor_commands(plan: RunPlan, floor_dz: float) -> list[str]:
+    """The commands that put the flat floor's regions (plane, orifice sphere, edge) and the closed
+    plate ``floor_dz`` (m) below their place: each deleted and defined anew, static (the plate keeps
+    its opening motion ``v_plate_dz``, still 0); the floor's union is left as it is, it finds its
+    sub-regions by name when the next run starts (which must set up: the driver's chunks do)."""
+    out = []
+    for w in walls(plan, floor_dz):
+        if w.kind not in ("bottom", "plate"):
+            continue
+        for rid, style, args in w.regions:
+            if style != "union":
+                out += [f"region {rid} delete", region_command(rid, style, args, w.plate and rid == w.region)]
     return out
 
 
@@ -182,7 +232,8 @@ def box(plan: RunPlan, count_every: int) -> dict:
     g = plan.geometry
     d = 2 * plan.particle_radius
     fall = math.sqrt(plan.fill.insertion_speed ** 2 + 2 * plan.gravity * (g.top - plan.outlet.z))
-    below = plan.opening.travel + 2 * d + fall * count_every * plan.dt + 4 * d
+    lowered = plan.fill.mobilise.drop if plan.fill.mobilise is not None else 0.0     # the plate opens from there
+    below = lowered + plan.opening.travel + 2 * d + fall * count_every * plan.dt + 4 * d
     half_y = g.half_depth
     return {"xlo": -g.half_width - 2 * d, "xhi": g.half_width + 2 * d, "ylo": -half_y - 2 * d,
             "yhi": half_y + 2 * d, "zlo": plan.outlet.z - below, "zhi": g.top + 2 * d}
@@ -237,6 +288,7 @@ def deck_context(plan: RunPlan) -> dict:
             pairs.append({"i": i + 1, "j": n_types, "args": pair_coeff_args(plan, p),
                           "args_fill": pair_coeff_args(plan, p, frictionless=f.frictionless)})
     groups, fixes, regions = {}, [], []
+    mobilise = f.mobilise
     for w in walls(plan):
         regions += [{"id": rid, "style": style, "args": args, "moving": w.plate and rid == w.region}
                     for rid, style, args in w.regions]
@@ -265,6 +317,9 @@ def deck_context(plan: RunPlan) -> dict:
         "wall_fixes": fixes, "dust_in_plane": dust is not None and plan.planar, "dust_group": "dust",
         "outlet_z": plan.outlet.z, "dump_every": plan.outputs.dump_every, "restart_file": RESTART_FILE,
         "opening_speed": plan.opening.speed,
+        "mobilise": None if mobilise is None else {"drop": mobilise.drop, "steps": mobilise.steps,
+                                                   "jumps": mobilise_jumps(mobilise.steps)},
+        "mobilised_floor": floor_commands(plan, -mobilise.drop) if mobilise is not None else [],
         "pour_type": poured_species(plan) + 1 if f.shrink_classes else 1,
         "mark_type": n_types,
         "density": plan.grains[0].density,

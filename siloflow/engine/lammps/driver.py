@@ -31,7 +31,7 @@ from ...errors import ReadError
 from ...guard import RunGuard
 from ...plan import RunPlan
 from ..liggghts.tables import FLOW_COLUMNS, wall_force_columns
-from .deck import BODY_QUANTITIES, deck_context, poured_species, wall_kind
+from .deck import BODY_QUANTITIES, deck_context, floor_commands, mobilise_jumps, poured_species, wall_kind
 
 STATE_NAME = "output/lammps_state.json"
 #: the stages a run from the settled bed's restart file runs again
@@ -258,6 +258,10 @@ class Driver:
             self.section("regroup")
             if not self.settle("shrink"):
                 raise Stop("not settled")
+        if self.plan.fill.mobilise is not None:
+            self.mobilise()
+            if not self.settle("resettle"):
+                raise Stop("not settled")
         if not self.clumps:      # fix rigid/small's bodies are not rebuilt from a restart file the same way
             self.section("save")
             self.state.restart_step, self.state.lost_at_restart = self.state.step, self.state.lost
@@ -277,6 +281,8 @@ class Driver:
                 write_text(self.folder / rel, rows_up_to(self.folder / rel, step))
         self.section("resume_box")
         self.section("model")
+        if self.plan.fill.mobilise is not None:
+            self.section("mobilised")            # the restart file's bed lies on the lowered floor
         self.section("regroup")
         self.section("restore_friction")
         self.section("dump_first")
@@ -446,7 +452,25 @@ class Driver:
         y = self.rng.uniform(reg.ylo, reg.yhi)
         return np.array([x, y, z])
 
-    # ------------------------------------------------------------------ settle, discharge
+    # ------------------------------------------------------------------ mobilise, settle, discharge
+    def mobilise(self) -> None:
+        """Lower the floor and the closed plate by the plan's ``drop`` over its ``steps``, in equal
+        jumps (:func:`.deck.mobilise_jumps`) at the start of equal runs: the settled bed slides down
+        along the wall (``fill.mobilise``). The last jump is the deck's ``mobilised`` section."""
+        m = self.plan.fill.mobilise
+        self.begin("mobilise")
+        jumps = mobilise_jumps(m.steps)
+        done = 0
+        for j in range(1, jumps + 1):
+            if j < jumps:
+                for line in floor_commands(self.plan, -m.drop * j / jumps):
+                    self.lmp.command(line)
+            else:
+                self.section("mobilised")
+            n = round(m.steps * j / jumps) - done
+            self.advance(n)                 # its first run sets up: the union finds its new sub-regions
+            done += n
+
     def settle(self, stage: str) -> bool:
         """Chunks until KE/PE < the plan's ratio (at most ``max_chunks``); False if it never got there."""
         s = self.plan.settle

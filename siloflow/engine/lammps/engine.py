@@ -48,7 +48,7 @@ class LammpsEngine(Engine):
 
     def check(self, case: Case, plan: Optional[RunPlan] = None) -> list[tuple[str, str]]:
         """What this engine cannot do: STL inserts (LAMMPS has no mesh walls for grains), clumps in a
-        slab (rigid/small bodies cannot be held to a plane), a mobilised floor (not built)."""
+        slab (rigid/small bodies cannot be held to a plane)."""
         problems = []
         if case.inserts:
             problems.append(("inserts", "LAMMPS has no STL walls for grains (no mesh region): remove the "
@@ -57,9 +57,6 @@ class LammpsEngine(Engine):
             problems.append(("geometry.kind", "clumps in a slab must stay in its plane, and LAMMPS' fix "
                                               "rigid/small cannot hold a body's motion to a plane: use a cylinder "
                                               "or hopper, or engine.name: liggghts"))
-        if case.fill.mobilise is not None:
-            problems.append(("fill.mobilise", "the LAMMPS engine does not lower the floor: remove fill.mobilise "
-                                              "or use engine.name: liggghts"))
         if case.engine.ranks > (os.cpu_count() or 1):
             problems.append(("engine.ranks", f"{case.engine.ranks} ranks but this machine has {os.cpu_count()} "
                                              "cores: lower engine.ranks"))
@@ -315,8 +312,10 @@ def diagnose(error: str) -> tuple[str, str, str]:
 
 
 #: the stages of a LAMMPS run in order; the restart point follows the last of BEFORE_RESTART it ran
-STAGES = ("fill", "settle", "shrink") + AFTER_RESTART
+STAGES = ("fill", "settle", "shrink", "mobilise", "resettle") + AFTER_RESTART
 BEFORE_RESTART = ("fill", "settle")
+#: the stages a fill may run between the settling and the restart point
+OPTIONAL_BEFORE_RESTART = ("shrink", "mobilise", "resettle")
 
 
 def resume_state(folder: Path) -> dict:
@@ -357,7 +356,7 @@ def resume_state(folder: Path) -> dict:
     if not isinstance(stages, dict) or not all(k in STAGES and whole(v) for k, v in stages.items()):
         problems.append(f"stage_steps must map stages ({', '.join(STAGES)}) to whole steps >= 0, not {stages!r}")
     elif whole(step, 1):
-        for name in BEFORE_RESTART + ("shrink",):
+        for name in BEFORE_RESTART + OPTIONAL_BEFORE_RESTART:
             if name in BEFORE_RESTART and name not in stages:
                 problems.append(f"stage_steps lacks '{name}', which ran before the restart point")
             elif name in stages and stages[name] >= step:

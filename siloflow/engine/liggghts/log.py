@@ -28,7 +28,7 @@ _WARNING = re.compile(r"^(WARNING:.*)$")
 #: check/timestep/gran's verdict that the time step is too large: a failure, not a warning
 _TIMESTEP = re.compile(r"time-step is .* of (rayleigh|hertz) time", re.I)
 
-STAGE_ORDER = ("fill", "settle", "shrink", "static", "open", "discharge")
+STAGE_ORDER = ("fill", "settle", "shrink", "mobilise", "resettle", "static", "open", "discharge")
 #: thermo columns of a deck with the guard (step ... outlet_count, speed, overlap, escaped)
 THERMO_GUARD_COLUMNS = 11
 
