@@ -223,6 +223,12 @@ bench-coverage: install
 	$(PY) benchmarks/error_coverage.py --seeds 12 --repost
 	$(PY) benchmarks/error_coverage.py --case benchmarks/cases/coverage_flow.yaml --seeds 12 --repost
 
+# does a mobilised bed hang the same share of its weight on the wall in both engines? (issue 35): 5 seeds of
+# benchmarks/cases/coverage_small.yaml on LIGGGHTS and on LAMMPS, discharge cut to 0.1 s, one run at a time
+# (about 15 min on 2 cores, resumable); benchmarks/results/mobilise_engines/: runs.csv, comparison.csv
+bench-mobilise-engines: install
+	$(PY) benchmarks/mobilise_engines.py --seeds 5
+
 # rewrite tests/golden/ (the decks every shipped case renders) after a change that alters decks on
 # purpose; commit them with the change (tests/test_golden_decks.py compares)
 golden: $(VENV)/.installed

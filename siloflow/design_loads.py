@@ -11,7 +11,7 @@ every number of the material table, against the standard before relying on them*
   K_l = K_m / a_K, mu and phi_i likewise), and which bound each load case takes; the upper unit
   weight gamma_u for every load.
 - §5.1 / §1.5: classification by the aspect ratio h_c/d_c: slender >= 2, intermediate 1-2,
-  squat 0.4-1, retaining < 0.4 (flat bottom only; a hopper silo that low is treated as squat).
+  squat 0.4 < . <= 1, retaining <= 0.4 (flat bottom only; a hopper silo that low is squat, §5.1(3)).
 - §5.2.1.1 (5.1)-(5.7): slender silos, Janssen filling pressures p_hf, p_wf, p_vf and the wall's
   vertical force per unit perimeter n_zSk.
 - §5.3.1.1: squat and intermediate silos, the modified depth function Y_R(z) and the vertical
@@ -211,13 +211,13 @@ def characteristic_values(solid: BulkSolid, wall_type: str, a_over_u: float) -> 
 
 
 def classify(aspect_ratio: float, flat_bottom: bool = True) -> str:
-    """Silo class by h_c/d_c (§5.1, §1.5): ``slender`` (>= 2), ``intermediate`` (1 < . < 2),
-    ``squat`` (0.4 <= . <= 1) or ``retaining`` (< 0.4, a flat bottom; with a hopper: squat)."""
+    """Silo class by h_c/d_c (§5.1(2)-(3), §1.5): ``slender`` (>= 2), ``intermediate`` (1 < . < 2),
+    ``squat`` (0.4 < . <= 1) or ``retaining`` (<= 0.4, a flat bottom; with a hopper: squat)."""
     if aspect_ratio >= 2.0:
         return "slender"
     if aspect_ratio > 1.0:
         return "intermediate"
-    if aspect_ratio >= 0.4 or not flat_bottom:
+    if aspect_ratio > 0.4 or not flat_bottom:
         return "squat"
     return "retaining"
 
@@ -587,7 +587,7 @@ def design_loads(geometry, material, fill_height: float, wall_type: str = "D2", 
     _, p_wf, _, n_zsk = wall("max_friction")
     p_vf = wall("max_vertical")[2]
     if cls == "retaining":
-        notes.append("retaining silo (h_c/d_c < 0.4): the squat procedure (§5.3) is used; §5.4's own rules are "
+        notes.append("retaining silo (h_c/d_c <= 0.4): the squat procedure (§5.3) is used; §5.4's own rules are "
                      "not implemented")
     e_ratio = eccentricity / d_c
     if eccentricity > 0.25 * d_c:

@@ -146,10 +146,15 @@ def test_material_table_is_self_consistent():
 
 
 def test_classification_boundaries():
+    """EN 1991-4:2006 §5.1(2)-(3) (and the terms of §1.5): slender 2.0 <= h_c/d_c; intermediate
+    1.0 < h_c/d_c < 2.0; squat 0.4 < h_c/d_c <= 1.0; retaining: a flat bottom and h_c/d_c <= 0.4;
+    a silo with a hopper and h_c/d_c <= 0.4 is classed as squat. So h_c/d_c = 0.4 exactly is a
+    retaining silo on a flat bottom (siloflow had it squat before issue 37)."""
     assert classify(2.0) == "slender" and classify(1.999) == "intermediate"
     assert classify(1.0001) == "intermediate" and classify(1.0) == "squat"
-    assert classify(0.4) == "squat" and classify(0.399) == "retaining"
-    assert classify(0.399, flat_bottom=False) == "squat"      # a hopper silo is never "retaining"
+    assert classify(0.4001) == "squat" and classify(0.4) == "retaining" and classify(0.399) == "retaining"
+    assert classify(0.4, flat_bottom=False) == "squat"        # a hopper silo is never "retaining"
+    assert classify(0.399, flat_bottom=False) == "squat"
     # through the geometry: d_c = 6 m, fills of 12, 9, 6 and 2 m
     got = [design_loads(cylinder(3.0), "wheat", h).classification for h in (12.0, 9.0, 6.0, 2.0)]
     assert got == ["slender", "intermediate", "squat", "retaining"]
@@ -345,3 +350,183 @@ def test_design_refuses_a_run_of_another_case(tmp_path, quick_dict, write_case):
     (run / "results" / "bands.csv").replace(bare / "results" / "bands.csv")
     result = CliRunner().invoke(app, ["design", str(QUICK), "-o", str(tmp_path / "d"), "--run", str(bare)])
     assert result.exit_code == 1 and "case.yaml" in result.output and result.exception.__class__ is SystemExit
+
+
+# --------------------------------------------------------------------------- issue 37, item 7
+# Each test below pins a value that a mutant of siloflow/design_loads.py got wrong undetected.
+
+def test_intermediate_silo_aac1_discharge_factors_by_hand():
+    """EN 1991-4 §5.3.2.2, AAC 1, intermediate silo (1 < h_c/d_c < 2), C_S = h_c/d_c - 1 (linear):
+    C_h = 1 + (0.15 + 1.5 (1 + 0.4 e/d_c) C_op) C_S,  C_w = 1 + 0.4 (1 + 1.4 e/d_c) C_S."""
+    # d_c = 6 m, h_c = 9 m: h_c/d_c = 1.5, C_S = 0.5; e = 0.6 m: e/d_c = 0.1
+    # wheat C_op 0.5: C_h = 1 + (0.15 + 1.5 * 1.04 * 0.5) * 0.5 = 1 + 0.93 * 0.5 = 1.465
+    #                 C_w = 1 + 0.4 * 1.14 * 0.5 = 1.228
+    # (with C_S^2 = 0.25 these would be 1.2325 and 1.114)
+    wheat = design_loads(cylinder(3.0), "wheat", 9.0, aac=1, eccentricity=0.6)
+    assert wheat.classification == "intermediate"
+    assert wheat.C_h == pytest.approx(1.465, rel=1e-9) and wheat.C_w == pytest.approx(1.228, rel=1e-9)
+    np.testing.assert_allclose(wheat.p_he, 1.465 * wheat.p_hf, rtol=1e-12)
+    np.testing.assert_allclose(wheat.p_we, 1.228 * wheat.p_wf, rtol=1e-12)
+    # maize (Table E.1 C_op 0.9): C_h = 1 + (0.15 + 1.5 * 1.04 * 0.9) * 0.5 = 1 + 1.554 * 0.5 = 1.777
+    maize = design_loads(cylinder(3.0), "maize", 9.0, aac=1, eccentricity=0.6)
+    assert maize.C_h == pytest.approx(1.777, rel=1e-9) and maize.C_w == pytest.approx(1.228, rel=1e-9)
+    # no eccentricity, h_c/d_c = 1.25 (h_c = 7.5 m): C_S = 0.25, C_h = 1 + 0.9 * 0.25 = 1.225, C_w = 1.1
+    low = design_loads(cylinder(3.0), "wheat", 7.5, aac=1)
+    assert (low.C_h, low.C_w) == (pytest.approx(1.225, rel=1e-9), pytest.approx(1.1, rel=1e-9))
+
+
+def test_discharge_patch_factor_of_low_intermediate_silos_by_hand():
+    """EN 1991-4 discharge patch, h_c/d_c <= 1.2: C_pe = 0.272 C_op (h_c/d_c - 1 + E), E = 2 e/d_c
+    (above 1.2: C_pe = 0.42 C_op (1 + 2 E^2)(1 - exp(-1.5 (h_c/d_c - 1))))."""
+    # d_c = 6 m, h_c = 6.6 m: h_c/d_c = 1.1; wheat C_op 0.5
+    # e = 0.6 m: E = 0.2, C_pe = 0.272 * 0.5 * (0.1 + 0.2) = 0.0408
+    ecc = design_loads(cylinder(3.0), "wheat", 6.6, eccentricity=0.6, heights=[3.0])
+    assert ecc.classification == "intermediate"
+    assert ecc.C_pe == pytest.approx(0.0408, rel=1e-9)
+    assert ecc.p_pe[0] == pytest.approx(0.0408 * ecc.p_he[0], rel=1e-12) and ecc.p_pe[0] > 0
+    # e = 0: C_pe = 0.272 * 0.5 * 0.1 = 0.0136
+    assert design_loads(cylinder(3.0), "wheat", 6.6).C_pe == pytest.approx(0.0136, rel=1e-9)
+    # maize C_op 0.9, e = 0: 0.272 * 0.9 * 0.1 = 0.02448
+    assert design_loads(cylinder(3.0), "maize", 6.6).C_pe == pytest.approx(0.02448, rel=1e-9)
+    # just above the switch, h_c/d_c = 1.3 (h_c = 7.8 m), E = 0.2:
+    # C_pe = 0.42 * 0.5 * 1.08 * (1 - exp(-0.45)) = 0.082186
+    above = design_loads(cylinder(3.0), "wheat", 7.8, eccentricity=0.6)
+    assert above.C_pe == pytest.approx(0.42 * 0.5 * 1.08 * (1.0 - math.exp(-0.45)), rel=1e-9)
+    assert above.C_pe == pytest.approx(0.082186, rel=1e-4)
+
+
+def test_bottom_load_magnifier_by_hand():
+    """EN 1991-4 §6.1.2: p_vft = C_b p_vf(h_c), C_b = 1.0 for AAC 2 and 3 and 1.3 for AAC 1; where the
+    solid may load the bottom dynamically, 1.2 (AAC 2, 3) and 1.6 (AAC 1)."""
+    # slender, d_c = 6 m, h_c = 20 m, flat bottom; max vertical case (K lower, mu lower):
+    # p_vf(20 m) = gamma z_o,v (1 - exp(-20 / z_o,v)), z_o,v = 9.4123 m -> 74592.1 Pa
+    z_o_v = 1.5 / (K_L * MU_L)
+    p_vf = GAMMA * z_o_v * (1.0 - math.exp(-20.0 / z_o_v))
+    assert p_vf == pytest.approx(74592.1, rel=1e-5)
+    expected = {(1, False): 1.3, (2, False): 1.0, (3, False): 1.0,
+                (1, True): 1.6, (2, True): 1.2, (3, True): 1.2}
+    for (aac, dynamic), C_b in expected.items():
+        loads = design_loads(cylinder(3.0), "wheat", 20.0, aac=aac, dynamic_bottom=dynamic, heights=[10.0])
+        assert loads.C_b == C_b, (aac, dynamic)
+        # AAC 1: 96969.8 Pa; AAC 1 dynamic: 119347.4 Pa; AAC 2/3 dynamic: 89510.5 Pa
+        assert loads.p_vft == pytest.approx(C_b * p_vf, rel=1e-9), (aac, dynamic)
+    # in a hopper silo p_vft is the hopper's stress at the transition, p_v(x = h_h) = C_b p_vf(h_c)
+    h = hopper(3.0, 30.0)
+    top = design_loads(h, "wheat", h.hopper_height + 20.0, aac=1, dynamic_bottom=True, heights=[h.hopper_height])
+    assert top.hopper.C_b == 1.6
+    assert top.p_v_hopper[0] == pytest.approx(1.6 * p_vf, rel=1e-9)
+
+
+def test_hopper_discharge_and_filling_traction_by_hand():
+    """EN 1991-4 §6.3: p_v(x) = gamma h_h / (n - 1) (x/h_h - (x/h_h)^n) + p_vft (x/h_h)^n with
+    n = S (F mu_h cot beta + F) - 2 (S = 2, cone); filling F = F_f: p_nf = F_f p_v, p_tf = mu_h F_f p_v
+    (§6.3.2); discharge (§6.3.3) F = F_e in both n and the pressures: p_ne = F_e p_v, p_te = mu_h F_e p_v."""
+    # steep 30 deg hopper under a 20 m slender column, d_c = 6 m, AAC 2: mu_h = mu_l = 0.32759,
+    # p_vft = 74592.1 Pa, h_h = 5.19615 m; at mid-height x = h_h / 2
+    t = math.tan(math.radians(30.0))
+    h_h = 3.0 / t
+    z_o_v = 1.5 / (K_L * MU_L)
+    p_vft = GAMMA * z_o_v * (1.0 - math.exp(-20.0 / z_o_v))
+    F_f = 1.0 - 0.2 / (1.0 + t / MU_L)                          # 0.92760
+    n_f = 2.0 * (F_f * MU_L / t + F_f) - 2.0                      # 0.90783
+    s = math.sin(math.radians(30.0 * 1.12))                       # phi_i upper 33.6 deg
+    phi_wh = math.atan(MU_L)
+    eps = phi_wh + math.asin(math.sin(phi_wh) / s)
+    F_e = (1.0 + s * math.cos(eps)) / (1.0 - s * math.cos(math.radians(60.0) + eps))     # 1.10512
+    n_e = 2.0 * (F_e * MU_L / t + F_e) - 2.0                      # 1.46433
+    assert (n_f, n_e) == (pytest.approx(0.90783, rel=1e-4), pytest.approx(1.46433, rel=1e-4))
+    p_v_f = GAMMA * h_h / (n_f - 1.0) * (0.5 - 0.5 ** n_f) + p_vft * 0.5 ** n_f     # 56493.0 Pa
+    p_v_e = GAMMA * h_h / (n_e - 1.0) * (0.5 - 0.5 ** n_e) + p_vft * 0.5 ** n_e     # 40890.6 Pa
+    assert (p_v_f, p_v_e) == (pytest.approx(56493.0, rel=1e-5), pytest.approx(40890.6, rel=1e-5))
+    h = hopper(3.0, 30.0)
+    z = 0.5 * h_h - 0.3 / t                                       # x = h_h / 2 above the apex
+    got = design_loads(h, "wheat", h.hopper_height + 20.0, heights=[z])
+    assert got.hopper.steep and got.hopper.n_e == pytest.approx(n_e, rel=1e-9)
+    assert got.p_v_hopper[0] == pytest.approx(p_v_f, rel=1e-9)
+    assert got.p_nf[0] == pytest.approx(F_f * p_v_f, rel=1e-9)             # 52402.9 Pa
+    assert got.p_tf[0] == pytest.approx(MU_L * F_f * p_v_f, rel=1e-9)      # 17166.5 Pa
+    assert got.p_ne[0] == pytest.approx(F_e * p_v_e, rel=1e-9)             # 45189.1 Pa (62431.7 with n_f)
+    assert got.p_te[0] == pytest.approx(MU_L * F_e * p_v_e, rel=1e-9)      # 14803.3 Pa
+    # shallow 45 deg hopper (§6.4): mu_heff = (1 - K_l) / (2 tan beta) in F_f, n and p_tf
+    hs = hopper(3.0, 45.0)
+    h_h = 3.0 / 1.0
+    mu_eff = (1.0 - K_L) / 2.0                                    # 0.25676
+    F_f = 1.0 - 0.2 / (1.0 + 1.0 / mu_eff)
+    n_f = 2.0 * (F_f * mu_eff + F_f) - 2.0
+    p_v = GAMMA * h_h / (n_f - 1.0) * (0.5 - 0.5 ** n_f) + p_vft * 0.5 ** n_f
+    got = design_loads(hs, "wheat", hs.hopper_height + 20.0, heights=[0.5 * h_h - 0.3])
+    assert not got.hopper.steep
+    assert got.p_tf[0] == pytest.approx(mu_eff * F_f * p_v, rel=1e-9)
+    assert got.p_te[0] == pytest.approx(got.p_tf[0], rel=1e-12)          # shallow: discharge = filling
+
+
+def test_wall_vertical_force_n_zSk_by_hand():
+    """EN 1991-4 (5.7): n_zSk = mu p_ho (z - z_o Y_J(z)) = integral of p_wf from the surface to z,
+    the frictional drag the wall has taken up (positive, growing with depth); max-friction case."""
+    # slender d_c = 6 m: K upper, mu upper, z_o = 1.5 / (0.5994 * 0.4408) = 5.6772 m,
+    # mu p_ho = gamma (A/U) = 9000 * 1.5 = 13500 N/m2
+    z_o = 1.5 / (K_U * MU_U)
+    depths = np.array([5.0, 10.0, 20.0])
+    expected = [GAMMA * 1.5 * (z - z_o * (1.0 - math.exp(-z / z_o))) for z in depths]
+    # 5 m: 13500 * (5 - 5.6772 * 0.58545) = 22625 N/m; 10 m: 71525 N/m; 20 m: 195620 N/m
+    assert expected == pytest.approx([22625.0, 71524.9, 195620.1], rel=1e-5)
+    loads = design_loads(cylinder(3.0), "wheat", 20.0, "D2", heights=20.0 - depths)
+    np.testing.assert_allclose(loads.n_zSk, expected, rtol=1e-9)
+    # the same as the integral of p_wf (trapezoid on a fine grid) down to 20 m
+    z = np.linspace(0.0, 20.0, 20001)
+    p_wf = MU_U * GAMMA * K_U * z_o * (1.0 - np.exp(-z / z_o))
+    assert np.trapezoid(p_wf, z) == pytest.approx(expected[-1], rel=1e-6)
+    # squat silo (d_c = 10 m, h_c = 8 m, flat top): n_zSk = integral of p_wf = mu p_ho Y_R
+    z_o = 2.5 / (K_U * MU_U)
+    n = -(1.0 + TAN_PHI_R)
+    z = np.linspace(0.0, 8.0, 8001)
+    p_wf = GAMMA * 2.5 * (1.0 - (z / z_o + 1.0) ** n)            # mu p_ho = gamma A/U
+    integral = np.concatenate([[0.0], np.cumsum(0.5 * (p_wf[1:] + p_wf[:-1]) * np.diff(z))])
+    squat = design_loads(cylinder(5.0), "wheat", 8.0, "D2", heights=8.0 - z[::2000])
+    assert squat.classification == "squat"
+    np.testing.assert_allclose(squat.n_zSk, integral[::2000], rtol=1e-6, atol=1e-9)
+    assert (np.diff(squat.n_zSk) > 0).all()                       # grows with depth
+
+
+#: EN 1991-4:2006 Annex E, Table E.1, the rows siloflow carries, written out here from the standard
+#: (cross-checked against an independent transcription: arturopala/encalmo,
+#: structures/.../eurocode/actions/silos/ParticulateSolid.scala; cement, fly ash and sand D2 values
+#: also against keipalahniuk/silo-calcs): gamma_l, gamma_u (kN/m3), phi_r, phi_im (deg), a_phi,
+#: K_m, a_K, mu_m for wall types D1, D2, D3, a_mu, C_op
+TABLE_E1 = {
+    "default":          (6.0, 22.0, 40, 35, 1.30, 0.50, 1.50, 0.32, 0.39, 0.50, 1.40, 1.0),
+    "aggregate":        (17.0, 18.0, 36, 31, 1.16, 0.52, 1.15, 0.39, 0.49, 0.59, 1.12, 0.4),
+    "alumina":          (10.0, 12.0, 36, 30, 1.22, 0.54, 1.20, 0.41, 0.46, 0.51, 1.07, 0.5),
+    "barley":           (7.0, 8.0, 31, 28, 1.14, 0.59, 1.11, 0.24, 0.33, 0.48, 1.16, 0.5),
+    "cement":           (13.0, 16.0, 36, 30, 1.22, 0.54, 1.20, 0.41, 0.46, 0.51, 1.07, 0.5),
+    "cement_clinker":   (15.0, 18.0, 47, 40, 1.20, 0.38, 1.31, 0.46, 0.56, 0.62, 1.07, 0.7),
+    "coal":             (7.0, 10.0, 36, 31, 1.16, 0.52, 1.15, 0.44, 0.49, 0.59, 1.12, 0.6),
+    "fly_ash":          (8.0, 15.0, 41, 35, 1.16, 0.46, 1.20, 0.51, 0.62, 0.72, 1.07, 0.5),
+    "flour":            (6.5, 7.0, 45, 42, 1.06, 0.36, 1.11, 0.24, 0.33, 0.48, 1.16, 0.6),
+    "lime_hydrated":    (6.0, 8.0, 34, 27, 1.26, 0.58, 1.20, 0.36, 0.41, 0.51, 1.07, 0.6),
+    "limestone_powder": (11.0, 13.0, 36, 30, 1.22, 0.54, 1.20, 0.41, 0.51, 0.56, 1.07, 0.5),
+    "maize":            (7.0, 8.0, 35, 31, 1.14, 0.53, 1.14, 0.22, 0.36, 0.53, 1.24, 0.9),
+    "sand":             (14.0, 16.0, 39, 36, 1.09, 0.45, 1.11, 0.38, 0.48, 0.57, 1.16, 0.4),
+    "soya_beans":       (7.0, 8.0, 29, 25, 1.16, 0.63, 1.11, 0.24, 0.38, 0.48, 1.16, 0.5),
+    "sugar":            (8.0, 9.5, 38, 32, 1.19, 0.50, 1.20, 0.46, 0.51, 0.56, 1.07, 0.4),
+    "wheat":            (7.5, 9.0, 34, 30, 1.12, 0.54, 1.11, 0.24, 0.38, 0.57, 1.16, 0.5),
+}
+
+
+def test_material_table_matches_en1991_4_table_e1():
+    assert set(MATERIALS) == set(TABLE_E1)
+    for name, row in TABLE_E1.items():
+        m = MATERIALS[name]
+        got = (m.gamma_l / 1e3, m.gamma_u / 1e3, m.phi_r, m.phi_im, m.a_phi, m.K_m, m.a_K, *m.mu_m, m.a_mu, m.C_op)
+        assert got == pytest.approx(row, rel=1e-12), name
+    # the values reach the loads: cement (gamma_u 16 kN/m3, K_m 0.54, a_K 1.20, mu_m D2 0.46, a_mu 1.07),
+    # slender d_c = 6 m at depth 20 m: p_hf = gamma_u (A/U) / mu_l (1 - exp(-z / z_o))
+    K_u, mu_l = 0.54 * 1.20, 0.46 / 1.07
+    z_o = 1.5 / (K_u * mu_l)                                      # 5.3845 m
+    p_hf = 16.0e3 * 1.5 / mu_l * (1.0 - math.exp(-20.0 / z_o))    # 54465.6 Pa
+    assert p_hf == pytest.approx(54465.6, rel=1e-5)
+    cement = design_loads(cylinder(3.0), "cement", 20.0, "D2", heights=[0.0])
+    assert cement.p_hf[0] == pytest.approx(p_hf, rel=1e-9)
+    # maize C_op 0.9 in the filling patch: C_pf = 0.21 * 0.9 * (1 - exp(-1.5 (20/6 - 1))) = 0.18329
+    maize = design_loads(cylinder(3.0), "maize", 20.0)
+    assert maize.C_pf == pytest.approx(0.21 * 0.9 * (1.0 - math.exp(-3.5)), rel=1e-9)
