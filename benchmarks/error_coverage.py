@@ -60,6 +60,11 @@ def differences(given, stored, path: str = "") -> list[str]:
         if not isinstance(stored, dict):
             return [path or "case"]
         return [d for k, v in given.items() for d in differences(v, stored.get(k), f"{path}.{k}".lstrip("."))]
+    if isinstance(given, str) and isinstance(stored, (int, float)):    # YAML 1.1 reads 5.0e6 as a string
+        try:
+            given = float(given)
+        except ValueError:
+            return [path]
     if isinstance(given, (int, float)) and not isinstance(given, bool) and isinstance(stored, (int, float)):
         return [] if math.isclose(given, stored, rel_tol=1e-12, abs_tol=0.0) else [path]
     return [] if given == stored else [path]
@@ -127,7 +132,7 @@ def figure(table: pd.DataFrame, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from postprocess.figures import save_figure
-    fig, ax = plt.subplots(figsize=(7.5, 0.45 * len(table) + 1.5))
+    fig, ax = plt.subplots(figsize=(7.5, 0.45 * len(table) + 2.0))
     y = np.arange(len(table))
     ax.axvspan(1 / FACTOR, FACTOR, color="0.9", label=f"within a factor of {FACTOR:g}")
     ax.errorbar(table.stated_rms / table.seed_sd, y,
@@ -138,7 +143,7 @@ def figure(table: pd.DataFrame, path: Path) -> None:
     ax.set_xscale("log")
     ax.axvline(1.0, color="k", lw=0.8)
     ax.set_xlabel("root mean square stated error / standard deviation of the seeds")
-    ax.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
     fig.tight_layout()
     save_figure(fig, path)
 
