@@ -26,7 +26,7 @@ fitted by least squares (bounds K in (0, 3], mu_eff in (0, 2]); their 95 % inter
 t(0.975, n - 2) times the standard errors of the linearised covariance. The corner band (the
 one whose bottom z0 is the floor, the hopper's top: the floor's corner stresses are not
 Janssen's) is left out by default. A fit says whether it is ``resolved`` and, if not, why
-(``flags``): K outside 0.2-1.0, a mobilisation mu_eff / mu_w above 1 beyond its interval,
+(``flags``): K outside 0.2-1.0 beyond its interval, a mobilisation mu_eff / mu_w above 1 beyond its interval,
 fewer than 3 loaded bands, an interval half-width above 50 % of its value, a parameter on its
 bound.
 
@@ -278,9 +278,12 @@ def fit_janssen_bands(z0, z1, pressure, surface: float, rho_b: float, D: float, 
             flags.append(f"{name} fell to the fit's lower bound (0)" + (
                 f": the profile is hydrostatic, no wall friction is measurable (hydrostatic K = {hyd[0]:.3g}, "
                 f"r2 {hyd[2]:.3f})" if name == "mu_eff" else ""))
-    if not K_PLAUSIBLE[0] <= K <= K_PLAUSIBLE[1]:
-        flags.append(f"K = {K:.3g} is outside the physical range {K_PLAUSIBLE[0]:g}-{K_PLAUSIBLE[1]:g} "
-                     "of a granular bed")
+    # like the mobilisation below: implausible when the whole 95 % interval is outside the range
+    # (a K of 1.0 [0.7, 1.3] is a bed at the top of the range, not an implausible one)
+    k_lo, k_hi = (K_ci[0], K_ci[1]) if all(np.isfinite(K_ci)) else (K, K)
+    if k_hi < K_PLAUSIBLE[0] or k_lo > K_PLAUSIBLE[1]:
+        flags.append(f"K = {K:.3g} (95 % CI {k_lo:.3g}-{k_hi:.3g}) is outside the physical range "
+                     f"{K_PLAUSIBLE[0]:g}-{K_PLAUSIBLE[1]:g} of a granular bed")
     mob_low = mob_ci[0] if np.isfinite(mob_ci[0]) else mob
     if mob_low > 1.0:
         flags.append(f"mobilisation mu_eff / mu_w = {mob:.3g} (95 % CI {mob_ci[0]:.3g}-{mob_ci[1]:.3g}) "

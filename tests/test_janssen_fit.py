@@ -149,8 +149,8 @@ def test_quick_demo_profile_is_flagged_not_called_saturated():
     assert one.n_bands_used == 1 and math.isnan(one.K) and not one.resolved
 
 
-@pytest.mark.parametrize("mu, K, flag", [(0.3, 1.5, "K = 1.5 is outside the physical range"),
-                                         (0.3, 0.15, "K = 0.15 is outside the physical range"),
+@pytest.mark.parametrize("mu, K, flag", [(0.3, 1.5, "K = 1.5 (95 % CI 1.5-1.5) is outside the physical range"),
+                                         (0.3, 0.15, "K = 0.15 (95 % CI 0.15-0.15) is outside the physical range"),
                                          (0.8, 0.5, "mobilisation mu_eff / mu_w = 1.6")])
 def test_implausible_fits_are_flagged(mu, K, flag):
     """Well-resolved profiles (exact data, 15 bands) whose parameters no poured bed has: K
@@ -160,6 +160,21 @@ def test_implausible_fits_are_flagged(mu, K, flag):
     assert fit.K == pytest.approx(K, rel=1e-5) and fit.mu_eff == pytest.approx(mu, rel=1e-5)
     assert not fit.resolved and len(fit.flags) == 1 and fit.flags[0].startswith(flag), fit.flags
     assert fit.reason == fit.flags[0]
+
+
+def test_a_k_at_the_top_of_the_range_within_its_interval_is_not_called_implausible():
+    """K is implausible only when its whole 95 % interval lies outside 0.2-1.0 (as the mobilisation
+    is above 1 only beyond its interval): a bed with K = 1.04 and scattered bands (+/- 4 %) fits to an
+    interval that reaches below 1, and is resolved; the same bed with K = 1.6 is flagged."""
+    rng = np.random.default_rng(7)
+    for K, implausible in ((1.04, False), (1.6, True)):
+        z0, z1, h, D, p = column(mu=0.3, K=K)
+        noisy = p * (1.0 + 0.04 * rng.standard_normal(len(p)))
+        fit = fit_janssen_bands(z0, z1, noisy, h, RHO, D, 0.5, G, floor=0.0)
+        flagged = any("outside the physical range" in f for f in fit.flags)
+        assert flagged == implausible, (K, fit.K, fit.K_ci, fit.flags)
+        if not implausible:
+            assert fit.K_ci[0] < 1.0 < fit.K_ci[1] and fit.resolved, (fit.K, fit.K_ci, fit.flags)
 
 
 def test_hydrostatic_profile_fits_k_and_says_mu_is_not_measurable():
