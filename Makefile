@@ -28,7 +28,7 @@ install-engine:
 	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$pkgs >/dev/null; }
 	@command -v liggghts >/dev/null 2>&1 || { echo "LIGGGHTS is still missing"; exit 1; }
 
-# the demo: a slender silo of rubber beads, 15 grains across, mobilised, fast profile (about 4 min on 2 cores)
+# the demo: a slender silo of rubber beads, 15 grains across, mobilised, fast profile (about 2.5 min on 2 cores)
 demo: install
 	$(VENV)/bin/siloflow run decks/demo.yaml -o runs/demo --force
 
