@@ -4,6 +4,7 @@
     analysis.run(frames, contacts=None)     # _prepare(); _single_frame(f, c) per frame; _conclude()
     analysis.table                          # tidy pandas DataFrame, one row per frame (and region/...)
     analysis.save(folder)                   # <name>.csv, <name>.parquet and <name>.png, atomically
+    analysis.products()                     # the same files in memory, for a report layer: Products
 
 ``frames`` is any iterable of :class:`postprocess.dumps.Frame` (a dump path is read with
 :func:`postprocess.dumps.read_frames`); ``contacts`` optionally gives the matching dump local
@@ -12,7 +13,7 @@ frames (paired by timestep), so the analyses run on any LIGGGHTS/LAMMPS output.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Iterable, Iterator, NamedTuple
 
 import pandas as pd
 
@@ -20,6 +21,26 @@ from siloflow.atomic_files import atomic_path, write_text
 from siloflow.errors import ReadError
 
 from .dumps import Frame, read_frames
+from .figures import plt, save_figure
+
+
+class Products(NamedTuple):
+    """What an analysis hands a report layer (``postprocess.report``) to write, in writing order:
+    ``tables`` {file name (``.csv``, ``.parquet``): pandas DataFrame, written without its index},
+    ``figures`` {file name (``.png``): matplotlib Figure}."""
+    tables: dict
+    figures: dict
+
+    def add(self, other: "Products") -> "Products":
+        """Add ``other``'s files (a name already here is replaced); returns self."""
+        self.tables.update(other.tables)
+        self.figures.update(other.figures)
+        return self
+
+    def close(self) -> None:
+        """Close the figures unwritten (a failed analysis' own, which pyplot would keep open)."""
+        for fig in self.figures.values():
+            plt.close(fig)
 
 
 def _as_frames(source) -> Iterable[Frame] | None:
@@ -103,9 +124,25 @@ class FrameAnalysis:
     def _conclude(self) -> None:
         pass
 
-    def figure(self, path: Path) -> Path | None:
-        """Draw the analysis' figure to ``path``; None if it has none."""
+    def plot(self):
+        """The analysis' figure (a matplotlib Figure); None if it has none."""
         return None
+
+    def figure(self, path: Path) -> Path | None:
+        """Draw the analysis' figure (:meth:`plot`) to ``path``; None if it has none."""
+        fig = self.plot()
+        if fig is None:
+            return None
+        save_figure(fig, path)
+        return Path(path)
+
+    def products(self, figure: bool = True) -> Products:
+        """What :meth:`save` writes, in memory, for a report layer to write: ``<name>.csv`` and
+        ``<name>.parquet`` (:attr:`table`), ``<name>.png`` (:meth:`plot`; none without ``figure``,
+        for an empty table or for an analysis without a figure)."""
+        fig = self.plot() if figure and not self.table.empty else None
+        return Products({f"{self.name}.csv": self.table, f"{self.name}.parquet": self.table},
+                        {} if fig is None else {f"{self.name}.png": fig})
 
     def save(self, folder, figure: bool = True) -> list[Path]:
         """Write ``<name>.csv`` (and ``.parquet``) and the figure into ``folder``."""

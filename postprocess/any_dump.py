@@ -14,6 +14,7 @@ from siloflow.run_folder import SUMMARY_NAME
 from .analysis_base import FrameAnalysis
 from .coordination import Coordination
 from .dumps import dump_files, last_frame, read_frames
+from .figures import line_plot
 from .force_chains import force_chain_figure
 from .porosity import MeasureRegion, Porosity
 
@@ -43,10 +44,8 @@ class FrameSummary(FrameAnalysis):
             row["mass"] = float(frame.column("mass").sum())
         return [row]
 
-    def figure(self, path):
-        from .figures import line_figure
-        return line_figure(self.table, x="step", y="particles", path=path, xlabel="timestep",
-                           ylabel="particles")
+    def plot(self):
+        return line_plot(self.table, x="step", y="particles", xlabel="timestep", ylabel="particles")
 
 
 _MUST_BE_FINITE = ("x", "y", "z", "xu", "yu", "zu", "xs", "ys", "zs", "xsu", "ysu", "zsu", "vx", "vy", "vz")

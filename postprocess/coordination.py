@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 from siloflow.errors import ReadError
 
 from .analysis_base import FrameAnalysis
+from .figures import line_plot
 
 
 def overlap_pairs(positions: np.ndarray, radii: np.ndarray, tolerance: float = 0.0):
@@ -169,7 +170,6 @@ class Coordination(FrameAnalysis):
                              "rattlers_1": int((z[m] == 1).sum())})
         return rows
 
-    def figure(self, path):
-        from .figures import line_figure
-        return line_figure(self.table[self.table.species == "all"], x="step", y=["z_mean", "z_mech"],
-                           path=path, xlabel="timestep", ylabel="coordination number")
+    def plot(self):
+        return line_plot(self.table[self.table.species == "all"], x="step", y=["z_mean", "z_mech"],
+                         xlabel="timestep", ylabel="coordination number")

@@ -39,11 +39,11 @@ def compare_with_dem(loads, bands: pd.DataFrame) -> pd.DataFrame:
                         columns=list(COMPARISON_COLUMNS))
 
 
-def design_figure(loads, path, dem_bands: pd.DataFrame | None = None):
+def design_plot(loads, dem_bands: pd.DataFrame | None = None):
     """Pressures (Pa) against height (m above the outlet): EN filling and discharge normal
     pressure, discharge plus patch, wall friction and mean vertical stress on the vertical wall,
     the hopper's normal pressures, and (``dem_bands``) the DEM's static and maximum dynamic band
-    pressures as points. Returns the path."""
+    pressures as points. Returns the Figure."""
     fig, ax = plt.subplots(figsize=(6.4, 5.2))
     z = loads.z
     ax.plot(loads.p_hf, z, color="C0", label="EN p_hf (filling)")
@@ -69,5 +69,10 @@ def design_figure(loads, path, dem_bands: pd.DataFrame | None = None):
     ax.set_xlim(left=0)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    save_figure(fig, path)
+    return fig
+
+
+def design_figure(loads, path, dem_bands: pd.DataFrame | None = None):
+    """:func:`design_plot` written to ``path``; returns the path."""
+    save_figure(design_plot(loads, dem_bands), path)
     return path

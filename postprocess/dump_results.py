@@ -1,6 +1,7 @@
 """Frame analyses of a siloflow run folder's dumps: bulk solid fraction, coordination number,
 force chains, free surface and Wr vs Wf, and the band-true Janssen fit of the settled
-wall-pressure profile. Called by :func:`postprocess.first_results.analyse` when the run wrote dumps.
+wall-pressure profile. Called by :func:`postprocess.first_results.analyse` when the run wrote dumps;
+its tables and figures are returned (``analysis_base.Products``) for the report layer to write.
 
 Every derived number that can be unresolved carries ``resolved`` and ``reason`` beside it: Wr
 (the surface must descend :data:`MIN_SURFACE_DESCENT` grain diameters over its fit window), a
@@ -17,13 +18,13 @@ from dataclasses import asdict
 import numpy as np
 import pandas as pd
 
-from siloflow.atomic_files import write_text
 from siloflow.errors import ReadError
 
+from .analysis_base import Products
 from .coordination import Coordination
 from .dumps import Frame, read_frames
 from .flow_rate import FreeSurface, LinearRate, rate_series, surface_flow_rate
-from .force_chains import force_chain_figure
+from .force_chains import force_chain_plot
 from .janssen import fit_janssen_bands
 from .porosity import MeasureRegion, Porosity
 
@@ -113,8 +114,9 @@ def case_regions(analysis) -> list[MeasureRegion]:
             for r in analysis.porosity_regions]
 
 
-def case_regions_porosity(analysis, atoms_files, settled: Frame, out) -> dict:
-    """Porosity in the case's regions over all frames (porosity_regions.csv); the settled values."""
+def case_regions_porosity(analysis, atoms_files, settled: Frame, products: Products) -> dict:
+    """Porosity in the case's regions over all frames (porosity_regions.csv and its figure, added to
+    ``products``); the settled values."""
     a = analysis
     conversion = None
     if a.relative_density is not None:
@@ -122,14 +124,15 @@ def case_regions_porosity(analysis, atoms_files, settled: Frame, out) -> dict:
     analysis = Porosity(case_regions(a), conversion)
     analysis.name = "porosity_regions"
     analysis.run(read_frames(atoms_files))
-    analysis.save(out)
+    products.add(analysis.products())
     at = analysis.table[analysis.table.step == settled.timestep].set_index("region")
     cols = [c for c in ("porosity", "porosity_3d") if c in at]
     return {name: {c: float(at.loc[name, c]) for c in cols} for name in at.index}
 
 
-def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_rate) -> dict:
-    """Run the frame analyses of a run folder; write tables and figures to ``out``; return a summary."""
+def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_rate, products: Products) -> dict:
+    """Run the frame analyses of a run folder; add their tables and figures to ``products``; return
+    their summary."""
     atoms_files = run.run.dump_files("particles")
     contact_files = run.run.dump_files("contacts")
     if atoms_files is None:
@@ -151,7 +154,7 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     # free surface over all frames; its table also says which frames exist
     surface = FreeSurface(radius=R, z_min=g.hopper_height, timestep=dt,
                           thickness=g.thickness if planar else None).run(read_frames(atoms_files))
-    surface.save(out)
+    products.add(surface.products())
     steps = surface.table.step
     if not (steps <= open_step).any():
         raise ReadError(f"{run.folder}: no particle dump at or before the outlet opened (step {open_step})")
@@ -174,7 +177,7 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
         except ValueError as exc:      # a type the run's species do not list: the grain density only
             summary["bulk_density_note"] = f"{exc}; bulk density = particle density x solid fraction"
             por = Porosity(regions).run([settled])
-        por.save(out, figure=False)
+        products.add(por.products(figure=False))
         at = por.table.set_index("region")
         phi_bulk, phi_section = (float(at.loc[k, "solid_fraction"]) for k in ("bulk_core", "cross_section"))
         if "bulk_density" in at:      # species of different densities (dust): measured mass per volume
@@ -186,7 +189,7 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
         summary["cross_section_solid_fraction"] = phi_section
         summary["cross_section_bulk_density_kg_m3"] = rho_section
     if plan.analysis.porosity_regions:
-        summary["porosity_regions"] = case_regions_porosity(plan.analysis, atoms_files, settled, out)
+        summary["porosity_regions"] = case_regions_porosity(plan.analysis, atoms_files, settled, products)
 
     # coordination number in the core, every contact frame
     def core(frame: Frame) -> np.ndarray:
@@ -197,7 +200,7 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
                 & (p[:, 2] < top - 2 * d))
 
     def settled_coordination(coord) -> None:
-        coord.save(out)
+        products.add(coord.products())
         row = coord.table[(coord.table.step == settled.timestep) & (coord.table.species == "all")]
         if not row.empty:
             summary["coordination_settled"] = {k: float(row[k].iloc[0]) for k in ("z_mean", "z_mech")}
@@ -218,7 +221,7 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
                 if f is not None and f.timestep in with_contacts]
         chains = {c.timestep: c for c in contact_frames([f.timestep for f, _ in figs])} if figs else {}
         for frame, name in figs:
-            force_chain_figure(frame, chains[frame.timestep], out / name, axis=1, center=0.0, thickness=d)
+            products.figures[name] = force_chain_plot(frame, chains[frame.timestep], axis=1, center=0.0, thickness=d)
 
     if regions is None:
         return summary
@@ -238,7 +241,7 @@ def analyse_dumps(run, out, bands_table: pd.DataFrame, discharge: pd.DataFrame, 
     wr_t = -rate_series(st.time, st.surface_height) * area * rho_section
     flows = pd.merge_asof(flows.sort_values("time"), pd.DataFrame({"time": st.time, "Wr_kg_s": wr_t}).sort_values("time"),
                           on="time", direction="nearest", tolerance=0.5 * dt * run.sample_steps)
-    write_text(out / "flow_rates.csv", flows.to_csv(index=False))
+    products.tables["flow_rates.csv"] = flows
 
     summary["janssen_static"] = janssen_static(plan, bands_table, h_settled, rho_section)
     return summary

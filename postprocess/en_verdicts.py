@@ -57,16 +57,17 @@ def janssen_pressure(depth, gamma: float, diameter: float, mu: float, K: float):
 
 
 def bed_state(force_balance: dict | None, wall_normal_N: float | None, janssen: dict | None, height: float,
-              diameter: float, mu_en: float, K_en: float, protocol: str) -> dict:
+              diameter: float, mu_en: float, K_en: float, protocol: str, mu_w: float | None = None) -> dict:
     """How the settled bed stands (the cause side of the verdicts). From the force balance of a
     flat-bottomed cylinder: the wall-carried share of the weight, the friction it mobilises on
     average, mu_eff = wall friction force / wall normal force (``wall_normal_N``, N: the static
     band pressures over their areas), and the lateral ratio that Janssen's law needs to carry that
     share with mu_eff, K_eff (:func:`mobilised_product` / mu_eff). The bed's own K from its
-    Janssen fit when resolved. EN's mu and K are those of its maximum-horizontal-pressure case."""
+    Janssen fit when resolved. EN's mu and K are those of its maximum-horizontal-pressure case;
+    ``mu_w`` the grains' wall friction coefficient, the most the wall can mobilise (kept as given)."""
     state = {"protocol": protocol, "wall_friction_share": None, "janssen_share_en": janssen_wall_share(
         height, diameter, mu_en * K_en), "mu_eff": None, "K_eff": None, "K_bed": None, "K_bed_ci": None,
-        "K_en": K_en, "mu_en": mu_en}
+        "K_en": K_en, "mu_en": mu_en, "mu_w": mu_w}
     fb = force_balance or {}
     share, weight = fb.get("wall_friction_share"), fb.get("weight_N")
     if share is not None and np.isfinite(share) and weight and wall_normal_N and wall_normal_N > 0:

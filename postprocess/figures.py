@@ -1,4 +1,6 @@
-"""Figures of a run (matplotlib, Agg backend, written atomically)."""
+"""Figures of a run (matplotlib, Agg backend): the ``*_plot`` functions draw and return a
+``matplotlib.figure.Figure``; :func:`save_figure` writes one atomically (the report layer,
+``postprocess.report``, writes a run's)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,15 +24,14 @@ def save_figure(fig, path, dpi: int = 130) -> None:
         plt.close(fig)
 
 
-def first_results_figure(bands, discharge, band_table, t_open: float, path) -> None:
+def first_results_plot(bands, discharge, band_table, t_open: float):
     """Pressure per band vs time (left), static/max-dynamic profile (middle), discharged mass (right);
-    a run without wall-pressure sensors (``bands`` None) gets the discharge only."""
+    a run without wall-pressure sensors (``bands`` None) gets the discharge only. Returns the Figure."""
     if bands is None:
         fig, ax3 = plt.subplots(figsize=(6, 4.5))
         _discharge_panel(ax3, discharge, t_open)
         fig.tight_layout()
-        save_figure(fig, path)
-        return
+        return fig
     fig, (ax1, ax2, ax3) = plt.subplots(1, 3, figsize=(15, 4.5))
     cmap = plt.get_cmap("viridis")
     nb = max(1, bands.band.nunique())
@@ -46,7 +47,7 @@ def first_results_figure(bands, discharge, band_table, t_open: float, path) -> N
     ax2.legend(fontsize=8)
     _discharge_panel(ax3, discharge, t_open)
     fig.tight_layout()
-    save_figure(fig, path)
+    return fig
 
 
 def _discharge_panel(ax, discharge, t_open: float) -> None:
@@ -58,9 +59,9 @@ def _discharge_panel(ax, discharge, t_open: float) -> None:
     ax.legend(fontsize=8)
 
 
-def line_figure(table, x: str, y, path, hue: str | None = None, xlabel: str = "", ylabel: str = "",
-                title: str = "", logy: bool = False):
-    """One line per ``hue`` group (or per column when ``y`` is a list); returns the path."""
+def line_plot(table, x: str, y, hue: str | None = None, xlabel: str = "", ylabel: str = "",
+              title: str = "", logy: bool = False):
+    """One line per ``hue`` group (or per column when ``y`` is a list); returns the Figure."""
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     if hue is not None:
         for key, grp in table.groupby(hue):
@@ -73,5 +74,11 @@ def line_figure(table, x: str, y, path, hue: str | None = None, xlabel: str = ""
     ax.set(xlabel=xlabel or x, ylabel=ylabel or str(y), title=title)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    save_figure(fig, path)
+    return fig
+
+
+def line_figure(table, x: str, y, path, hue: str | None = None, xlabel: str = "", ylabel: str = "",
+                title: str = "", logy: bool = False):
+    """:func:`line_plot` written to ``path``; returns the path."""
+    save_figure(line_plot(table, x, y, hue, xlabel, ylabel, title, logy), path)
     return Path(path)

@@ -20,6 +20,7 @@ from siloflow.errors import ReadError
 
 from .analysis_base import FrameAnalysis
 from .discharge import straight_line_fit
+from .figures import line_plot
 
 
 def rate_series(time, cumulative, window: int = 5) -> np.ndarray:
@@ -150,10 +151,8 @@ class FreeSurface(FrameAnalysis):
             row["surface_spread"] = float(np.max(heights) - np.min(heights))
         return [row]
 
-    def figure(self, path):
-        from .figures import line_figure
-        return line_figure(self.table, x="time", y="surface_height", path=path, xlabel="time (s)",
-                           ylabel="free-surface height (m)")
+    def plot(self):
+        return line_plot(self.table, x="time", y="surface_height", xlabel="time (s)", ylabel="free-surface height (m)")
 
 
 def surface_flow_rate(time, height, area: float, bulk_density: float) -> LinearRate:

@@ -6,11 +6,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.collections import LineCollection
 
 from siloflow.errors import ReadError
 
 from .coordination import normal_force, rows_of
 from .dumps import Frame
+from .figures import plt, save_figure
 
 
 def chain_segments(atoms: Frame, contacts: Frame, axis: int = 1, center: float | None = None,
@@ -44,13 +46,10 @@ def chain_segments(atoms: Frame, contacts: Frame, axis: int = 1, center: float |
     return seg, fn[keep], (center, thickness)
 
 
-def force_chain_figure(atoms: Frame, contacts: Frame, path, axis: int = 1, center: float | None = None,
-                       thickness: float | None = None, max_width: float = 3.0) -> Path:
-    """Draw the contact network of a slice to ``path`` (PNG); width = max_width * Fn / max Fn."""
-    from matplotlib.collections import LineCollection
-
-    from .figures import plt, save_figure
-
+def force_chain_plot(atoms: Frame, contacts: Frame, axis: int = 1, center: float | None = None,
+                     thickness: float | None = None, max_width: float = 3.0):
+    """The contact network of a slice (:func:`chain_segments`), line width = max_width * Fn / max Fn;
+    returns the Figure."""
     seg, fn, (center, thickness) = chain_segments(atoms, contacts, axis, center, thickness)
     fig, ax = plt.subplots(figsize=(5.5, 8))
     if len(fn):
@@ -67,5 +66,11 @@ def force_chain_figure(atoms: Frame, contacts: Frame, path, axis: int = 1, cente
                  f"(max {fn.max() if len(fn) else 0:.3g} N)")
     ax.title.set_fontsize(8)
     fig.tight_layout()
-    save_figure(fig, path)
+    return fig
+
+
+def force_chain_figure(atoms: Frame, contacts: Frame, path, axis: int = 1, center: float | None = None,
+                       thickness: float | None = None, max_width: float = 3.0) -> Path:
+    """:func:`force_chain_plot` written to ``path`` (PNG); returns the path."""
+    save_figure(force_chain_plot(atoms, contacts, axis, center, thickness, max_width), path)
     return Path(path)

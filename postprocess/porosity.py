@@ -28,6 +28,7 @@ from scipy.spatial import cKDTree
 from siloflow.clumps import union_area, union_volume
 
 from .analysis_base import FrameAnalysis
+from .figures import line_plot
 from .overlap_volume import solid_area_in_circle, solid_volume_in_cylinder, solid_volume_in_sphere
 
 #: 2 / sqrt(pi sqrt 3) and sqrt 2 / sqrt(pi sqrt 3), the constants of paper A's Eq. 37
@@ -265,7 +266,5 @@ class Porosity(FrameAnalysis):
         cols = [c for c in ("solid_fraction", "porosity", "bulk_density") if c in self.table]
         self.summary = self.table.groupby("region")[cols].mean()
 
-    def figure(self, path):
-        from .figures import line_figure
-        return line_figure(self.table, x="step", y="porosity", hue="region", path=path,
-                           xlabel="timestep", ylabel="porosity")
+    def plot(self):
+        return line_plot(self.table, x="step", y="porosity", hue="region", xlabel="timestep", ylabel="porosity")

@@ -1,0 +1,446 @@
+"""The report layer of a run: writes what the analyses computed under ``results/``.
+
+The analyses (:func:`postprocess.first_results.analyse` and the modules it calls) return their
+results: the summary (a dict, ``summary.json``) and their tables and figures
+(:class:`postprocess.analysis_base.Products`: pandas DataFrames and matplotlib Figures by file
+name). :func:`write_report` writes them all, atomically (``siloflow.atomic_files``): the tables
+(CSV, Parquet), the figures (PNG), ``summary.json``, ``report.md`` and ``report.html``.
+
+Both reports are rendered from one list of blocks (:func:`report_blocks`: a title, bullet
+lists, paragraphs and tables of strings), so report.html states every number of report.md as
+the same string. report.html is self-contained: its figures are embedded as base64 PNG, its
+style is inline, a Content-Security-Policy forbids every request but ``data:`` images, and it
+holds no script, no link and no external URL; every text is escaped (``html.escape``).
+"""
+from __future__ import annotations
+
+import base64
+import html
+import math
+from pathlib import Path
+from typing import NamedTuple
+
+import pandas as pd
+
+from siloflow.atomic_files import atomic_path, write_json, write_text
+from siloflow.run_folder import SUMMARY_NAME
+
+from .analysis_base import Products
+from .figures import save_figure
+from .numbers import mass_rate, pressure
+
+#: the report files written beside the tables and figures
+REPORT_MD, REPORT_HTML = "report.md", "report.html"
+#: report.html allows nothing but data: images and its own inline style
+CONTENT_SECURITY_POLICY = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
+#: report.html shows a table of at most this many rows whole, a longer one as per-column statistics
+HTML_TABLE_ROWS = 200
+
+STYLE = """
+body { font-family: system-ui, sans-serif; max-width: 1200px; margin: 1.5em auto; padding: 0 1em; color: #222; }
+h1 { font-size: 1.5em; } h2 { font-size: 1.25em; margin-top: 2em; border-bottom: 1px solid #ccc; }
+h3 { font-size: 1em; margin-top: 1.5em; }
+table { border-collapse: collapse; margin: 0.5em 0 1em; font-size: 0.85em; }
+th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: right; vertical-align: top; }
+th { background: #f0f0f0; } td:first-child, th:first-child { text-align: left; }
+figure { margin: 1em 0; } img { max-width: 100%; height: auto; border: 1px solid #ddd; }
+figcaption { font-size: 0.85em; color: #555; } .note { color: #555; font-size: 0.9em; }
+.wide { overflow-x: auto; }
+"""
+
+
+# ---------------------------------------------------------------- the blocks of a report
+
+class Title(NamedTuple):
+    """The report's heading."""
+    text: str
+
+
+class Items(NamedTuple):
+    """A bullet list: Markdown lines ``- item`` and ``  - sub-item``, after an optional ``lead`` line."""
+    lines: list
+    lead: str | None = None
+
+
+class Text(NamedTuple):
+    """A paragraph (a table's caption, a statement)."""
+    text: str
+
+
+class Table(NamedTuple):
+    """A table of strings: its header and its rows."""
+    header: list
+    rows: list
+
+
+def markdown(blocks) -> str:
+    """report.md: the blocks separated by blank lines."""
+    def md(b) -> str:
+        if isinstance(b, Title):
+            return f"# {b.text}"
+        if isinstance(b, Items):
+            return "\n".join(([b.lead] if b.lead else []) + list(b.lines))
+        if isinstance(b, Table):
+            return "\n".join([f"| {' | '.join(b.header)} |", "|" + "---|" * len(b.header),
+                              *(f"| {' | '.join(row)} |" for row in b.rows)])
+        return b.text
+    return "\n\n".join(md(b) for b in blocks) + "\n"
+
+
+def _esc(text) -> str:
+    """Text for an HTML text node (``&``, ``<``, ``>`` escaped; quotes kept, as report.md has them)."""
+    return html.escape(str(text), quote=False)
+
+
+def _html_items(b: Items) -> str:
+    """A nested <ul> of Markdown bullets ``- `` and ``  - ``."""
+    items: list[tuple[str, list[str]]] = []
+    for line in b.lines:
+        if line.startswith("  - ") and items:
+            items[-1][1].append(line[4:])
+        else:
+            items.append((line[2:] if line.startswith("- ") else line, []))
+    lis = "".join(f"<li>{_esc(text)}" + (f"<ul>{''.join(f'<li>{_esc(s)}</li>' for s in subs)}</ul>" if subs else "")
+                  + "</li>\n" for text, subs in items)
+    return (f"<p>{_esc(b.lead)}</p>\n" if b.lead else "") + f"<ul>\n{lis}</ul>"
+
+
+def html_blocks(blocks) -> str:
+    """The blocks as HTML, every text escaped."""
+    out = []
+    for b in blocks:
+        if isinstance(b, Title):
+            out.append(f"<h1>{_esc(b.text)}</h1>")
+        elif isinstance(b, Items):
+            out.append(_html_items(b))
+        elif isinstance(b, Table):
+            head = "".join(f"<th>{_esc(h)}</th>" for h in b.header)
+            body = "".join("<tr>" + "".join(f"<td>{_esc(c)}</td>" for c in row) + "</tr>\n" for row in b.rows)
+            out.append(f"<table>\n<thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody>\n</table>")
+        else:
+            out.append(f"<p>{_esc(b.text)}</p>")
+    return "\n".join(out)
+
+
+# ---------------------------------------------------------------- the report's lines
+
+def _fmt(value, spec: str = ".4g") -> str:
+    try:
+        return format(float(value), spec)
+    except (TypeError, ValueError):
+        return "n/a"
+
+
+def _ci(ci, spec: str = ".3g") -> str:
+    return f"[{_fmt(ci[0], spec)}, {_fmt(ci[1], spec)}]" if ci else "[n/a]"
+
+
+def _ranges(numbers) -> str:
+    """1, 2, 3, 5 -> '1-3, 5'."""
+    out, run = [], []
+    for k in sorted(numbers):
+        if run and k != run[-1] + 1:
+            out.append(f"{run[0]}-{run[-1]}" if len(run) > 1 else f"{run[0]}")
+            run = []
+        run.append(k)
+    if run:
+        out.append(f"{run[0]}-{run[-1]}" if len(run) > 1 else f"{run[0]}")
+    return ", ".join(out)
+
+
+def janssen_lines(j: dict) -> list[str]:
+    """The report's lines on the band-true Janssen fit (summary's ``janssen_static``)."""
+    if not j:
+        return []
+    if "K" not in j:
+        return [f"- Janssen fit of the settled profile: not fitted: {j.get('error', 'no fit')}"]
+    how = (f"band-averaged below the free surface, {j['n_bands_used']} band(s) {_ranges(j['bands_used'])}"
+           + ("; corner band excluded" if j.get("exclude_corner") else "; corner band included") + ")")
+    values = (f"K = {_fmt(j['K'], '.3f')} {_ci(j['K_ci'])}, mu_eff = {_fmt(j['mu_eff'], '.3f')} {_ci(j['mu_eff_ci'])}, "
+              f"mobilisation mu_eff / mu_w = {_fmt(j['mobilisation'], '.2f')} {_ci(j['mobilisation_ci'], '.2f')} "
+              f"of mu_w = {_fmt(j['mu_w'], '.3g')}, r2 {_fmt(j['r2'], '.3f')}")
+    hyd = (f"  - hydrostatic comparison p = K rho_b g d: K = {_fmt(j['hydrostatic_K'], '.3f')} "
+           f"{_ci(j['hydrostatic_K_ci'])}, r2 {_fmt(j['hydrostatic_r2'], '.3f')}")
+    if j["resolved"]:
+        return [f"- Janssen fit of the settled profile ({how}: {values} (95 % intervals)", hyd]
+    return [f"- Janssen fit of the settled profile ({how}: not resolved: {j['reason']}",
+            f"  - fitted values, not to be used as material data: {values}", hyd]
+
+
+def profile_line(p: dict | None) -> str:
+    """The report's line on the numerical profile (engine.profile) and the error bounds it carries."""
+    if not p:
+        return "- numerical profile: not recorded (rendered by an older siloflow)"
+    line = (f"- numerical profile {p['name']}: time step {_fmt(p['timestep_fraction'], 'g')} of the critical time, "
+            f"stiffness x {_fmt(p['stiffness_scale'], 'g')}")
+    if p["name"] == "fast":
+        bounds = ", ".join(f"{q} {b:.1%}" for q, b in (p.get("error_bounds") or {}).items())
+        line += (f"; 95 % error bounds against the papers' settings: {bounds}, measured on the benchmark's case "
+                 f"(siloflow bench, {p.get('benchmark')}); another case's own error is not measured" if bounds
+                 else "; its error bounds are not measured yet")
+    return line
+
+
+def flow_rate_line(fr: dict) -> str:
+    """The report's flow-rate line: the one steady rate, its batch-means error, its window."""
+    line = (f"- steady flow rate Wf = {mass_rate(fr['rate'], fr.get('stderr'))} (t = {_fmt(fr['t_start'], '.3g')}-"
+            f"{_fmt(fr['t_end'], '.3g')} s, {fr.get('n_samples')} samples, r2 {_fmt(fr['r2'], '.4f')}")
+    if fr.get("batches"):
+        line += (f"; standard error by batch means of {fr['batches']} batches, the error that matches the spread "
+                 f"of seeds (the straight line's own, {mass_rate(fr.get('fit_stderr'), float('nan')).split(' (')[0]},"
+                 " takes the samples as independent)")
+    elif "batches" in fr:
+        line += "; its error is not resolved: the window holds too few samples for batch means"
+    return line + ")"
+
+
+def steady_window_line(steady: dict, fr: dict) -> str:
+    """The detected steady window, the dynamic pressures' window; not a second flow rate: its
+    median sample rate is compared with Wf in units of Wf's error."""
+    line = (f"- steady discharge detected (the window of the dynamic pressures): t = {_fmt(steady['t_start'], '.3g')}-"
+            f"{_fmt(steady['t_end'], '.3g')} s")
+    if not steady.get("resolved", True):
+        return line + f": not resolved: {steady['reason']}"
+    line += f" ({steady['n_samples']} samples)"
+    diff = steady["median_rate"] - fr["rate"]
+    se = fr.get("stderr")
+    if se is not None and math.isfinite(se) and se > 0 and abs(diff) > 2 * se:
+        line += (f"; its median sample rate {mass_rate(steady['median_rate'], float('nan')).split(' (')[0]} differs "
+                 f"from Wf by {diff / se:+.1f} standard errors: the rate drifts over Wf's window (the silo empties "
+                 "or the flow is still starting), so Wf is an average over that window")
+    return line
+
+
+def static_cell(b: dict) -> str:
+    """A band's static pressure with its error, or why its error is not resolved."""
+    value, se = b.get("static_pressure"), b.get("static_pressure_stderr")
+    if se is not None and math.isfinite(se):
+        return pressure(value, se)
+    why = []
+    if b.get("static_batches") == 0:
+        why.append(f"the static window holds {b.get('static_samples')} samples (batch means need 10)")
+    if b.get("static_sectors", 2) < 2:
+        why.append("a band of one sector shows no spread around the wall")
+    return f"{_fmt(value, '.1f')} Pa (error not resolved: {'; '.join(why) or 'see bands.csv'})"
+
+
+def mobilisation_note(summary: dict) -> str | None:
+    """The settled bed's measured wall-friction mobilisation (``design_loads.bed_state``), said
+    beside the static pressures: mu_eff and its share of the grains' wall friction mu_w (of EN's
+    mu for a summary without mu_w), and the fill protocol; None when the bed's mu_eff is not
+    measured (no force balance of a flat-bottomed cylinder, no EN comparison)."""
+    state = (summary.get("design_loads") or {}).get("bed_state") or {}
+    mu_eff = state.get("mu_eff")
+    if mu_eff is None:
+        return None
+    mu_w = state.get("mu_w")
+    share = (f"{mu_eff / mu_w:.2f} of mu_w = {mu_w:.3g}" if mu_w else
+             f"{mu_eff / state['mu_en']:.2f} of EN's mu = {state['mu_en']:.3g}")
+    return f"the bed mobilises mu_eff = {mu_eff:.2g} on the wall, {share} (fill protocol: {state['protocol']})"
+
+
+def en_verdict_blocks(en: dict) -> list:
+    """The report's bed state and per-band verdicts of the EN comparison (no ratio without one)."""
+    state, blocks = en.get("bed_state") or {}, []
+    if state:
+        line = f"The settled bed ({state['protocol']} fill)"
+        if state.get("mu_eff") is not None:
+            line += (f": the wall carries {state['wall_friction_share']:.2f} of its weight by friction (Janssen with "
+                     f"EN's mu = {state['mu_en']:.3g} and K = {state['K_en']:.3g}: {state['janssen_share_en']:.2f}); "
+                     f"its friction over its normal force, the mobilised mu_eff, is {state['mu_eff']:.2g} "
+                     f"({state['mu_eff'] / state['mu_en']:.2f} of EN's mu), and Janssen's law carries that share with "
+                     f"K_eff = {_fmt(state.get('K_eff'), '.2g')}")
+        else:
+            line += ": its wall friction's mobilisation is not measured (needs the force balance of a flat-bottomed cylinder)"
+        if state.get("K_bed") is not None:
+            line += f"; its own K = {state['K_bed']:.3g}"
+        blocks.append(Text(line + "."))
+    verdicts = [b for b in en.get("bands", []) if b.get("static_verdict")]
+    if verdicts:
+        blocks.append(Items([f"- band {b['band']}: static {b['static_verdict']}"
+                             + (f"; cause: {b['static_causes']}" if b.get("static_causes") else "")
+                             + f"; maximum dynamic {b['dynamic_verdict']}" for b in verdicts], lead="Verdicts per band:"))
+    return blocks
+
+
+def _facts(summary: dict) -> list[str]:
+    """The report's first bullet list: the run, its flow rate, its settled bed."""
+    fb, fr = summary["force_balance"], summary["flow_rate"]
+    lines = [f"- particles inserted: {summary['particles_inserted']}, mass {_fmt(summary['initial_mass_kg'] * 1000)} g"
+             + (f" ({summary['fill_losses']} atoms left the box while pouring; the bed settled without them)"
+                if summary.get("fill_losses") else ""),
+             f"- settled at KE/PE = {_fmt(summary['settled_ke_pe'], '.2e')}; outlet opened at t = "
+             f"{_fmt(summary['time_open_s'])} s",
+             (f"- force balance of the settled bed: walls + bottom carry {_fmt(fb['ratio'], '.4f')} x the weight "
+              f"({_fmt(fb['wall_friction_share'], '.2f')} of it by wall friction)" if fb else
+              "- force balance: not measured (outputs.results asks for neither force_balance nor wall_pressure)"),
+             flow_rate_line(fr),
+             f"- discharged {_fmt(summary['discharged_mass_kg'] * 1000)} g; {_fmt(summary['mass_in_silo_end_kg'] * 1000)} g left"]
+    engine = summary.get("engine")
+    if engine:
+        lines += [f"- engine: {engine['name']} on {engine['ranks']} MPI rank(s), {_fmt(summary['engine_wall_time_s'], '.3g')} s"]
+    lines += [profile_line(summary.get("numerical_profile"))]
+    steady = summary.get("steady_window_detected")
+    if steady:
+        lines += [steady_window_line(steady, fr)]
+    fa = summary.get("frame_analyses", {})
+    if "bulk_solid_fraction" in fa:
+        if "cross_section_solid_fraction" in fa:
+            lines += [f"- settled bed: bulk solid fraction {_fmt(fa['bulk_solid_fraction'], '.3f')} (core), "
+                      f"{_fmt(fa['cross_section_solid_fraction'], '.3f')} (whole cross-section); bulk density "
+                      f"{_fmt(fa['bulk_density_kg_m3'], '.4g')} kg/m3 (core); free surface at "
+                      f"{_fmt(fa['settled_surface_height_m'] * 1000)} mm"]
+        else:
+            lines += [f"- settled bed: free surface at {_fmt(fa['settled_surface_height_m'] * 1000)} mm; "
+                      f"no bulk solid fraction: {fa['bulk_solid_fraction']['error']}"]
+        if "coordination_settled" in fa:
+            c = fa["coordination_settled"]
+            lines += [f"- coordination number (core, {fa['coordination_convention']}): {_fmt(c['z_mean'], '.2f')}, "
+                      f"mechanical {_fmt(c['z_mech'], '.2f')}"]
+        if "flow_rate_surface" in fa:
+            wr = fa["flow_rate_surface"]
+            if wr.get("resolved", True):
+                lines += [f"- free-surface flow rate Wr = {_fmt(wr['rate'] * 1000)} g/s = "
+                          f"{_fmt(fa['flow_rate_surface_over_outlet'], '.3f')} +/- "
+                          f"{_fmt(fa.get('flow_rate_surface_over_outlet_stderr'), '.2g')} x Wf (the surface descended "
+                          f"{_fmt(wr.get('surface_descent_grain_diameters'), '.3g')} grain diameters)"]
+            else:
+                lines += [f"- free-surface flow rate Wr: not resolved: {wr['reason']}"]
+        lines += janssen_lines(fa.get("janssen_static", {}))
+    else:
+        lines += [f"- frame analyses: {fa.get('dumps', 'none')}"]
+    return lines
+
+
+def _band_blocks(summary: dict) -> list:
+    """The band pressures: their caption (the windows, the bed's mobilisation) and table."""
+    ps = summary.get("pressure_statistics") or {}
+    win = ps.get("dynamic_window") or {}
+    mobilised = mobilisation_note(summary)
+    blocks = []
+    if win.get("t_start") is not None:
+        blocks.append(Text(
+            f"Band pressures (Pa). Static: mean over t = {_fmt(ps['static_window']['t_start'], '.3g')}-"
+            f"{_fmt(ps['static_window']['t_end'], '.3g')} s +/- its batch-means standard error"
+            + (f"; {mobilised}" if mobilised else "")
+            + f". Dynamic: over the {win['source']} t = {_fmt(win['t_start'], '.3g')}-{_fmt(win['t_end'], '.3g')} s "
+            f"({win['n_samples']} samples" + (")" if win.get("resolved", True) else f"; not resolved: {win['reason']})")
+            + "; max dynamic and C_h = max dynamic / static over the whole discharge."))
+    elif mobilised:
+        blocks.append(Text(f"Band pressures (Pa). Static: {mobilised}."))
+    rows = [[str(b["band"]), _fmt(b["z_mid"], ".3f"), static_cell(b),
+             f"{_fmt(b.get('dynamic_mean_pressure'), '.1f')} +/- {_fmt(b.get('dynamic_std_pressure'), '.2g')}",
+             _fmt(b.get("dynamic_p95_pressure"), ".1f"), _fmt(b.get("dynamic_max_pressure"), ".1f"),
+             _fmt(b["max_dynamic_pressure"], ".1f"), _fmt(b["discharge_factor"], ".2f")] for b in summary["bands"]]
+    return blocks + [Table(["band", "z (m)", "static p", "dynamic mean +/- sd", "p95", "max (window)", "max dynamic",
+                            "C_h"], rows)]
+
+
+def _en_blocks(summary: dict) -> list:
+    """EN 1991-4's pressures beside the DEM's, with the verdicts; or why they are not computed."""
+    en = summary.get("design_loads") or {}
+    if not en:
+        return []
+    if not en.get("computed"):
+        return [Text(f"EN 1991-4 loads: not computed ({en.get('reason')})")]
+    mobilised = mobilisation_note(summary)
+    rows = [[str(b["band"]), _fmt(b["en_p_hf"], ".1f"), _fmt(b["static_over_p_hf"], ".2f"), _fmt(b["en_p_he"], ".1f"),
+             _fmt(b["max_dynamic_over_p_he"], ".2f"), _fmt(b["dem_discharge_factor"], ".2f")] for b in en["bands"]]
+    return [Text(f"EN 1991-4 beside the DEM ({en['classification']} silo, solid: {en['solid']}; "
+                 f"C_h = {_fmt(en['C_h'], '.3g')}): design_vs_dem.csv, design_loads.png"
+                 + (f". DEM static: {mobilised}." if mobilised else "")),
+            Table(["band", "EN p_hf (Pa)", "DEM static / p_hf", "EN p_he (Pa)", "DEM max dynamic / p_he", "DEM C_h"],
+                  rows),
+            *en_verdict_blocks(en)]
+
+
+def report_blocks(summary: dict, name: str) -> list:
+    """The report of a run named ``name`` (its folder's name) from its summary, as blocks
+    (:class:`Title`, :class:`Items`, :class:`Text`, :class:`Table`) that :func:`markdown` and
+    :func:`html_blocks` render."""
+    blocks = [Title(f"Run report: {name}"), Items(_facts(summary))]
+    if summary["bands"]:
+        blocks += _band_blocks(summary)
+    blocks += _en_blocks(summary)
+    if "pressure_comparison" in summary:
+        blocks.append(Table(["band", "max measured (Pa)", "max simulated (Pa)", "difference", "W (Eq. 34)"],
+                            [[str(r["band"]), _fmt(r["max_measured_Pa"], ".1f"), _fmt(r["max_simulated_Pa"], ".1f"),
+                              _fmt(r["relative_difference"], "+.1%"), _fmt(r["W"], ".1%")]
+                             for r in summary["pressure_comparison"]]))
+    warnings = summary.get("engine_warnings") or []
+    if warnings:
+        blocks.append(Text(f"Engine warnings ({len(warnings)}): see {SUMMARY_NAME}"))
+    return blocks
+
+
+def report_text(summary: dict, run) -> str:
+    """A short human-readable report of a run's results (Markdown); ``run.folder`` names it."""
+    return markdown(report_blocks(summary, Path(run.folder).name))
+
+
+# ---------------------------------------------------------------- report.html
+
+def _html_table(name: str, table: pd.DataFrame) -> str:
+    """One written table: whole up to :data:`HTML_TABLE_ROWS` rows, else its per-column statistics."""
+    head = f"<h3>{_esc(name)}</h3>\n"
+    if len(table) <= HTML_TABLE_ROWS:
+        return head + f'<div class="wide">{table.to_html(index=False, border=0, na_rep="nan", escape=True)}</div>'
+    return (head + f'<p class="note">{len(table)} rows x {len(table.columns)} columns; per-column statistics:</p>\n'
+            f'<div class="wide">{table.describe().to_html(border=0, na_rep="nan", escape=True)}</div>')
+
+
+def report_html(blocks, name: str, tables: dict, figures: dict) -> str:
+    """report.html: the report's blocks, every figure (``figures``: file name -> PNG bytes)
+    embedded as a base64 ``data:`` URL, and every CSV table (``tables``: file name -> DataFrame)."""
+    figs = "\n".join(
+        f'<figure><img src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}" '
+        f'alt="{html.escape(fname, quote=True)}"><figcaption>{_esc(fname)}</figcaption></figure>'
+        for fname, png in figures.items())
+    csvs = "\n".join(_html_table(fname, t) for fname, t in tables.items() if fname.endswith(".csv"))
+    return (
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+        f"<meta http-equiv=\"Content-Security-Policy\" content=\"{CONTENT_SECURITY_POLICY}\">\n"
+        f"<title>{_esc(f'Run report: {name}')}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n"
+        f"{html_blocks(blocks)}\n"
+        + (f"<h2>Figures</h2>\n{figs}\n" if figs else "")
+        + (f"<h2>Tables</h2>\n<p class=\"note\">The tables written beside this report (results/).</p>\n{csvs}\n"
+           if csvs else "")
+        + "</body>\n</html>\n")
+
+
+# ---------------------------------------------------------------- writing
+
+def write_products(out: Path, products: Products) -> None:
+    """Write ``products``' tables (``.csv``, ``.parquet``; without the index) and figures (PNG)
+    into the folder ``out``, each atomically; the figures are closed, written or not."""
+    try:
+        for fname, table in products.tables.items():
+            path = out / fname
+            if path.suffix == ".csv":
+                write_text(path, table.to_csv(index=False))
+            elif path.suffix == ".parquet":
+                try:
+                    with atomic_path(path) as tmp:
+                        table.to_parquet(tmp, index=False)
+                except ImportError:  # pyarrow is a dependency; a missing one only loses the Parquet copy
+                    pass
+            else:
+                raise ValueError(f"{fname}: a table is written as .csv or .parquet")
+        for fname, fig in products.figures.items():
+            save_figure(fig, out / fname)
+    finally:
+        products.close()
+
+
+def write_report(out, name: str, summary: dict, products: Products) -> None:
+    """Write a run's results into the folder ``out`` (made if missing): the tables and figures of
+    ``products`` (:func:`write_products`), ``summary`` as summary.json (NaN as null), report.md
+    and report.html (:func:`report_blocks`; the figures' PNG as written). ``name``: the run's."""
+    out = Path(out)
+    out.mkdir(exist_ok=True)
+    write_products(out, products)
+    write_json(out / SUMMARY_NAME, summary)
+    blocks = report_blocks(summary, name)
+    write_text(out / REPORT_MD, markdown(blocks))
+    pngs = {fname: (out / fname).read_bytes() for fname in products.figures}
+    write_text(out / REPORT_HTML, report_html(blocks, name, products.tables, pngs))
