@@ -131,6 +131,12 @@ def _fmt(value, spec: str = ".4g") -> str:
         return "n/a"
 
 
+def _cell(value, spec: str) -> str:
+    """A table cell: the number, or "-" where there is none (no EN value at that height: NaN)."""
+    text = _fmt(value, spec)
+    return "-" if text in ("nan", "n/a") else text
+
+
 def _ci(ci, spec: str = ".3g") -> str:
     return f"[{_fmt(ci[0], spec)}, {_fmt(ci[1], spec)}]" if ci else "[n/a]"
 
@@ -257,9 +263,36 @@ def en_verdict_blocks(en: dict) -> list:
         blocks.append(Text(line + "."))
     verdicts = [b for b in en.get("bands", []) if b.get("static_verdict")]
     if verdicts:
-        blocks.append(Items([f"- band {b['band']}: static {b['static_verdict']}"
-                             + (f"; cause: {b['static_causes']}" if b.get("static_causes") else "")
-                             + f"; maximum dynamic {b['dynamic_verdict']}" for b in verdicts], lead="Verdicts per band:"))
+        blocks += verdict_blocks(verdicts)
+    return blocks
+
+
+#: where a dynamic verdict's figure ends and its explanation begins ("above EN p_he (1.8 x): ...")
+_EXPLAINED = "): "
+
+
+def verdict_blocks(verdicts: list[dict]) -> list:
+    """The per-band verdicts with what every band shares said once: a cause (or a dynamic verdict's
+    explanation) found in every band that has causes is stated under "Causes common to ..." and left
+    out of the band lines, which keep their own numbers and band-specific causes."""
+    causes = {b["band"]: [c for c in str(b.get("static_causes") or "").split("; ") if c] for b in verdicts}
+    with_causes = [c for c in causes.values() if c]
+    common = [c for c in with_causes[0] if all(c in other for other in with_causes)] if len(with_causes) > 1 else []
+    dynamic = {b["band"]: str(b["dynamic_verdict"]).partition(_EXPLAINED) for b in verdicts}
+    notes = [d[2] for d in dynamic.values() if d[1]]
+    shared_note = notes[0] if len(notes) > 1 and all(n == notes[0] for n in notes) else None
+    lines = []
+    for b in verdicts:
+        own = [c for c in causes[b["band"]] if c not in common]
+        head, sep, note = dynamic[b["band"]]
+        dyn = head + ")" if sep and note == shared_note else "".join(dynamic[b["band"]])
+        lines.append(f"- band {b['band']}: static {b['static_verdict']}" + (f"; cause: {'; '.join(own)}" if own else "")
+                     + f"; maximum dynamic {dyn}")
+    blocks = []
+    if common or shared_note:
+        blocks.append(Items([f"- {c}" for c in common] + ([f"- maximum dynamic: {shared_note}"] if shared_note else []),
+                            lead="Causes common to every band that differs from EN:"))
+    blocks.append(Items(lines, lead="Verdicts per band:"))
     return blocks
 
 
@@ -344,8 +377,8 @@ def _en_blocks(summary: dict) -> list:
     if not en.get("computed"):
         return [Text(f"EN 1991-4 loads: not computed ({en.get('reason')})")]
     mobilised = mobilisation_note(summary)
-    rows = [[str(b["band"]), _fmt(b["en_p_hf"], ".1f"), _fmt(b["static_over_p_hf"], ".2f"), _fmt(b["en_p_he"], ".1f"),
-             _fmt(b["max_dynamic_over_p_he"], ".2f"), _fmt(b["dem_discharge_factor"], ".2f")] for b in en["bands"]]
+    rows = [[str(b["band"]), _cell(b["en_p_hf"], ".1f"), _cell(b["static_over_p_hf"], ".2f"), _cell(b["en_p_he"], ".1f"),
+             _cell(b["max_dynamic_over_p_he"], ".2f"), _cell(b["dem_discharge_factor"], ".2f")] for b in en["bands"]]
     return [Text(f"EN 1991-4 beside the DEM ({en['classification']} silo, solid: {en['solid']}; "
                  f"C_h = {_fmt(en['C_h'], '.3g')}): design_vs_dem.csv, design_loads.png"
                  + (f". DEM static: {mobilised}." if mobilised else "")),

@@ -299,3 +299,25 @@ def test_chromium_check_catches_a_page_that_asks_for_a_file_or_the_network(tmp_p
         assert sorted(leaving(seen["requests"], page)) == sorted([(tmp_path / "other.png").as_uri(),
                                                                   "http://example.com/x.png"]), seen["requests"]
         assert any(u.startswith(DATA_PNG) for u in seen["requests"])
+
+
+def test_verdicts_say_what_every_band_shares_once_and_keep_each_band_s_own_numbers():
+    """The EN verdicts of many bands: a cause every differing band has, and the dynamic verdicts'
+    common explanation, are stated once; each band keeps its ratio and its own causes."""
+    from postprocess.report import markdown, verdict_blocks
+    shared, note = "the wall mobilises mu_eff = 0.27", "the DEM maximum is a peak"
+    verdicts = [{"band": k, "static_verdict": f"above EN p_hf ({2 + k / 10:.2f} x, 5 standard errors)",
+                 "static_causes": "; ".join([shared, f"Janssen gives {300 - k} Pa here"]
+                                            + (["the band is inside the surface's cone"] if k == 2 else [])),
+                 "dynamic_verdict": f"above EN p_he ({1.5 + k / 10:.2f} x): {note}"} for k in range(3)]
+    verdicts.append({"band": 3, "static_verdict": "no EN filling pressure at this height", "static_causes": "",
+                     "dynamic_verdict": "no comparison (no EN discharge pressure)"})
+    text = markdown(verdict_blocks(verdicts))
+    assert text.count(shared) == 1 and text.count(note) == 1, text
+    for k in range(3):
+        assert f"- band {k}: static above EN p_hf ({2 + k / 10:.2f} x, 5 standard errors); cause: Janssen gives " \
+               f"{300 - k} Pa here" in text and f"above EN p_he ({1.5 + k / 10:.2f} x)" in text, text
+    assert text.count("inside the surface's cone") == 1 and "band 3: static no EN filling pressure" in text
+    # one band alone: nothing is "common", its line says everything
+    alone = markdown(verdict_blocks(verdicts[:1]))
+    assert shared in alone and note in alone and "common" not in alone
