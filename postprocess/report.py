@@ -267,6 +267,34 @@ def en_verdict_blocks(en: dict) -> list:
     return blocks
 
 
+def console_lines(summary: dict) -> list[str]:
+    """What ``siloflow run``/``post`` print of the static loads beside the flow rate: each band's
+    static pressure with its error, the Janssen fit's headline, and a count of the EN 1991-4
+    verdicts (their causes are in report.md / report.html)."""
+    lines = []
+    bands = [b for b in summary.get("bands") or [] if b.get("static_pressure") is not None]
+    if bands:
+        note = mobilisation_note(summary)
+        lines.append("static wall pressure by band (Pa, mean +/- standard error" + (f"; {note}" if note else "")
+                     + "): " + "; ".join(f"{b['band']}: {static_cell(b).removesuffix(' Pa')}" for b in bands))
+    fit = janssen_lines((summary.get("frame_analyses") or {}).get("janssen_static", {}))
+    if fit:
+        lines.append(fit[0].removeprefix("- "))
+    en = summary.get("design_loads") or {}
+    rows = [b for b in en.get("bands", []) if b.get("static_verdict") and math.isfinite(b.get("en_p_hf", math.nan))]
+    if rows:
+        def counted(word: str, key: str) -> str:
+            hit = [b[key] for b in rows if str(b.get("static_verdict" if key == "static_over_p_hf" else
+                                                   "dynamic_verdict")).startswith(word)]
+            return f"{len(hit)} {word}" + (f" ({min(hit):.2f}-{max(hit):.2f} x)" if hit else "")
+        lines.append(f"EN 1991-4 ({len(rows)} bands under the fill): static against p_hf: "
+                     + ", ".join(counted(w, "static_over_p_hf") for w in ("above", "agrees", "below"))
+                     + "; maximum dynamic against p_he: "
+                     + ", ".join(counted(w, "max_dynamic_over_p_he") for w in ("above", "within"))
+                     + "; the measured causes per band: report.html")
+    return lines
+
+
 #: where a dynamic verdict's figure ends and its explanation begins ("above EN p_he (1.8 x): ...")
 _EXPLAINED = "): "
 

@@ -280,6 +280,7 @@ def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
 
 def _post(folder: Path, measured: Path | None = None) -> None:
     from postprocess.first_results import analyse
+    from postprocess.report import console_lines
     from .run_folder import RunFolder, record_products
     since = time.time()
     try:
@@ -308,7 +309,10 @@ def _post(folder: Path, measured: Path | None = None) -> None:
         out.print(printable(line), markup=False, highlight=False)
     elif "bulk_solid_fraction" in fa:
         out.print(f"no bulk solid fraction: {fa['bulk_solid_fraction']['error']}")
-    out.print(f"results: {RunFolder(folder).results} (summary.json, *.csv, *.parquet, *.png)")
+    for line in console_lines(summary):
+        out.print(printable(line), markup=False, highlight=False)
+    out.print(f"results: {RunFolder(folder).results} (report.html: one page with every number, table and "
+              "figure; report.md, summary.json, *.csv, *.parquet, *.png)")
 
 
 @app.command()

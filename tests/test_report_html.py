@@ -321,3 +321,25 @@ def test_verdicts_say_what_every_band_shares_once_and_keep_each_band_s_own_numbe
     # one band alone: nothing is "common", its line says everything
     alone = markdown(verdict_blocks(verdicts[:1]))
     assert shared in alone and note in alone and "common" not in alone
+
+
+def test_the_console_prints_every_band_s_static_pressure_with_its_error_the_fit_and_the_verdict_counts(fake_report):
+    """What ``siloflow run`` prints beside the flow rate (issue 35: static pressures with their
+    errors, the Janssen fit, the EN verdicts): the same cells as report.md, and the counts of the
+    verdicts with their range of ratios."""
+    from postprocess.report import console_lines, static_cell
+    summary = with_en(fake_report[0])
+    lines = console_lines(summary)
+    static = next(line for line in lines if line.startswith("static wall pressure by band"))
+    assert "the bed mobilises mu_eff = 0.14 on the wall, 0.27 of mu_w = 0.5" in static
+    for b in summary["bands"]:
+        assert f"{b['band']}: {static_cell(b).removesuffix(' Pa')}" in static
+    fit = (summary.get("frame_analyses") or {}).get("janssen_static")
+    assert any(line.startswith("Janssen fit of the settled profile") for line in lines) == bool(fit), lines
+    ratios = [b["static_over_p_hf"] for b in summary["design_loads"]["bands"]]
+    en = next(line for line in lines if line.startswith("EN 1991-4"))
+    assert f"{len(ratios)} above ({min(ratios):.2f}-{max(ratios):.2f} x), 0 agrees, 0 below" in en, en
+    dynamic = [b["max_dynamic_over_p_he"] for b in summary["design_loads"]["bands"]]
+    assert f"0 above, {len(dynamic)} within ({min(dynamic):.2f}-{max(dynamic):.2f} x)" in en, en
+    summary["frame_analyses"] = {"janssen_static": {"error": "too few bands"}}
+    assert "Janssen fit of the settled profile: not fitted: too few bands" in console_lines(summary)
