@@ -269,3 +269,20 @@ def test_hooke_needs_its_velocity_and_no_springs(quick_dict):
     quick_dict["materials"]["particle_particle"]["kn"] = 1e5
     with pytest.raises(CaseError, match="computed by model 'hooke'"):
         case_from_dict(quick_dict)
+
+
+def test_is_prime_agrees_with_a_sieve_and_with_known_primes_and_pseudoprimes():
+    """The Miller-Rabin primality test that picks LIGGGHTS' seeds: every n below 2e5 against a
+    sieve of Eratosthenes; strong pseudoprimes to small bases and Carmichael numbers are composite;
+    primes near the seeds' top (5e7) and Mersenne 2^31 - 1 are prime."""
+    n = 200_000
+    sieve = np.ones(n, bool)
+    sieve[:2] = False
+    for k in range(2, int(n ** 0.5) + 1):
+        if sieve[k]:
+            sieve[k * k::k] = False
+    assert [k for k in range(n) if is_prime(k)] == list(np.flatnonzero(sieve))
+    for composite in (2047, 1373653, 25326001, 3215031751, 2152302898747, 3474749660383, 561, 41041, 825265):
+        assert not is_prime(composite), composite
+    for prime in (50_000_017, 2_147_483_647, 10_007, 999_999_937):
+        assert is_prime(prime), prime
