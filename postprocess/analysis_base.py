@@ -42,6 +42,34 @@ class Products(NamedTuple):
         for fig in self.figures.values():
             plt.close(fig)
 
+    def write(self, folder) -> list[Path]:
+        """Write the tables (``.csv``, ``.parquet``; without the index) and the figures (PNG) into
+        ``folder`` (made if missing), each atomically; the figures are closed, written or not.
+        Returns the paths written."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        written = []
+        try:
+            for fname, table in self.tables.items():
+                path = folder / fname
+                if path.suffix == ".csv":
+                    write_text(path, table.to_csv(index=False))
+                elif path.suffix == ".parquet":
+                    try:
+                        with atomic_path(path) as tmp:
+                            table.to_parquet(tmp, index=False)
+                    except ImportError:  # pyarrow is a dependency; a missing one only loses the Parquet copy
+                        continue
+                else:
+                    raise ValueError(f"{fname}: a table is written as .csv or .parquet")
+                written.append(path)
+            for fname, fig in self.figures.items():
+                save_figure(fig, folder / fname)
+                written.append(folder / fname)
+        finally:
+            self.close()
+        return written
+
 
 def _as_frames(source) -> Iterable[Frame] | None:
     if source is None:
@@ -128,14 +156,6 @@ class FrameAnalysis:
         """The analysis' figure (a matplotlib Figure); None if it has none."""
         return None
 
-    def figure(self, path: Path) -> Path | None:
-        """Draw the analysis' figure (:meth:`plot`) to ``path``; None if it has none."""
-        fig = self.plot()
-        if fig is None:
-            return None
-        save_figure(fig, path)
-        return Path(path)
-
     def products(self, figure: bool = True) -> Products:
         """What :meth:`save` writes, in memory, for a report layer to write: ``<name>.csv`` and
         ``<name>.parquet`` (:attr:`table`), ``<name>.png`` (:meth:`plot`; none without ``figure``,
@@ -145,17 +165,5 @@ class FrameAnalysis:
                         {} if fig is None else {f"{self.name}.png": fig})
 
     def save(self, folder, figure: bool = True) -> list[Path]:
-        """Write ``<name>.csv`` (and ``.parquet``) and the figure into ``folder``."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        written = [folder / f"{self.name}.csv"]
-        write_text(written[0], self.table.to_csv(index=False))
-        parquet = folder / f"{self.name}.parquet"
-        with atomic_path(parquet) as tmp:
-            self.table.to_parquet(tmp, index=False)
-        written.append(parquet)
-        if figure and not self.table.empty:
-            fig = self.figure(folder / f"{self.name}.png")
-            if fig is not None:
-                written.append(fig)
-        return written
+        """Write ``<name>.csv`` (and ``.parquet``) and the figure into ``folder`` (:meth:`products`)."""
+        return self.products(figure).write(folder)

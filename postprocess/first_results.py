@@ -29,8 +29,7 @@ from .en_verdicts import band_verdicts, bed_state
 from .figures import first_results_plot
 from .flow_rate import rate_series, steady_window
 from .janssen import compare_with_measurement
-from .report import (  # noqa: F401  the report's lines, imported from here by older callers
-    flow_rate_line, janssen_lines, profile_line, report_text, steady_window_line, write_report)
+from .report import write_report
 from .wall_pressure import band_mean, band_pressures, vertical_load, wide_forces
 
 

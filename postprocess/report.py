@@ -22,11 +22,10 @@ from typing import NamedTuple
 
 import pandas as pd
 
-from siloflow.atomic_files import atomic_path, write_json, write_text
+from siloflow.atomic_files import write_json, write_text
 from siloflow.run_folder import SUMMARY_NAME
 
 from .analysis_base import Products
-from .figures import save_figure
 from .numbers import mass_rate, pressure
 
 #: the report files written beside the tables and figures
@@ -283,14 +282,14 @@ def console_lines(summary: dict) -> list[str]:
     en = summary.get("design_loads") or {}
     rows = [b for b in en.get("bands", []) if b.get("static_verdict") and math.isfinite(b.get("en_p_hf", math.nan))]
     if rows:
-        def counted(word: str, key: str) -> str:
-            hit = [b[key] for b in rows if str(b.get("static_verdict" if key == "static_over_p_hf" else
-                                                   "dynamic_verdict")).startswith(word)]
-            return f"{len(hit)} {word}" + (f" ({min(hit):.2f}-{max(hit):.2f} x)" if hit else "")
+        def counted(verdict: str, ratio: str, words: tuple) -> str:
+            """How many bands' ``verdict`` begins with each of ``words``, with the range of their ``ratio``."""
+            hits = {w: [b[ratio] for b in rows if str(b.get(verdict)).startswith(w)] for w in words}
+            return ", ".join(f"{len(h)} {w}" + (f" ({min(h):.2f}-{max(h):.2f} x)" if h else "") for w, h in hits.items())
         lines.append(f"EN 1991-4 ({len(rows)} bands under the fill): static against p_hf: "
-                     + ", ".join(counted(w, "static_over_p_hf") for w in ("above", "agrees", "below"))
+                     + counted("static_verdict", "static_over_p_hf", ("above", "agrees", "below"))
                      + "; maximum dynamic against p_he: "
-                     + ", ".join(counted(w, "max_dynamic_over_p_he") for w in ("above", "within"))
+                     + counted("dynamic_verdict", "max_dynamic_over_p_he", ("above", "within"))
                      + "; the measured causes per band: report.html")
     return lines
 
@@ -471,35 +470,12 @@ def report_html(blocks, name: str, tables: dict, figures: dict) -> str:
 
 # ---------------------------------------------------------------- writing
 
-def write_products(out: Path, products: Products) -> None:
-    """Write ``products``' tables (``.csv``, ``.parquet``; without the index) and figures (PNG)
-    into the folder ``out``, each atomically; the figures are closed, written or not."""
-    try:
-        for fname, table in products.tables.items():
-            path = out / fname
-            if path.suffix == ".csv":
-                write_text(path, table.to_csv(index=False))
-            elif path.suffix == ".parquet":
-                try:
-                    with atomic_path(path) as tmp:
-                        table.to_parquet(tmp, index=False)
-                except ImportError:  # pyarrow is a dependency; a missing one only loses the Parquet copy
-                    pass
-            else:
-                raise ValueError(f"{fname}: a table is written as .csv or .parquet")
-        for fname, fig in products.figures.items():
-            save_figure(fig, out / fname)
-    finally:
-        products.close()
-
-
 def write_report(out, name: str, summary: dict, products: Products) -> None:
     """Write a run's results into the folder ``out`` (made if missing): the tables and figures of
-    ``products`` (:func:`write_products`), ``summary`` as summary.json (NaN as null), report.md
+    ``products`` (:meth:`Products.write`), ``summary`` as summary.json (NaN as null), report.md
     and report.html (:func:`report_blocks`; the figures' PNG as written). ``name``: the run's."""
     out = Path(out)
-    out.mkdir(exist_ok=True)
-    write_products(out, products)
+    products.write(out)
     write_json(out / SUMMARY_NAME, summary)
     blocks = report_blocks(summary, name)
     write_text(out / REPORT_MD, markdown(blocks))

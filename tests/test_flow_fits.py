@@ -201,7 +201,7 @@ def test_a_report_gives_one_flow_rate_with_its_batch_error_in_a_readable_unit():
     """Issue 35: the headline error is the batch-means one, printed to two figures in a unit of the
     rate's size; a detected window whose median rate differs from Wf by more than 2 errors says why,
     one within them gives no second rate."""
-    from postprocess.first_results import flow_rate_line, steady_window_line
+    from postprocess.report import flow_rate_line, steady_window_line
     fr = {"rate": 29.04471, "stderr": 0.52, "fit_stderr": 0.04, "batches": 10, "t_start": 1.0, "t_end": 3.0,
           "n_samples": 400, "r2": 0.999}
     line = flow_rate_line(fr)

@@ -15,11 +15,11 @@ from scipy.signal import lfilter
 
 from postprocess.dump_results import (MIN_STEADY_SAMPLES, band_extents, steady_resolution,
                                       surface_rate_resolution)
-from postprocess.first_results import (BAND_STATISTICS, band_statistics, batch_means_stderr, janssen_lines,
-                                       pressure_window, report_text)
+from postprocess.first_results import BAND_STATISTICS, band_statistics, batch_means_stderr, pressure_window
 from postprocess.flow_rate import LinearRate, surface_flow_rate
 from postprocess.janssen import (band_hydrostatic_pressure, band_janssen_pressure, fit_janssen_bands,
                                  janssen_depth_integral)
+from postprocess.report import janssen_lines, report_text
 
 RHO, G = 1500.0, 9.81
 

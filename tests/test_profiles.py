@@ -175,7 +175,7 @@ def test_the_profile_does_not_change_the_fill_key_of_the_same_bed(quick_dict):
 
 
 def test_the_report_names_the_profile_and_its_bounds():
-    from postprocess.first_results import profile_line
+    from postprocess.report import profile_line
     fast = {"name": "fast", "timestep_fraction": 0.2, "stiffness_scale": 1e-4,
             "error_bounds": {"flow_rate": 0.041, "static_pressure": 0.12}, "benchmark": "accuracy_small"}
     line = profile_line(fast)
