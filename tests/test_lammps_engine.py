@@ -137,18 +137,23 @@ def test_each_silo_shape_carries_the_bed(tmp_path, geometry):
     assert after.discharged_mass.iloc[-1] > 0
 
 
+def interrupt_at(eng, folder, stage: str) -> None:
+    """Run the rendered ``folder`` on ``eng`` until ``stage`` begins and stop it there, as a Ctrl-C
+    would: the folder is left interrupted."""
+    def stop(now, step, total):
+        if now == stage:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        eng.execute(folder, progress=stop)
+    assert read_status(folder)["state"] == "interrupted"
+
+
 @pytest.mark.engine
 def test_resume_after_an_interruption_finishes_from_the_settled_bed(tmp_path):
     eng = engine()
     folder = eng.prepare(case_from_dict(tiny()), tmp_path / "run")
-
-    def stop_in_static(stage, step, total):
-        if stage == "open":
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        eng.execute(folder, progress=stop_in_static)
-    assert read_status(folder)["state"] == "interrupted"
+    interrupt_at(eng, folder, "open")
     record = eng.resume(folder)
     flow = RunFolder(folder).flow()
     assert record.completed and record.stage_steps["static"] >= record.stage_steps["settle"]

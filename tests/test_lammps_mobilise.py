@@ -20,9 +20,9 @@ from siloflow.engine.base import check_case
 from siloflow.engine.lammps.deck import (MOBILISE_JUMP_STEPS, MOBILISE_MAX_JUMPS, box, count_every,
                                         floor_commands, mobilise_jumps, render_deck_text, sections)
 from siloflow.errors import CaseError
-from siloflow.run_folder import RESTART_FILE, RunFolder, read_status
+from siloflow.run_folder import RESTART_FILE, RunFolder
 
-from test_lammps_engine import tiny
+from test_lammps_engine import interrupt_at, tiny
 
 DROP = 0.25                      # grain diameters (the case's largest)
 TIME = 0.02                      # s
@@ -204,14 +204,7 @@ def test_the_mobilised_bed_hangs_more_of_its_weight_on_the_wall(pair):
 def test_a_mobilised_run_resumes_on_the_lowered_floor(tmp_path, pair):
     eng = get_engine("lammps")
     folder = eng.prepare(case_from_dict(deep(True)), tmp_path / "run")
-
-    def stop_in_static(stage, step, total):
-        if stage == "static":
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        eng.execute(folder, progress=stop_in_static)
-    assert read_status(folder)["state"] == "interrupted"
+    interrupt_at(eng, folder, "static")
     record = eng.resume(folder)
     st = record.stage_steps
     assert record.completed and st["mobilise"] < st["resettle"] < st["static"]

@@ -44,7 +44,7 @@ import numpy as np
 
 from ...atomic_files import write_text
 from ...case import Case
-from ...deck import DeckError, _num, check_commands, template_environment
+from ...deck import DeckError, _num, _safe_name, check_commands, template_environment
 from ...meshes import write_stl
 from ...plan import FACES, WALL, RunPlan
 from ...run_folder import LAMMPS_FILES, RESTART_FILE, DumpLayout, RunFolder
@@ -205,9 +205,10 @@ def mobilise_jumps(steps: int) -> int:
 
 
 def region_command(rid: str, style: str, args: list, moving: bool = False) -> str:
-    """The ``region`` command of one wall region (``moving``: the plate, displaced by ``v_plate_dz``)."""
-    return " ".join(["region", rid, style, *args] + (["move", "NULL", "NULL", "v_plate_dz"] if moving else [])
-                    + ["units", "box"])
+    """The ``region`` command of one wall region (``moving``: the plate, displaced by ``v_plate_dz``),
+    as the deck holds it and as the driver issues it when it lowers the floor."""
+    return (f"region          {_safe_name(rid)} {_safe_name(style)}" + "".join(f" {a}" for a in args)
+            + (" move NULL NULL v_plate_dz" if moving else "") + " units box")
 
 
 def floor_commands(plan: RunPlan, floor_dz: float) -> list[str]:
@@ -290,8 +291,7 @@ def deck_context(plan: RunPlan) -> dict:
     groups, fixes, regions = {}, [], []
     mobilise = f.mobilise
     for w in walls(plan):
-        regions += [{"id": rid, "style": style, "args": args, "moving": w.plate and rid == w.region}
-                    for rid, style, args in w.regions]
+        regions += [region_command(rid, style, args, w.plate and rid == w.region) for rid, style, args in w.regions]
         for gname, types, args in species_groups(plan, w.partner):
             if gname != "all":
                 groups[gname] = types
