@@ -54,10 +54,6 @@ def engine_case(base: dict, engine: str, seed: int, discharge: float | None) -> 
     return data
 
 
-def complete(folder: Path) -> bool:
-    return (folder / "results" / "summary.json").is_file()
-
-
 def row_of(case: str, engine: str, seed: int, folder: Path, wall: float) -> dict:
     """A run's row: the static force balance of its settled bed and where its stages began."""
     s = json.loads((folder / "results" / "summary.json").read_text())
@@ -118,7 +114,8 @@ def main(args) -> None:
             print(f"  {data['name']}: engine {engine}, seed {seed}, ranks {data['engine'].get('ranks', 1)}")
         return
     import pandas as pd
-    from error_coverage import check_same_case
+    from error_coverage import check_same_case, complete
+    from siloflow.atomic_files import write_text
     from bench_runs import run_case
     args.work.mkdir(parents=True, exist_ok=True)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -138,13 +135,13 @@ def main(args) -> None:
         else:
             folder, wall = run_case(data, args.work, *(["--force"] if folder.exists() else []))
         rows.append(row_of(name, engine, seed, folder, wall))
-        pd.DataFrame(rows, columns=list(COLUMNS)).to_csv(table, index=False)
+        write_text(table, pd.DataFrame(rows, columns=list(COLUMNS)).to_csv(index=False))
         r = rows[-1]
         print(f"{engine} seed {seed}: wall share {r['wall_share']:.3f}, force balance {r['force_balance_ratio']:.3f}, "
               f"{wall:.0f} s", flush=True)
     runs = pd.DataFrame(rows, columns=list(COLUMNS))
     summary = comparison(runs, [e for e in args.engines if (runs.engine == e).any()])
-    summary.to_csv(args.out / "comparison.csv", index=False)
+    write_text(args.out / "comparison.csv", summary.to_csv(index=False))
     print(summary.to_string(index=False))
 
 
