@@ -35,6 +35,8 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_runs import run_case, siloflow  # noqa: E402
+from siloflow.case_file import case_from_dict  # noqa: E402
+from siloflow.run_folder import RunFolder, case_differences  # noqa: E402
 
 #: a band is loaded when its mean static pressure is above this share of the largest one's
 LOADED_BAND = 0.2
@@ -53,27 +55,10 @@ def complete(folder: Path) -> bool:
     return (folder / "results" / "summary.json").is_file()
 
 
-def differences(given, stored, path: str = "") -> list[str]:
-    """Where the run folder's case (``stored``, every field written out) differs from the case this
-    call runs (``given``, only the fields its file sets): the fields' paths."""
-    if isinstance(given, dict):
-        if not isinstance(stored, dict):
-            return [path or "case"]
-        return [d for k, v in given.items() for d in differences(v, stored.get(k), f"{path}.{k}".lstrip("."))]
-    if isinstance(given, str) and isinstance(stored, (int, float)):    # YAML 1.1 reads 5.0e6 as a string
-        try:
-            given = float(given)
-        except ValueError:
-            return [path]
-    if isinstance(given, (int, float)) and not isinstance(given, bool) and isinstance(stored, (int, float)):
-        return [] if math.isclose(given, stored, rel_tol=1e-12, abs_tol=0.0) else [path]
-    return [] if given == stored else [path]
-
-
 def check_same_case(folder: Path, data: dict) -> None:
-    """Refuse to reuse a finished run of another case (the case file changed since it ran)."""
-    stored = yaml.safe_load((folder / "case.yaml").read_text())
-    changed = differences(data, stored)
+    """Refuse to reuse a finished run of another case (the case file changed since it ran): the
+    validated cases compared in every section the case file sets (``run_folder.case_differences``)."""
+    changed = [path for path, _ in case_differences(case_from_dict(data), RunFolder(folder).case, list(data))]
     if changed:
         raise SystemExit(f"{folder} ran another case ({', '.join(changed[:5])} differ): give another --work, "
                          f"or remove the old runs")
