@@ -76,7 +76,7 @@ ENGINE_OUTPUTS = re.compile(r"output/(flow|wall_forces)\.txt(\.before_resume)?|o
 #: an atomic write cut short: ``.{name}.{8 random characters}.tmp`` (tempfile.mkstemp)
 _TEMP = re.compile(r"(?P<dir>(?:.*/)?)\.(?P<name>[^/]+)\.[A-Za-z0-9_]{8}\.tmp")
 #: folders siloflow makes in a run folder (results/ may hold sub-folders, e.g. results/cg)
-FOLDERS = frozenset({"meshes", "output", "output/dumps", "output/vtk", "output/restart", "results"})
+FOLDERS = frozenset({"meshes", "fill", "output", "output/dumps", "output/vtk", "output/restart", "results"})
 
 
 def sha256(path: Path) -> str:

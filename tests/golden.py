@@ -20,7 +20,8 @@ CASES = sorted([*(ROOT / "decks").glob("*.yaml"), *(ROOT / "tests" / "data").glo
 
 
 def golden_files(case_file: Path) -> dict[str, bytes]:
-    """{file name: bytes} of what ``case_file`` renders: both decks and the meshes' SHA-256."""
+    """{file name: bytes} of what ``case_file`` renders: both decks, the meshes' SHA-256
+    and, for spheres, the placed fill batches' SHA-256."""
     from siloflow.case_file import load_case
     from siloflow.derived import derive
     from siloflow.engine import get_engine
@@ -33,9 +34,13 @@ def golden_files(case_file: Path) -> dict[str, bytes]:
         folder = get_engine(case.engine.name).prepare(case, Path(scratch) / "deck", plan=plan)
         write_resume_deck(plan, case, folder)
         meshes = "".join(f"{sha256(p)}  {p.name}\n" for p in sorted((folder / "meshes").glob("*.stl")))
-        return {"in.liggghts": (folder / "in.liggghts").read_bytes(),
-                "in.resume.liggghts": (folder / "in.resume.liggghts").read_bytes(),
-                "meshes.sha256": meshes.encode()}
+        out = {"in.liggghts": (folder / "in.liggghts").read_bytes(),
+               "in.resume.liggghts": (folder / "in.resume.liggghts").read_bytes(),
+               "meshes.sha256": meshes.encode()}
+        if (folder / "fill").is_dir():          # spheres: the placed fill's batches (siloflow.fill_placement)
+            out["fill.sha256"] = "".join(f"{sha256(p)}  {p.name}\n"
+                                         for p in sorted((folder / "fill").glob("*.txt"))).encode()
+        return out
 
 
 def golden_folder(case_file: Path) -> Path:

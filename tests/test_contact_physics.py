@@ -10,6 +10,7 @@ from scipy.optimize import brentq
 
 from siloflow import contact_physics as cp
 from siloflow.case_file import case_from_dict
+from siloflow.fill_placement import class_counts
 from siloflow.derived import bed_height, bed_volume, derive
 from siloflow.engine.liggghts.encoding import encode, is_prime
 
@@ -146,10 +147,11 @@ def test_polydisperse_number_and_mass_fractions_and_time_step(quick_dict):
     assert d.particle_radius == 0.0015
     assert d.particle_volume == pytest.approx(sum(n * 4 / 3 * math.pi * r ** 3 for n, r in zip([0.2, 0.3, 0.5],
                                                                                               [0.0015, 0.001, 0.00075])))
+    # the fill holds the number fractions' counts (siloflow.fill_placement), each size its own type and density
+    assert class_counts(d) == {0: 0.2 * d.fill.count, 1: 0.3 * d.fill.count, 2: 0.5 * d.fill.count}
     deck = render_deck_text(d, case)
-    assert "particledistribution/discrete" in deck and deck.count("particletemplate/sphere") == 3
-    line = next(ln for ln in deck.splitlines() if "particledistribution/discrete" in ln).split()
-    assert [float(x) for x in line[7::2]] == pytest.approx(d.fill.mass_fractions, rel=1e-9)
+    assert "particletemplate" not in deck and "read_dump" in deck
+    assert [ln.split()[2] for ln in deck.splitlines() if ln.startswith("set ")][:3] == ["1", "2", "3"]
     # the same distribution given by mass converts back to the number fractions
     by_mass = dict(quick_dict, particles=dict(quick_dict["particles"], fractions=d.fill.mass_fractions, basis="mass"))
     assert case_from_dict(by_mass).particles.number_fractions == pytest.approx([0.2, 0.3, 0.5])

@@ -24,7 +24,11 @@ def test_deck_folder_is_complete_and_deterministic(quick_dict, tmp_path):
         assert (a / w.file).read_bytes() == (b / w.file).read_bytes()
         if w.role != "outlet":
             assert f"meshes {w.name}" in deck or f" {w.name}" in deck.split("n_meshes")[1]
-    assert f"nparticles {plan.fill.count}" in deck
+    # the placed fill: every grain in one of the batch files the deck reads, the same bytes each time
+    batches = sorted((a / "fill").iterdir())
+    assert [f"read_dump       fill/{p.name}" in deck for p in batches] == [True] * len(batches)
+    assert sum(int(p.read_text().splitlines()[3]) for p in batches) == plan.fill.count
+    assert all(p.read_bytes() == (b / "fill" / p.name).read_bytes() for p in batches)
     assert f"timestep        {plan.dt:.10g}" in deck
     assert "delete_atoms yes" in deck and "move/mesh mesh plate" in deck
     assert (a / "case.yaml").is_file()

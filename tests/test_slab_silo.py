@@ -68,7 +68,7 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
     assert "face_s00.stl type 3" in text and "band00_s00.stl type 2" in text
     mu = case.materials.particle_particle.friction, case.materials.particle_wall.friction
     assert f"coefficientFriction peratomtypepair 3 {mu[0]:g} {mu[1]:g} 0 " in text      # faces: 0
-    assert "region          insertion block" in text and "all_in no" in text
+    assert "read_dump" in text and "insert/rate/region" not in text      # spheres: placed by siloflow
     # wheat clumps in a slab: inserted flat, moving in the plane only
     data = slab_dict()
     data["particles"] = {"kind": "clumps", "length": 0.003, "width": 0.002, "monte_carlo_tries": 100000}
@@ -78,6 +78,7 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
     d = derive(case)
     text = render_deck_text(d, case)
     assert "fflag on off on tflag off on off" in text and "orientation template" in text
+    assert "region          insertion block" in text and "all_in no" in text
     assert d.fill.region.yhi == pytest.approx(0.5 * 0.0022 - 0.001)
     # dust in a slab: poured into the mid-plane and held there; inserted before the grains of
     # the same step, whose overlap check (unlike the dust's) sees the other fix's particles

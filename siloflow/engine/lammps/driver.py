@@ -28,10 +28,11 @@ from scipy.spatial import cKDTree
 
 from ...atomic_files import write_text
 from ...errors import ReadError
+from ...fill_placement import FILL_OVERTIME, fill_batches, fill_order, fill_steps, place
 from ...guard import RunGuard
 from ...plan import RunPlan
 from ..liggghts.tables import FLOW_COLUMNS, wall_force_columns
-from .deck import BODY_QUANTITIES, deck_context, floor_commands, mobilise_jumps, poured_species, wall_kind
+from .deck import BODY_QUANTITIES, deck_context, floor_commands, mobilise_jumps, wall_kind
 
 STATE_NAME = "output/lammps_state.json"
 #: the stages a run from the settled bed's restart file runs again
@@ -46,8 +47,6 @@ FORCE_ON_WALL = -1.0
 INT, DOUBLE = 0, 1
 #: LAMMPS' Marsaglia generator takes seeds up to 900,000,000 (fix pour's seed)
 MARSAGLIA_MAX = 900_000_000
-#: how many times longer than planned the fill may go on inserting what did not fit yet
-FILL_OVERTIME = 3
 
 
 class Stop(Exception):
@@ -306,12 +305,33 @@ class Driver:
 
     # ------------------------------------------------------------------ fill
     def fill(self) -> None:
-        """Insert the grains (and dust) in batches every ``insert_every`` steps until all are in:
-        what does not fit in a batch's region goes in with a later batch (the fill runs on, up to
-        :data:`FILL_OVERTIME` times its planned length, until everything is placed)."""
-        f = self.plan.fill
+        """Insert the grains (and dust) in batches every ``insert_every`` steps. Spheres: the batches
+        siloflow placed (:func:`siloflow.fill_placement.fill_batches`, the same as LIGGGHTS reads), at
+        their steps; the fill lasts :func:`~siloflow.fill_placement.fill_steps`. Clumps: poured
+        (:meth:`_pour`) with their dust placed around what is there; what does not fit in a batch
+        goes in with a later one (the fill runs on, up to :data:`FILL_OVERTIME` times its planned
+        length, until everything is in)."""
         self.begin("fill")
-        todo = self._fill_list()
+        if self.clumps:
+            placed_total = self._fill_clumps()
+        else:
+            batches = fill_batches(self.plan)
+            end = fill_steps(self.plan, len(batches))
+            for b, after in zip(batches, [b.step for b in batches[1:]] + [end]):
+                self._read_spheres(list(b.kinds), list(b.centres))
+                self.advance(after - b.step)
+            placed_total = sum(len(b.kinds) for b in batches)
+        self.state.templates_inserted = placed_total
+        self.state.inserted = int(self.lmp.get_natoms())
+        if self.clumps:                  # the bodies as LAMMPS integrates them: mass and principal moments
+            self.lmp.command("run 0 post no")
+            self.state.bodies = {q: [float(self.lmp.extract_compute(f"body_{q}_{m}", 0, 0)) for m in ("min", "max")]
+                                 for q in BODY_QUANTITIES}
+
+    def _fill_clumps(self) -> int:
+        """Pour the clumps and place their dust, batch by batch; returns how many went in."""
+        f = self.plan.fill
+        todo = fill_order(self.plan, self.rng)
         placed_total = 0
         bodies = [k for k in todo if k + 1 in self.molecules]
         todo = [k for k in todo if k + 1 not in self.molecules]
@@ -330,50 +350,20 @@ class Driver:
                 placed = poured()
                 bodies = bodies[placed:]
                 placed_total += placed
-        self.state.templates_inserted = placed_total
-        self.state.inserted = int(self.lmp.get_natoms())
-        if self.clumps:                  # the bodies as LAMMPS integrates them: mass and principal moments
-            self.lmp.command("run 0 post no")
-            self.state.bodies = {q: [float(self.lmp.extract_compute(f"body_{q}_{m}", 0, 0)) for m in ("min", "max")]
-                                 for q in BODY_QUANTITIES}
-
-    def _fill_list(self) -> list[int]:
-        """The species index of every grain and dust sphere to insert, shuffled (dust in its ratio)."""
-        f, plan = self.plan.fill, self.plan
-        if f.shrink_classes:          # paper B: all poured at the largest size, shrunk after settling
-            grains = [poured_species(plan)] * f.count
-        else:
-            idx = [k for k, sp in enumerate(plan.species) if sp.stream == "grains"]
-            counts = np.floor(np.array([plan.species[k].number_fraction for k in idx]) * f.count).astype(int)
-            counts[np.argmax(counts)] += f.count - counts.sum()
-            grains = [k for k, c in zip(idx, counts) for _ in range(c)]
-        dust = [len(plan.species) - 1] * f.dust_count if plan.dust is not None else []
-        order = grains + dust
-        self.rng.shuffle(order)
-        return [int(k) for k in order]
+        return placed_total
 
     def _insert(self, batch: list[int]) -> int:
         """Place as many of ``batch`` (species indices of spheres, in order) as fit in the insertion
-        region without overlapping anything (random sequential addition); returns how many were
-        placed (the first ones). Clumps are poured (:meth:`_pour`)."""
-        plan, reg = self.plan, self.plan.fill.region
+        region without touching anything there (:func:`siloflow.fill_placement.place`); returns
+        how many were placed (the first ones)."""
+        reg = self.plan.fill.region
         atoms = self.atoms()
-        radii = [float(plan.species[k].radius) for k in batch]
-        rmax = max(max(radii), float(atoms["r"].max()) if len(atoms["r"]) else 0.0)
-        near = atoms["x"][:, 2] > reg.z_min - 2 * rmax
-        old_x, old_r = atoms["x"][near], atoms["r"][near]
-        tree = cKDTree(old_x) if len(old_x) else None
-        new_x: list[np.ndarray] = []
-        for r in radii:
-            p = self._place(r, rmax, tree, old_x, old_r, new_x, radii)
-            if p is None:
-                break                   # the region is full: the rest waits for the next batch
-            new_x.append(p)
-        n = len(new_x)
-        if n == 0:
-            return 0
-        self._read_spheres(batch[:n], new_x)
-        return n
+        r_max = max([float(self.plan.species[k].radius) for k in batch] + [float(atoms["r"].max()) if len(atoms["r"]) else 0.0])
+        near = atoms["x"][:, 2] > reg.z_min - 2 * r_max
+        centres = place(self.plan, batch, self.rng, obstacles=(atoms["x"][near], atoms["r"][near]))
+        if len(centres):
+            self._read_spheres(batch[:len(centres)], list(centres))
+        return len(centres)
 
     def _pour(self, batch: list[int]):
         """Start pouring the clumps of ``batch`` (one species) into the insertion region with LAMMPS'
@@ -417,40 +407,6 @@ class Driver:
         self.lmp.command(f"read_data {INSERTION_FILE} add append")
         self.section("regroup")
         self.expected_atoms += n
-
-    def _place(self, r, rmax, tree, old_x, old_r, new_x, radii, tries: int = 200) -> Optional[np.ndarray]:
-        """A random centre for a sphere of radius ``r`` in the insertion region touching nothing (None: no
-        room found in ``tries``)."""
-        mine = np.array(new_x) if new_x else None
-        mine_r = np.array(radii[:len(new_x)]) if new_x else None
-        for _ in range(tries):
-            p = self._random_point(r)
-            if p is None:
-                return None
-            if tree is not None:
-                hits = tree.query_ball_point(p, r + rmax)
-                if hits and np.any(np.linalg.norm(old_x[hits] - p, axis=1) < r + old_r[hits]):
-                    continue
-            if mine is not None and np.any(np.linalg.norm(mine - p, axis=1) < r + mine_r):
-                continue
-            return p
-        return None
-
-    def _random_point(self, r: float) -> Optional[np.ndarray]:
-        reg = self.plan.fill.region
-        z0, z1 = reg.z_min + r, reg.z_max - r
-        if z1 < z0:
-            return None
-        z = self.rng.uniform(z0, z1)
-        if reg.shape == "cylinder":
-            rho_max = reg.radius - r
-            if rho_max <= 0:
-                return None
-            rho, phi = rho_max * math.sqrt(self.rng.uniform()), self.rng.uniform(0, 2 * math.pi)
-            return np.array([rho * math.cos(phi), rho * math.sin(phi), z])
-        x = self.rng.uniform(reg.xlo, reg.xhi)
-        y = self.rng.uniform(reg.ylo, reg.yhi)
-        return np.array([x, y, z])
 
     # ------------------------------------------------------------------ mobilise, settle, discharge
     def mobilise(self) -> None:

@@ -15,6 +15,7 @@ from ...atomic_files import write_text
 from ...case import Case
 from ...contact_physics import sphere_volume
 from ...deck import DeckError, check_commands, template_environment
+from ...fill_placement import Batch, fill_batches, fill_steps
 from ...meshes import write_stl
 from ...plan import RunPlan
 from ...run_folder import LIGGGHTS_FILES, RESTART_FILE, DumpLayout, RunFolder
@@ -28,7 +29,7 @@ RESUME_DECK_NAME = LIGGGHTS_FILES["resume_deck"]
 ALLOWED_COMMANDS = frozenset("""
 atom_style atom_modify boundary newton communicate units processors region create_box neighbor
 neigh_modify hard_particles soft_particles fix pair_style pair_coeff timestep compute variable thermo_style thermo
-thermo_modify dump dump_modify print run unfix label next jump if set group read_restart write_restart
+thermo_modify dump dump_modify print run unfix label next jump if set group read_restart write_restart read_dump
 """.split())
 
 #: LIGGGHTS' particletemplate/sphere refuses spheres smaller than its volume_limit (default 1e-12 m3,
@@ -171,8 +172,54 @@ def contact_columns(plan: RunPlan, wall: bool = False) -> list[str]:
     return local_columns(WALL_CONTACT_KEYWORDS, wall=True) if wall else local_columns(pair_keywords(plan))
 
 
+#: where a deck's placed fill batches are, in its folder (read by ``read_dump``)
+FILL_FOLDER = "fill"
+
+
+def batch_file_name(index: int) -> str:
+    """The file of the fill's batch ``index`` (from 0) under :data:`FILL_FOLDER`."""
+    return f"batch_{index + 1:04d}.txt"
+
+
+def placed_fill(plan: RunPlan, enc: LiggghtsEncoding) -> dict | None:
+    """The fill stage's batches as the deck reads them (``siloflow.fill_placement``): each one's
+    file, step and the steps run after it (the last also runs the fall); the densities the deck
+    sets by type. None for clumps: LIGGGHTS' multisphere insertion places them."""
+    if plan.has_clumps:
+        return None
+    batches = fill_batches(plan)
+    total = fill_steps(plan, len(batches))
+    steps = [b.step for b in batches] + [total]
+    kinds = {k for b in batches for k in b.kinds}
+    return {"batches": [{"name": batch_file_name(i), "step": b.step, "run": steps[i + 1] - b.step}
+                        for i, b in enumerate(batches)],
+            "densities": [{"type": enc.types[plan.species[k].name], "density": plan.species[k].density}
+                          for k in sorted(kinds)],
+            "steps": total,
+            # LAMMPS' default sorting bin, half the neighbour cut-off (2 r_max + skin)
+            "sort_bin": max(sp.bounding_radius for sp in plan.species) + 0.5 * enc.skin}
+
+
+def batch_dump_text(plan: RunPlan, enc: LiggghtsEncoding, batch: Batch, first_id: int) -> str:
+    """A placed batch as a LIGGGHTS dump snapshot at its step (``read_dump ... add yes``): atom
+    IDs from ``first_id``, the species' atom types, moving down at the insertion speed."""
+    box, vz = enc.box, -plan.fill.insertion_speed
+    lines = ["ITEM: TIMESTEP", str(batch.step), "ITEM: NUMBER OF ATOMS", str(len(batch.kinds)),
+             "ITEM: BOX BOUNDS ff ff ff", *(f"{box[a + 'lo']!r} {box[a + 'hi']!r}" for a in "xyz"),
+             "ITEM: ATOMS id type x y z vx vy vz radius"]
+    for n, (k, p) in enumerate(zip(batch.kinds, batch.centres)):
+        sp = plan.species[k]
+        lines.append(f"{first_id + n} {enc.types[sp.name]} {float(p[0])!r} {float(p[1])!r} {float(p[2])!r} "
+                     f"0.0 0.0 {float(vz)!r} {float(sp.radius)!r}")
+    return "\n".join(lines) + "\n"
+
+
 def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, resume: bool = False) -> dict:
     """Everything the LIGGGHTS template places, already computed and checked."""
+    fill = None if resume else placed_fill(plan, enc)
+    planned = plan.planned_steps(enc.open_steps)
+    if fill is not None:
+        planned["fill"] = fill["steps"]
     youngs = [e for e, _ in _type_moduli(plan, enc) if e is not None]
     f = plan.fill
     particle_rate = f.batch / (f.insert_every * plan.dt)
@@ -217,7 +264,7 @@ def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, r
         "delta_column": local_columns(pair_keywords(plan)).index("delta") + 1 if guarded(plan) else 0,
         "wall_contact_keywords": list(WALL_CONTACT_KEYWORDS), "wall_contact_columns": contact_columns(plan, wall=True),
         "empty_mass": plan.discharge.empty_mass,
-        "planned": plan.planned_steps(enc.open_steps), "fill_steps": f.steps,
+        "planned": planned, "fill_steps": f.steps, "placed_fill": fill,
         "settle_max_chunks": plan.settle.max_chunks, "settle_chunk_steps": plan.settle.chunk_steps,
         "settle_ratio": plan.settle.ke_pe_ratio, "static_steps": plan.static_steps,
         "opening_speed": plan.opening.speed, "open_steps": enc.open_steps,
@@ -280,6 +327,12 @@ def write_deck(plan: RunPlan, case: Case, folder: Path) -> None:
         (folder / sub).mkdir()
     for w in plan.meshes:
         write_stl(w, folder / "meshes" / f"{w.name}.stl")
+    if not plan.has_clumps:
+        (folder / FILL_FOLDER).mkdir()
+        first_id = 1
+        for i, batch in enumerate(fill_batches(plan)):
+            write_text(folder / FILL_FOLDER / batch_file_name(i), batch_dump_text(plan, enc, batch, first_id))
+            first_id += len(batch.kinds)
     write_text(folder / DECK_NAME, text)
     RunFolder(folder).write_dump_layout(DumpLayout(
         engine="liggghts", types={t: name for name, t in enc.types.items()},

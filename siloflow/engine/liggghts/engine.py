@@ -22,7 +22,8 @@ from ..processes import FILL_LOSS_LIMIT, die_with_parent, not_settled, read_plan
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
-from .insertion import short_batch_warning, short_batches_note
+from .insertion import short_batches_note
+from ...fill_placement import fill_batches
 from .log import LogState, decode, diagnose, parse_log_text
 from .tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 
@@ -105,15 +106,11 @@ class LiggghtsEngine(Engine):
         if plan is not None:
             try:
                 encode(plan)
+                if not plan.has_clumps:     # the deck reads the placed batches
+                    fill_batches(plan)
             except CaseError as exc:
                 problems += list(exc.problems)
         return problems
-
-    def plan_warnings(self, case: Case, plan: RunPlan) -> list[str]:
-        """A grain batch asking for more than LIGGGHTS places in the insertion region on this many
-        ranks (:mod:`.insertion`)."""
-        warning = short_batch_warning(plan, encode(plan).box, case.engine.ranks, case.fill)
-        return [warning] if warning else []
 
     def write_deck(self, plan: RunPlan, case: Case, folder: Path) -> None:
         liggghts_deck.write_deck(plan, case, folder)

@@ -21,6 +21,10 @@ _STOP = re.compile(r"^SILOFLOW_STOP (steady|empty|max_time|clogged) (\S+)\s*$")
 _THERMO = re.compile(r"^\s*(\d+)\s+([-+0-9.eE]+)\s+(\d+)(\s+[-+0-9.eEnaif]+)*\s*$")
 #: an insertion fix's report of one batch (fix id, templates: a clump or a sphere each)
 _INSERT_BATCH = re.compile(r"^INFO: Particle insertion (\S+): inserted (\d+) particle templates")
+#: read_dump's count of the atoms a placed batch added (siloflow.fill_placement)
+_READ_BATCH = re.compile(r"^\s*(\d+) atoms added\s*$")
+#: the fix-like name under which the placed batches are counted
+PLACED = "read_dump"
 #: the warning after a batch placed short (it names no fix: the batch reported just before)
 _SHORT_BATCH = re.compile(r"Particle insertion: Less insertions than requested")
 _ERROR = re.compile(r"^(ERROR( on proc \d+)?:.*)$")
@@ -98,11 +102,12 @@ class LogState:
                 error = None
             self.discharge_stop = {"reason": m.group(1), "relative_error": error}
             return False
-        m = _INSERT_BATCH.match(line)
+        m = _INSERT_BATCH.match(line) or _READ_BATCH.match(line)
         if m:
-            self.templates[m.group(1)] = self.templates.get(m.group(1), 0) + int(m.group(2))
-            self.batches.setdefault(m.group(1), []).append(int(m.group(2)))
-            self.last_batch_fix = m.group(1)
+            fix, n = (m.group(1), int(m.group(2))) if m.re is _INSERT_BATCH else (PLACED, int(m.group(1)))
+            self.templates[fix] = self.templates.get(fix, 0) + n
+            self.batches.setdefault(fix, []).append(n)
+            self.last_batch_fix = fix
             return False
         m = _ERROR.match(line)
         if m:
