@@ -1,10 +1,12 @@
-"""Do MPI ranks change a LIGGGHTS fill, and does a batch that fits make them neutral?
+"""Do MPI ranks change a LIGGGHTS fill, and does the bed hold the particles the case asks for?
 
 ``make bench-rank-fill`` (resumable: a (batch fraction, ranks, seed) already in the table is not run
-again). LIGGGHTS' ``fix insert/rate/region`` places a batch by random sequential insertion with 50
-attempts per grain, inside the region shrunk by a grain radius (``all_in yes``) and at least one
-radius from every subdomain border. A batch asking for more than fits comes in short (a warning in
-the log), the fill takes more batches, and on 2 ranks (a border through the region) shorter still.
+again). Until issue 36, LIGGGHTS' ``fix insert/rate/region`` placed each batch largest first and
+dropped what did not fit (more on 2 ranks: no grain within a radius of a subdomain border): the
+bed came out heavier than asked by amounts that depended on the rank count. Those results are kept
+in benchmarks/results/rank_fill_fix_insert/. Since then siloflow places every batch itself
+(``siloflow.fill_placement``) and LIGGGHTS reads them (``read_dump``): this benchmark checks that
+the bed's weight is the planned one on both rank counts, and what is left of a rank effect.
 
 The case is the accuracy benchmark's (benchmarks/cases/accuracy_small.yaml: 1000 grains of paper B's
 7 sizes, ``fill.batch_volume_fraction`` 0.35) at dt = 0.2 t_c and 1/1000 of the stiffness (candidate
@@ -13,12 +15,11 @@ at the case's batch fraction and at one that fits on both rank counts, on 1 and 
 ``SEEDS`` seeds each. One engine job at a time.
 
 Writes benchmarks/results/rank_fill/: runs.csv (every run: the accuracy bench's quantities, the
-batches and how many came in short), summary.csv (per batch fraction: 1 rank against 2, Welch's
+batches, the settled bed's weight against the plan's), summary.csv (per batch fraction: 1 rank against 2, Welch's
 95 % interval, ``siloflow.bench_stats.difference``) and rank_fill.png.
 """
 from __future__ import annotations
 
-import re
 import sys
 from pathlib import Path
 
@@ -31,19 +32,19 @@ sys.path.insert(0, str(ROOT))
 from siloflow import bench_stats  # noqa: E402
 from siloflow.accuracy_bench import QUANTITIES, run_metrics  # noqa: E402
 from siloflow.atomic_files import write_text  # noqa: E402
-from siloflow.engine.liggghts.log import parse_log_text  # noqa: E402
+from siloflow.engine.liggghts.log import PLACED, parse_log_text  # noqa: E402
+from siloflow.fill_placement import class_counts  # noqa: E402
 from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing, run_name  # noqa: E402
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
 OUT = ROOT / "benchmarks" / "results" / "rank_fill"
-WORK = ROOT / "runs" / "bench_rank_fill"
+WORK = ROOT / "runs" / "bench_rank_fill_placed"
 SEEDS = 8
 RANKS = (1, 2)
 #: the case's batch fraction (over-full: short batches on any rank count) and one that fits on both
 BATCH_FRACTIONS = (0.35, 0.15)
 #: the settings measured (pinned: the table resumes on them)
 TIMESTEP_FRACTION, STIFFNESS_SCALE = 0.2, 1e-3
-REQUESTED = re.compile(r"^INFO: Particle insertion ins: (\S+) particles every", re.M)
 
 
 def case_of(base: dict, fraction: float, ranks: int, seed: int) -> dict:
@@ -60,17 +61,22 @@ def bed_weight(folder: Path) -> float:
     return float((RunFolder(folder).read_summary().get("force_balance") or {}).get("weight_N", float("nan")))
 
 
+def planned_weight(folder: Path) -> float:
+    """The weight of the bed the plan asks for (every grain of :func:`class_counts`), N."""
+    from siloflow.run_folder import RunFolder
+    plan = RunFolder(folder).plan
+    return plan.gravity * sum(plan.species[k].mass * n for k, n in class_counts(plan).items())
+
+
 def batches(folder: Path) -> dict:
-    """The grain insertion of a run's log: batches, how many came in short, the first batch placed
-    and requested; the settled bed's weight, N."""
-    text = (folder / "log.liggghts").read_text(errors="replace")
-    state = parse_log_text(text)
-    placed = state.batches.get("ins", [])
-    requested = REQUESTED.search(text)
-    return {"weight_N": bed_weight(folder), "batches": len(placed),
-            "short_batches": len(state.short_batches.get("ins", [])),
-            "first_batch": placed[0] if placed else float("nan"),
-            "batch_requested": float(requested.group(1)) if requested else float("nan")}
+    """The fill of a run's log: batches read, the first batch's size, the settled bed's weight
+    against the planned one, N."""
+    state = parse_log_text((folder / "log.liggghts").read_text(errors="replace"))
+    placed = state.batches.get(PLACED, [])
+    weight, planned = bed_weight(folder), planned_weight(folder)
+    return {"weight_N": weight, "planned_weight_N": planned, "weight_error": weight / planned - 1,
+            "batches": len(placed), "first_batch": placed[0] if placed else float("nan"),
+            "inserted": sum(placed)}
 
 
 def summary(runs: pd.DataFrame) -> pd.DataFrame:
@@ -80,7 +86,7 @@ def summary(runs: pd.DataFrame) -> pd.DataFrame:
     ok = runs[runs.state == "complete"]
     for fraction, g in ok.groupby("batch_volume_fraction"):
         one, two = g[g.ranks == 1], g[g.ranks == 2]
-        for q in (*QUANTITIES, "weight_N", "batches", "first_batch"):
+        for q in (*QUANTITIES, "weight_N", "weight_error", "batches", "first_batch"):
             d = bench_stats.difference(one[q], two[q])
             rows.append({"batch_volume_fraction": fraction, "quantity": q, "n_1rank": len(one), "n_2ranks": len(two),
                          "mean_1rank": one[q].mean(), "mean_2ranks": two[q].mean(), **d})
@@ -91,7 +97,7 @@ def figure(table: pd.DataFrame, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    shown = ["static_pressure", "weight_N", "flow_rate", "first_batch"]
+    shown = ["static_pressure", "weight_N", "flow_rate", "solid_fraction"]
     fig, axes = plt.subplots(1, len(shown), figsize=(3.2 * len(shown), 3.2))
     for ax, q in zip(axes, shown):
         t = table[table.quantity == q]

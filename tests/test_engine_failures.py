@@ -125,20 +125,16 @@ def test_error_that_aborts_mpi_still_reaches_the_message(tmp_path, quick_dict):
     on a pipe: the message must still reach the user (the engine line-buffers it)."""
     import re
 
-    from siloflow.engine.liggghts.encoding import encode
-    from siloflow.run_folder import RunFolder
-
     quick_dict["engine"]["ranks"] = 1
     engine = LiggghtsEngine()
     folder = engine.prepare(case_from_dict(quick_dict), tmp_path / "run")
     deck = (folder / "in.liggghts").read_text()
-    seeds = encode(RunFolder(folder).plan).seeds
-    # an insertion seed equal to a template seed: LIGGGHTS refuses it on one rank (error->one)
-    deck = re.sub(r"insert/rate/region seed \d+", f"insert/rate/region seed {seeds['templates'][0]}", deck)
+    # a fill batch that is not there: read_dump opens it on rank 0 only, which ends in error->one
+    deck = re.sub(r"read_dump       fill/batch_0002\.txt", "read_dump       fill/batch_none.txt", deck)
     (folder / "in.liggghts").write_text(deck)
     with pytest.raises(EngineRunError) as info:
         engine.execute(folder)
-    assert "random seeds" in str(info.value) + info.value.log_tail
+    assert "batch_none.txt" in str(info.value) + info.value.log_tail
     assert info.value.returncode != 0
 
 
@@ -328,18 +324,22 @@ def test_a_silo_too_many_grains_across_for_the_engine_bins_is_refused(tmp_path, 
 
 
 @pytest.mark.engine
-def test_engine_accepts_the_templates_of_tiny_grains(tmp_path, quick_dict):
-    """The deck of 30 um grains, cut after its insertion fix, starts in LIGGGHTS (it refused such
-    templates with 'Volume expectancy too small' before the deck set volume_limit)."""
+def test_engine_reads_the_placed_batch_of_tiny_grains(tmp_path, quick_dict):
+    """The deck of 30 um grains, cut after its first placed batch, starts in LIGGGHTS and holds that
+    batch's every grain (their insertion template was refused with 'Volume expectancy too small'
+    before the deck set volume_limit; siloflow now places sphere fills itself)."""
     folder = render(_tiny_grain_case(quick_dict), tmp_path / "deck")
     lines = (folder / "in.liggghts").read_text().splitlines()
-    last = max(k for k, ln in enumerate(lines) if ln.startswith("fix             ins "))
-    (folder / "in.cut").write_text("\n".join(lines[:last + 1]) + "\nrun 1\n")
+    first = next(k for k, ln in enumerate(lines) if ln.startswith("read_dump"))
+    batch = lines[first].split()[1]
+    end = next(k for k in range(first, len(lines)) if lines[k].startswith("run "))
+    (folder / "in.cut").write_text("\n".join(lines[:end]) + '\nrun 1\nprint "TINY_ATOMS ${natoms}"\n')
     proc = subprocess.run(["liggghts", "-in", "in.cut", "-log", "log.cut"], cwd=folder, capture_output=True,
                           timeout=120, stdin=subprocess.DEVNULL)
     out = proc.stdout.decode("utf-8", "replace")
     assert proc.returncode == 0 and "ERROR" not in out, out[-2000:]
-    assert "volume_limit" in (folder / "in.cut").read_text()
+    planned = int((folder / batch).read_text().splitlines()[3])
+    assert planned > 0 and f"TINY_ATOMS {planned}" in out
 
 
 #: stands in for LIGGGHTS stopped by SIGTERM: like its signal handler, it writes a forced restart into

@@ -313,11 +313,14 @@ def test_write_stl_never_writes_a_mesh_liggghts_refuses(tmp_path):
 # ------------------------------------------------------------------ the engine accepts them
 def mesh_only_deck(deck: str) -> str:
     """The rendered deck up to its integrator (box, materials, every mesh fix, the wall/gran fix
-    that uses them, the grain templates and the insertion), then ten steps: LIGGGHTS reads and
-    checks every mesh, bins the box for the case's own grains and inserts the first batch."""
+    that uses them), its first placed batch of grains, then ten steps: LIGGGHTS reads and checks
+    every mesh and bins the box for the case's own grains."""
     lines = deck.splitlines()
     end = next(k for k, ln in enumerate(lines) if ln.startswith("fix             integrate "))
-    return "\n".join(lines[:end + 1] + ["thermo          1", "run             10", ""])
+    first = next(k for k, ln in enumerate(lines) if ln.startswith("read_dump "))
+    batch = lines[first - 1:next(k for k in range(first, len(lines)) if lines[k].startswith("run "))]
+    assert batch[0].startswith("run             0 ")
+    return "\n".join(lines[:end + 1] + batch + ["thermo          1", "run             10", ""])
 
 
 @pytest.mark.engine

@@ -1,7 +1,7 @@
 """A stage run in chunks follows the trajectory of one run (docs/engine_facts.md).
 
-siloflow's LIGGGHTS decks run their stages in chunks: the settle stage one ``run`` per check
-interval, the discharge one per chunk, and each stage a ``run`` of its own. LIGGGHTS sets a run up
+siloflow's LIGGGHTS decks run their stages in chunks: the fill one ``run`` per placed batch, the
+settle stage one per check interval, the discharge one per chunk, and each stage a ``run`` of its own. LIGGGHTS sets a run up
 anew at each ``run`` (neighbour lists, the walls' contact histories), so the chunks are only harmless
 if every contact's history survives the set-up. It does at LIGGGHTS' default neighbour page; with
 a page of 20000 the trajectory jumps at a run boundary, as if contact histories were dropped
@@ -26,32 +26,37 @@ from siloflow.engine.liggghts.deck import before_stage_run
 from conftest import ROOT, needs_liggghts, render_deck
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
-#: steps compared after the boundary, the fill's end (siloflow's first run boundary: the bed lies on
-#: the plate and against the walls, and the next batch would come 1678 steps on)
+#: steps run after the fill before the compared boundary, and compared after it (the bed lies on the
+#: plate and against the walls, still settling)
 AFTER = 34
 NEIGH_MODIFY = re.compile(r"^neigh_modify.*$", re.M)
 
 
 @pytest.fixture(scope="module")
 def fill_deck(tmp_path_factory):
-    """The accuracy case's rendered deck up to its fill's ``run``, at pinned settings (dt = 0.1 t_c,
-    1/100 of the stiffness), and its folder (meshes, output folders)."""
+    """The accuracy case's rendered deck up to its settle stage's first ``run`` (its whole fill, a
+    ``run`` per placed batch), at pinned settings (dt = 0.1 t_c, 1/100 of the stiffness), its folder
+    (meshes, fill batches, output folders) and the step the fill ends at."""
     tmp = tmp_path_factory.mktemp("chunks")
     data = yaml.safe_load(CASE.read_text())
     data.update(name="chunks", engine={"ranks": 2, "timestep_fraction": 0.1, "stiffness_scale": 0.01})
     folder = tmp / "deck"
-    return folder, before_stage_run(render_deck(data, folder), "fill")
+    text = render_deck(data, folder)
+    fill = int(re.search(r"SILOFLOW_STAGE fill (\d+)", text).group(1))
+    return folder, before_stage_run(text, "settle"), fill
 
 
-def _state(folder, head: str, name: str, runs: list[int], page: int | None = None) -> tuple[float, float]:
+def _state(folder, head: str, name: str, start: int, runs: list[int], page: int | None = None
+           ) -> tuple[float, float]:
     """Kinetic energy (J) and deepest pair overlap (m) after ``runs`` (steps of each ``run``) from
-    the fill's start, from the last thermo line (LIGGGHTS prints one at the end of every run)."""
+    step ``start`` (the head's end), from the last thermo line (LIGGGHTS prints one at the end of
+    every run). ``page`` sets the neighbour page for the whole deck."""
     if page is not None:
         head = NEIGH_MODIFY.sub(f"neigh_modify    delay 0 page {page}", head, count=1)
     (folder / f"{name}.in").write_text(head + "".join(f"run {n}\n" for n in runs))
     subprocess.run(LiggghtsEngine().command(2, deck=f"{name}.in", log=f"{name}.log"), cwd=folder, check=True,
                    capture_output=True)
-    step = str(sum(runs))
+    step = str(start + sum(runs))
     last = [line.split() for line in (folder / f"{name}.log").read_text().splitlines()
             if line.split()[:1] == [step]][-1]
     # thermo_style custom step time atoms c_ke c_pe c_mass_silo f_massflow[1] f_massflow[2]
@@ -60,25 +65,22 @@ def _state(folder, head: str, name: str, runs: list[int], page: int | None = Non
 
 
 def test_decks_leave_the_neighbour_page_at_its_default(fill_deck):
-    _, head = fill_deck
+    _, head, _ = fill_deck
     lines = NEIGH_MODIFY.findall(head)
     assert lines and not any(re.search(r"\b(page|one)\b", line) for line in lines)
 
 
 @needs_liggghts
 def test_chunks_follow_one_run_at_the_default_page_and_not_at_another(fill_deck):
-    folder, head = fill_deck
-    fill = int(re.search(r"SILOFLOW_STAGE fill (\d+)", head).group(1))
-    ke_one, overlap_one = _state(folder, head, "one", [fill + AFTER])
-    ke_chunks, overlap_chunks = _state(folder, head, "chunks", [fill, AFTER])
+    folder, head, fill = fill_deck
+    ke_one, overlap_one = _state(folder, head, "one", fill, [2 * AFTER])
+    ke_chunks, overlap_chunks = _state(folder, head, "chunks", fill, [AFTER, AFTER])
     assert overlap_one > 0.0 and ke_one > 0.0            # a bed in contact, still settling
     # the same trajectory, to what the set-up's new summation order leaves (1e-5, 1e-6 measured)
     assert ke_chunks == pytest.approx(ke_one, rel=1e-4)
     assert overlap_chunks == pytest.approx(overlap_one, rel=1e-4)
-    # the engine fact: at a page of 20000 the trajectory jumps at the boundary (0.6 % in
-    # kinetic energy and 6 % in the deepest overlap 34 steps on, measured); within one run the page
-    # changes nothing (measured)
-    ke_small_page_one, _ = _state(folder, head, "one_page", [fill + AFTER], page=20000)
-    assert ke_small_page_one == pytest.approx(ke_one, rel=1e-9)
-    ke_small_page, _ = _state(folder, head, "chunks_page", [fill, AFTER], page=20000)
-    assert abs(ke_small_page / ke_one - 1.0) > 1e-3
+    # the engine fact: at a page of 20000 the trajectory jumps at a run boundary (0.6 % in kinetic
+    # energy and 6 % in the deepest overlap 34 steps on, measured at the end of an inserted fill)
+    ke_small_page_one, _ = _state(folder, head, "one_page", fill, [2 * AFTER], page=20000)
+    ke_small_page, _ = _state(folder, head, "chunks_page", fill, [AFTER, AFTER], page=20000)
+    assert abs(ke_small_page / ke_small_page_one - 1.0) > 1e-3
