@@ -26,24 +26,26 @@ from siloflow.engine.liggghts.deck import before_stage_run
 from conftest import ROOT, needs_liggghts, render_deck
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
-#: steps run after the fill before the compared boundary, and compared after it (the bed lies on the
-#: plate and against the walls, still settling)
+#: steps compared after the boundary, the fill's end (its last batch's run: the bed lies on the plate
+#: and against the walls, still settling)
 AFTER = 34
 NEIGH_MODIFY = re.compile(r"^neigh_modify.*$", re.M)
 
 
 @pytest.fixture(scope="module")
 def fill_deck(tmp_path_factory):
-    """The accuracy case's rendered deck up to its settle stage's first ``run`` (its whole fill, a
-    ``run`` per placed batch), at pinned settings (dt = 0.1 t_c, 1/100 of the stiffness), its folder
-    (meshes, fill batches, output folders) and the step the fill ends at."""
+    """The accuracy case's rendered deck up to its last placed batch's ``run`` (left out), at pinned
+    settings (dt = 0.1 t_c, 1/100 of the stiffness), its folder (meshes, fill batches, output
+    folders), the step that batch is read at and the steps of its run (to the fill's end)."""
     tmp = tmp_path_factory.mktemp("chunks")
     data = yaml.safe_load(CASE.read_text())
     data.update(name="chunks", engine={"ranks": 2, "timestep_fraction": 0.1, "stiffness_scale": 0.01})
     folder = tmp / "deck"
     text = render_deck(data, folder)
-    fill = int(re.search(r"SILOFLOW_STAGE fill (\d+)", text).group(1))
-    return folder, before_stage_run(text, "settle"), fill
+    last = text.rindex("\nread_dump ")
+    run = text.index("\nrun ", last)
+    steps = int(text[run:].split()[1])
+    return folder, text[:run + 1], int(text[last:].split()[2]), steps
 
 
 def _state(folder, head: str, name: str, start: int, runs: list[int], page: int | None = None
@@ -65,22 +67,22 @@ def _state(folder, head: str, name: str, start: int, runs: list[int], page: int 
 
 
 def test_decks_leave_the_neighbour_page_at_its_default(fill_deck):
-    _, head, _ = fill_deck
+    _, head, _, _ = fill_deck
     lines = NEIGH_MODIFY.findall(head)
     assert lines and not any(re.search(r"\b(page|one)\b", line) for line in lines)
 
 
 @needs_liggghts
 def test_chunks_follow_one_run_at_the_default_page_and_not_at_another(fill_deck):
-    folder, head, fill = fill_deck
-    ke_one, overlap_one = _state(folder, head, "one", fill, [2 * AFTER])
-    ke_chunks, overlap_chunks = _state(folder, head, "chunks", fill, [AFTER, AFTER])
+    folder, head, start, fill = fill_deck
+    ke_one, overlap_one = _state(folder, head, "one", start, [fill + AFTER])
+    ke_chunks, overlap_chunks = _state(folder, head, "chunks", start, [fill, AFTER])
     assert overlap_one > 0.0 and ke_one > 0.0            # a bed in contact, still settling
     # the same trajectory, to what the set-up's new summation order leaves (1e-5, 1e-6 measured)
     assert ke_chunks == pytest.approx(ke_one, rel=1e-4)
     assert overlap_chunks == pytest.approx(overlap_one, rel=1e-4)
     # the engine fact: at a page of 20000 the trajectory jumps at a run boundary (0.6 % in kinetic
-    # energy and 6 % in the deepest overlap 34 steps on, measured at the end of an inserted fill)
-    ke_small_page_one, _ = _state(folder, head, "one_page", fill, [2 * AFTER], page=20000)
-    ke_small_page, _ = _state(folder, head, "chunks_page", fill, [AFTER, AFTER], page=20000)
+    # energy and 6 % in the deepest overlap 34 steps on, measured with an inserted fill)
+    ke_small_page_one, _ = _state(folder, head, "one_page", start, [fill + AFTER], page=20000)
+    ke_small_page, _ = _state(folder, head, "chunks_page", start, [fill, AFTER], page=20000)
     assert abs(ke_small_page / ke_small_page_one - 1.0) > 1e-3

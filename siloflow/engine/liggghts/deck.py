@@ -196,8 +196,10 @@ def placed_fill(plan: RunPlan, enc: LiggghtsEncoding) -> dict | None:
             "densities": [{"type": enc.types[plan.species[k].name], "density": plan.species[k].density}
                           for k in sorted(kinds)],
             "steps": total,
-            # LAMMPS' default sorting bin, half the neighbour cut-off (2 r_max + skin)
-            "sort_bin": max(sp.bounding_radius for sp in plan.species) + 0.5 * enc.skin}
+            # the atom-sorting and neighbour bin: LAMMPS' default once grains are in (half the neighbour
+            # cut-off, 2 r_max + skin), set because the empty box before the first batch has no cut-off
+            # (its default bin is then the box's x size, refused in a thin slab)
+            "bin": max(sp.bounding_radius for sp in plan.species) + 0.5 * enc.skin}
 
 
 def batch_dump_text(plan: RunPlan, enc: LiggghtsEncoding, batch: Batch, first_id: int) -> str:
