@@ -8,9 +8,10 @@ as the full deck has; no dumps). Dumps and force sampling do not change the dyna
 seams might (LIGGGHTS counts a grain touching an edge shared by two meshes once per mesh). Since
 issue 36 both variants of a seed start from the same placed grains (``siloflow.fill_placement``).
 One engine job at a time; each finished run is kept (``--work``) with its row in
-``benchmarks/results/seams/runs.csv``, and a second invocation resumes. Writes summary.csv (sensor
-meshes against one wall: Welch's 95 % interval, ``siloflow.bench_stats``; engine wall time as a
-speed ratio) and seams.png. The 2-seed check on the inserted fill (before issue 36) is kept in
+``benchmarks/results/seams/runs.csv``, and a second invocation resumes. Writes summary.csv
+(sensor meshes against one wall over the runs that did not clog: Welch's 95 % interval,
+``siloflow.bench_stats``; the share of runs that clogged; engine wall time as a speed ratio) and
+seams.png. The 2-seed check on the inserted fill (before issue 36) is kept in
 benchmarks/results/skip/seams.csv.
 """
 from __future__ import annotations
@@ -33,6 +34,19 @@ VARIANTS = {"one_wall": ["flow_rate", "force_balance"], "sensor_meshes": ["flow_
 #: compared quantities: summary.json's flow rate (kg/s), the settled bed's force balance and wall
 #: friction share (dimensionless)
 QUANTITIES = ("flow_rate_kg_s", "force_balance", "wall_friction_share")
+
+
+def discharge_outcome(folder: Path) -> dict:
+    """Mass discharged (kg) and whether the run clogged (``postprocess.discharge.clog``: a fifth of
+    the bed or more still in the silo, none out over the last 40 % of the discharge). A clogged run's flow rate is no sample of
+    the flowing rate; the benchmark counts clogs apart."""
+    import pandas as pd
+
+    from postprocess.discharge import clog
+    d = pd.read_csv(folder / "results" / "discharge.csv")
+    initial = float(d.loc[d.time_since_open <= 0, "mass_total"].iloc[-1])
+    return {"discharged_kg": float(d.outlet_mass.iloc[-1]),
+            "clogged": clog(d.time_since_open, d.outlet_mass, d.mass_in_silo, initial) is not None}
 
 
 def main(case_file: Path, seeds: int, work: Path, out: Path) -> None:
@@ -64,8 +78,18 @@ def main(case_file: Path, seeds: int, work: Path, out: Path) -> None:
             write_text(table, pd.DataFrame(rows).to_csv(index=False))
             print(f"{name} seed {seed}: {rows[-1]['flow_rate_kg_s'] * 1000:.2f} g/s")
     runs = pd.DataFrame(rows)
-    one, sensed = (runs[runs.variant == v] for v in VARIANTS)
+    outcome = pd.DataFrame([discharge_outcome(work / "runs" / f"{base['name']}_{v}_{int(seed)}")
+                            for v, seed in zip(runs.variant, runs.seed)], index=runs.index)
+    runs[outcome.columns] = outcome
+    write_text(table, runs.to_csv(index=False))
+    flowing = runs[~runs.clogged]
+    one, sensed = (flowing[flowing.variant == v] for v in VARIANTS)
     summary = [{"quantity": q, **bench_stats.difference(one[q], sensed[q])} for q in QUANTITIES]
+    summary.append({"quantity": "clogged", "n_ref": int((runs.variant == "one_wall").sum()),
+                    "n_cand": int((runs.variant == "sensor_meshes").sum()),
+                    "ref_mean": runs[runs.variant == "one_wall"].clogged.mean(),
+                    "cand_mean": runs[runs.variant == "sensor_meshes"].clogged.mean(),
+                    "verdict": "share of runs that clogged (left out of the other rows)"})
     speed = bench_stats.speedup(sensed.wall_s, one.wall_s)
     summary.append({"quantity": "wall_s", "n_ref": len(one), "n_cand": len(sensed), "ref_mean": one.wall_s.mean(),
                     "cand_mean": sensed.wall_s.mean(), "verdict": f"one wall {speed['speedup']:.2f}x faster "
@@ -85,11 +109,16 @@ def figure(runs, summary, path: Path) -> None:
     from siloflow.atomic_files import atomic_path
     fig, ax = plt.subplots(figsize=(6, 3.5))
     for x, (name, colour) in enumerate(zip(VARIANTS, ("C0", "C1"))):
-        rates = runs[runs.variant == name].flow_rate_kg_s * 1000
+        mine = runs[runs.variant == name]
+        rates = mine[~mine.clogged].flow_rate_kg_s * 1000
         ax.plot([x] * len(rates), rates, "o", color=colour, alpha=0.6)
         ax.hlines(rates.mean(), x - 0.25, x + 0.25, color=colour)
+        if mine.clogged.any():
+            ax.annotate(f"{int(mine.clogged.sum())} clogged", (x, rates.min()), textcoords="offset points",
+                        xytext=(0, -14), ha="center", fontsize=8)
     row = summary.set_index("quantity").loc["flow_rate_kg_s"]
-    ax.set_xticks([0, 1], [f"{n}\n(n = {int((runs.variant == n).sum())})" for n in VARIANTS])
+    ax.set_xticks([0, 1], [f"{n}\n(n = {int((runs.variant == n).sum())}, flowing {int(((runs.variant == n) & ~runs.clogged).sum())})"
+                           for n in VARIANTS])
     ax.set_xlim(-0.6, 1.6)
     ax.set_ylabel("flow rate (g/s)")
     ax.set_title(f"sensor meshes against one wall: {row.rel_error:+.1%} (95 %: {row.ci_lo:+.1%} to {row.ci_hi:+.1%})",

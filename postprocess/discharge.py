@@ -113,6 +113,33 @@ def steady_flow_rate(time, mass, t_open: float, skip: float = 0.2, min_remaining
     return FlowRate(fit.slope, batch_se, fit.t_start, fit.t_end, fit.n_samples, fit.r2, fit.stderr, batches)
 
 
+#: a discharge clogged when nothing left the silo over this share of its duration, to its end
+CLOG_WINDOW = 0.4
+
+
+def clog(time_since_open, outlet_mass, mass_in_silo, initial_mass: float, min_remaining: float = 0.2,
+         window: float = CLOG_WINDOW) -> dict | None:
+    """Whether a discharge clogged: at least ``min_remaining`` of ``initial_mass`` (kg) was still in
+    the silo (more than a flat bottom's dead zone; :func:`steady_flow_rate` ends its window there too)
+    and no mass left through the outlet over the last ``window`` of the discharge (times in s since
+    the outlet opened, masses in kg). None if it flowed to its end or emptied; else the time of the
+    last outflow (s since opening), the mass out before it and the mass left (kg): the flow rate of
+    such a run is not a steady one."""
+    t = np.asarray(time_since_open, float)
+    out = np.asarray(outlet_mass, float)
+    left = np.asarray(mass_in_silo, float)
+    after = t >= 0
+    t, out, left = t[after], out[after], left[after]
+    if len(t) < 2 or t[-1] <= 0 or not left[-1] >= min_remaining * initial_mass:
+        return None
+    late = t >= (1 - window) * t[-1]
+    if out[-1] > out[late][0]:
+        return None
+    moved = np.flatnonzero(out < out[-1])
+    return {"t_last_outflow_s": float(t[moved[-1] + 1]) if len(moved) else 0.0,
+            "discharged_mass_kg": float(out[-1]), "mass_left_kg": float(left[-1]), "window": window}
+
+
 def discharge_table(flow: pd.DataFrame, timestep: float, t_open: float) -> pd.DataFrame:
     """From a run folder's ``flow`` table (``siloflow.run_folder.FLOW_SCHEMA``), time series of the discharge: time (s), time since opening, mass through the outlet,
     mass above the outlet, particles present."""

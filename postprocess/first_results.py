@@ -23,7 +23,7 @@ from siloflow.run_folder import RESULT_TABLES, RunFolder
 from .analysis_base import Products
 from .batch_means import batch_means_stderr
 from .design_figure import compare_with_dem, design_plot
-from .discharge import discharge_table, steady_flow_rate
+from .discharge import clog, discharge_table, steady_flow_rate
 from .dump_results import MIN_STEADY_SAMPLES, analyse_dumps, steady_resolution
 from .en_verdicts import band_verdicts, bed_state
 from .figures import first_results_plot
@@ -145,6 +145,7 @@ def analyse(folder, measured_pressure=None) -> dict:
     after = dis[dis.step >= run.stage_steps["open"]]
     rate = steady_flow_rate(after.time, after.outlet_mass, t_open,
                             mass_in_silo=after.mass_in_silo, initial_mass=initial_mass)
+    clogged = clog(after.time_since_open, after.outlet_mass, after.mass_in_silo, initial_mass)
     # steady state detected from the rate itself (smoothed over a tenth of the discharge)
     w = rate_series(after.time, after.outlet_mass, window=max(5, len(after) // 10))
     i0, i1 = steady_window(w, tolerance=0.2)
@@ -211,6 +212,7 @@ def analyse(folder, measured_pressure=None) -> dict:
         "force_balance": balance,
         "results_asked": run.plan.outputs.results,
         "flow_rate": asdict(rate),
+        "clogged": clogged,
         "steady_window_detected": steady,
         "discharged_mass_kg": float(dis.outlet_mass.iloc[-1]),
         "mass_in_silo_end_kg": float(dis.mass_in_silo.iloc[-1]),

@@ -186,8 +186,20 @@ def profile_line(p: dict | None) -> str:
     return line
 
 
-def flow_rate_line(fr: dict) -> str:
-    """The report's flow-rate line: the one steady rate, its batch-means error, its window."""
+def clog_line(clogged: dict | None) -> str:
+    """What a clogged discharge is said to be (empty if it did not clog, :func:`discharge.clog`)."""
+    if not clogged:
+        return ""
+    return (f"the discharge CLOGGED: nothing left the silo after t = {_fmt(clogged['t_last_outflow_s'], '.3g')} s "
+            f"from opening ({_fmt(clogged['discharged_mass_kg'] * 1000)} g out), so the flow rate is not a steady "
+            "one; an orifice this size clogs by chance, so run more seeds or widen it")
+
+
+def flow_rate_line(fr: dict, clogged: dict | None = None) -> str:
+    """The report's flow-rate line: the one steady rate, its batch-means error, its window, or the
+    clog that left no steady rate."""
+    if clogged:
+        return f"- {clog_line(clogged)} (fitted over the whole discharge: {mass_rate(fr['rate'], fr.get('stderr'))})"
     line = (f"- steady flow rate Wf = {mass_rate(fr['rate'], fr.get('stderr'))} (t = {_fmt(fr['t_start'], '.3g')}-"
             f"{_fmt(fr['t_end'], '.3g')} s, {fr.get('n_samples')} samples, r2 {_fmt(fr['r2'], '.4f')}")
     if fr.get("batches"):
@@ -334,7 +346,7 @@ def _facts(summary: dict) -> list[str]:
              (f"- force balance of the settled bed: walls + bottom carry {_fmt(fb['ratio'], '.4f')} x the weight "
               f"({_fmt(fb['wall_friction_share'], '.2f')} of it by wall friction)" if fb else
               "- force balance: not measured (outputs.results asks for neither force_balance nor wall_pressure)"),
-             flow_rate_line(fr),
+             flow_rate_line(fr, summary.get("clogged")),
              f"- discharged {_fmt(summary['discharged_mass_kg'] * 1000)} g; {_fmt(summary['mass_in_silo_end_kg'] * 1000)} g left"]
     engine = summary.get("engine")
     if engine:

@@ -280,7 +280,7 @@ def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
 
 def _post(folder: Path, measured: Path | None = None) -> None:
     from postprocess.first_results import analyse
-    from postprocess.report import console_lines
+    from postprocess.report import clog_line, console_lines
     from .run_folder import RunFolder, record_products
     since = time.time()
     try:
@@ -294,8 +294,11 @@ def _post(folder: Path, measured: Path | None = None) -> None:
         out.print(f"force balance of the settled bed: walls+bottom carry {fb['ratio']:.4f} x the weight "
                   f"({fb['wall_friction_share']:.2f} of it by wall friction)")
     from postprocess.numbers import mass_rate
-    out.print(f"steady flow rate: {mass_rate(fr['rate'], fr['stderr'])} (standard error by batch means); "
-              f"discharged {summary['discharged_mass_kg'] * 1000:.1f} g")
+    if summary.get("clogged"):
+        out.print(f"{clog_line(summary['clogged'])} (fitted over the whole discharge: {mass_rate(fr['rate'], fr['stderr'])})")
+    else:
+        out.print(f"steady flow rate: {mass_rate(fr['rate'], fr['stderr'])} (standard error by batch means); "
+                  f"discharged {summary['discharged_mass_kg'] * 1000:.1f} g")
     fa = summary.get("frame_analyses", {})
     if "cross_section_solid_fraction" in fa:
         line = f"settled bulk solid fraction {fa['bulk_solid_fraction']:.3f}"

@@ -214,3 +214,38 @@ def test_a_report_gives_one_flow_rate_with_its_batch_error_in_a_readable_unit():
     drift = steady_window_line(steady, {**small, "stderr": 0.0005})
     assert "differs from Wf by +4.3 standard errors" in drift and "median rate" not in steady_window_line(
         {**steady, "median_rate": 0.0362}, small)
+
+
+# ------------------------------------------------------------------ a discharge that clogged
+def _discharge(t_stop: float, duration: float = 1.0, rate: float = 0.02, initial: float = 0.05, n: int = 201):
+    """A discharge at ``rate`` kg/s from ``initial`` kg that stops at ``t_stop`` s (or empties)."""
+    t = np.linspace(0.0, duration, n)
+    out = np.minimum(rate * np.minimum(t, t_stop), initial)
+    return t, out, initial - out
+
+
+def test_a_discharge_that_stopped_with_grains_left_clogged():
+    from postprocess.discharge import clog
+    t, out, left = _discharge(t_stop=0.3)
+    c = clog(t, out, left, initial_mass=0.05)
+    assert c is not None and c["t_last_outflow_s"] == pytest.approx(0.3, abs=0.006)
+    assert c["discharged_mass_kg"] == pytest.approx(0.006)
+    # one that flows to the end, one that emptied and one that stopped inside the last 40 % did not
+    assert clog(*_discharge(t_stop=2.0), initial_mass=0.05) is None
+    assert clog(*_discharge(t_stop=2.0, rate=0.1), initial_mass=0.05) is None        # empty at 0.5 s
+    assert clog(*_discharge(t_stop=0.7), initial_mass=0.05) is None
+    assert clog(*_discharge(t_stop=0.55), initial_mass=0.05) is not None
+    # a flat bottom's dead zone (under a fifth of the bed) left when the flow stopped: emptied
+    t, out, left = _discharge(t_stop=0.3)
+    assert clog(t, out, left, initial_mass=5 * left[-1] + 1e-6) is None
+    # a bed that clogged at once: nothing ever left
+    assert clog(*_discharge(t_stop=0.0), initial_mass=0.05)["t_last_outflow_s"] == 0.0
+
+
+def test_a_clogged_run_says_so_instead_of_a_steady_rate():
+    from postprocess.report import flow_rate_line
+    fr = {"rate": 2.7e-5, "stderr": 2.1e-5, "t_start": 0.9, "t_end": 1.9, "n_samples": 200, "r2": 0.3,
+          "batches": 10, "fit_stderr": 1e-7}
+    line = flow_rate_line(fr, {"t_last_outflow_s": 0.05, "discharged_mass_kg": 5e-4, "window": 0.4})
+    assert "CLOGGED" in line and "steady flow rate" not in line and "0.05 s" in line
+    assert "steady flow rate" in flow_rate_line(fr, None)
