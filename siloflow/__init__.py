@@ -5,7 +5,7 @@ summary, flow and wall-pressure tables, dump frames): see ``siloflow.runs``. Cas
 ``Case.from_yaml(path)`` (``siloflow.case_file``) or validated from a dict with
 ``Case.model_validate(data)`` (``siloflow.case``).
 """
-__version__ = "0.1.0"
+from ._version import __version__
 
 __all__ = ["Run", "open_run", "run", "__version__"]
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import jinja2
 
-from . import __version__
+from ._version import __version__
 from .atomic_files import new_folder, write_json, write_text
 from .case import SAFE_NAME_PATTERN, Case
 from .case_file import case_to_yaml

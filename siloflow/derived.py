@@ -7,7 +7,7 @@ unit-tested and written to ``plan.json`` beside the deck. All values SI.
 from __future__ import annotations
 
 import math
-from . import __version__
+from ._version import __version__
 from . import contact_physics as cp
 from .case import Case, HopperGeometry, PlanarGeometry
 from .errors import CaseError, SetupError
