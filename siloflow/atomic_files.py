@@ -1,10 +1,12 @@
-"""Atomic file and folder writes: a reader never sees half a file, and nothing is overwritten silently."""
+"""Atomic file writes: a reader never sees half a file, and nothing is overwritten silently.
+
+A whole folder built under a temporary name and moved into place (``new_folder``) is the run
+folder's (``siloflow.run_folder``), which knows which folders siloflow may replace."""
 from __future__ import annotations
 
 import errno
 import json
 import os
-import shutil
 import stat
 import tempfile
 from contextlib import contextmanager
@@ -113,26 +115,6 @@ def _nan_to_none(x):
     return x
 
 
-def check_free_folder(folder, force: bool, keep=()) -> None:
-    """Refuse an existing ``folder`` that is not an empty folder, unless ``force`` and siloflow
-    may replace it (``siloflow.run_folder.check_replaceable``; ``keep``: files being read)."""
-    from .run_folder import check_not_in_use, check_replaceable
-    folder = Path(folder)
-    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
-        raise SetupError(f"{folder} exists and is not a folder (or is a symbolic link): choose another output folder")
-    for parent in folder.absolute().parents:
-        if parent.exists() and not parent.is_dir():
-            raise SetupError(f"cannot make {folder}: {parent} is a file, not a folder")
-    if not folder.is_dir():
-        return
-    check_not_in_use(folder, keep)            # the current directory, a mount point, a file being read
-    if any(folder.iterdir()):
-        if not force:
-            raise SetupError(f"{folder} already exists and is not empty: choose another folder, "
-                             "or pass --force to replace it (only a folder siloflow made, holding only its files)")
-        check_replaceable(folder)
-
-
 def os_error(exc: OSError, what, verb: str = "write") -> SetupError:
     """An OSError while writing, as a message in the user's terms (disk full, read-only, ...)."""
     reasons = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is exceeded",
@@ -141,44 +123,3 @@ def os_error(exc: OSError, what, verb: str = "write") -> SetupError:
     reason = reasons.get(exc.errno, exc.strerror or str(exc))
     where = f" ({exc.filename})" if exc.filename else ""
     return SetupError(f"cannot {verb} {what}: {reason}{where}")
-
-
-@contextmanager
-def new_folder(folder, force: bool = False, keep=()):
-    """Build a folder under a temporary name and move it into place only if the block succeeds.
-
-    Yields the temporary path. An existing non-empty ``folder`` is refused unless ``force``
-    and it is a siloflow folder holding only siloflow's files (``keep``: paths being read,
-    never inside a replaced folder); it is replaced only after the new one is complete, and
-    then only siloflow's files are deleted. An OSError (disk full, read-only, ...) becomes a
-    ``SetupError`` and leaves no partial folder.
-    """
-    from .run_folder import remove_siloflow_files
-    folder = Path(folder).absolute()
-    check_free_folder(folder, force, keep)
-    try:
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}.", suffix=".partial"))
-    except OSError as exc:
-        raise os_error(exc, str(folder)) from None
-    try:
-        yield tmp
-        old = None
-        if folder.exists():
-            old = folder.with_name(f".{folder.name}.replaced-{os.getpid()}")
-            os.replace(folder, old)
-        try:
-            os.replace(tmp, folder)
-        except OSError:
-            if old is not None:
-                os.replace(old, folder)          # put the old folder back as it was
-            raise
-    except OSError as exc:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise os_error(exc, str(folder)) from None
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if old is not None and remove_siloflow_files(old):
-        # files that appeared after the check are never deleted: the old folder stays, visibly
-        os.replace(old, folder.with_name(f"{folder.name}.kept-{os.getpid()}"))

@@ -16,11 +16,11 @@ from pathlib import Path
 import jinja2
 
 from ._version import __version__
-from .atomic_files import new_folder, write_json, write_text
+from .atomic_files import write_json, write_text
 from .case import SAFE_NAME_PATTERN, Case
 from .case_file import case_to_yaml
 from .errors import SetupError, SiloflowError
-from .run_folder import CASE_NAME, MANIFEST_NAME, RunFolder, check_plain_tree, sha256
+from .run_folder import CASE_NAME, MANIFEST_NAME, RunFolder, check_plain_tree, new_folder, sha256
 
 #: words no deck line may hold, whatever its command (LIGGGHTS and LAMMPS both have ``shell``)
 FORBIDDEN_WORDS = re.compile(r"\b(shell|include|python|system|popen)\b", re.IGNORECASE)

@@ -22,14 +22,18 @@ import hashlib
 import json
 import os
 import re
+import shutil
 import socket
 import stat
+import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Optional
 
+from .atomic_files import os_error, write_json, write_text
 from .errors import ReadError, SetupError
 
 # ------------------------------------------------------------------ file names
@@ -105,7 +109,6 @@ def record_products(folder, out_dir, since: float) -> None:
     written since ``since`` (a ``time.time()``), with their SHA-256: post-processing's tables,
     figures and reports, which ``--force`` may then replace. Nothing happens for a folder without
     a manifest or an ``out_dir`` outside it."""
-    from .atomic_files import write_json
     folder, out_dir = Path(folder).resolve(), Path(out_dir).resolve()
     manifest = read_manifest(folder)
     if not manifest or folder not in out_dir.parents and out_dir != folder:
@@ -239,6 +242,65 @@ def remove_siloflow_files(folder: Path) -> list[str]:
     return foreign_entries(folder) if folder.exists() else []
 
 
+def check_free_folder(folder, force: bool, keep=()) -> None:
+    """Refuse an existing ``folder`` that is not an empty folder, unless ``force`` and siloflow
+    may replace it (:func:`check_replaceable`; ``keep``: files being read)."""
+    folder = Path(folder)
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise SetupError(f"{folder} exists and is not a folder (or is a symbolic link): choose another output folder")
+    for parent in folder.absolute().parents:
+        if parent.exists() and not parent.is_dir():
+            raise SetupError(f"cannot make {folder}: {parent} is a file, not a folder")
+    if not folder.is_dir():
+        return
+    check_not_in_use(folder, keep)            # the current directory, a mount point, a file being read
+    if any(folder.iterdir()):
+        if not force:
+            raise SetupError(f"{folder} already exists and is not empty: choose another folder, "
+                             "or pass --force to replace it (only a folder siloflow made, holding only its files)")
+        check_replaceable(folder)
+
+
+@contextmanager
+def new_folder(folder, force: bool = False, keep=()):
+    """Build a folder under a temporary name and move it into place only if the block succeeds.
+
+    Yields the temporary path. An existing non-empty ``folder`` is refused unless ``force``
+    and it is a siloflow folder holding only siloflow's files (``keep``: paths being read,
+    never inside a replaced folder); it is replaced only after the new one is complete, and
+    then only siloflow's files are deleted. An OSError (disk full, read-only, ...) becomes a
+    ``SetupError`` and leaves no partial folder.
+    """
+    folder = Path(folder).absolute()
+    check_free_folder(folder, force, keep)
+    try:
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=folder.parent, prefix=f".{folder.name}.", suffix=".partial"))
+    except OSError as exc:
+        raise os_error(exc, str(folder)) from None
+    try:
+        yield tmp
+        old = None
+        if folder.exists():
+            old = folder.with_name(f".{folder.name}.replaced-{os.getpid()}")
+            os.replace(folder, old)
+        try:
+            os.replace(tmp, folder)
+        except OSError:
+            if old is not None:
+                os.replace(old, folder)          # put the old folder back as it was
+            raise
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise os_error(exc, str(folder)) from None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if old is not None and remove_siloflow_files(old):
+        # files that appeared after the check are never deleted: the old folder stays, visibly
+        os.replace(old, folder.with_name(f"{folder.name}.kept-{os.getpid()}"))
+
+
 def case_differences(mine, theirs, fields) -> list[tuple[str, str]]:
     """``(field path, message)`` for each dotted case field of ``fields`` (a section or a value)
     in which the cases ``mine`` and ``theirs`` differ, down to the leaf that differs."""
@@ -270,7 +332,6 @@ def write_status(folder: Path, state: str, **extra) -> None:
     A ``running`` status names siloflow's process with its start time, so a PID reused by
     another process is not taken for the run. On a full disk the status is rewritten in place
     (its blocks are already allocated), so a failure can still be recorded."""
-    from .atomic_files import write_json
     if state == "running":
         extra = {"siloflow_pid": os.getpid(), "siloflow_start": process_start(os.getpid()),
                  "host": socket.gethostname(), **extra}
@@ -506,7 +567,6 @@ class RunFolder:
                             f"version):\n{exc}") from None
 
     def write_plan(self, plan) -> None:
-        from .atomic_files import write_text
         write_text(self.plan_file, plan.to_json())
 
     @cached_property
@@ -519,7 +579,6 @@ class RunFolder:
         return DumpLayout.from_json(data, str(path))
 
     def write_dump_layout(self, layout: DumpLayout) -> None:
-        from .atomic_files import write_json
         write_json(self.path / DUMP_LAYOUT_NAME, layout.to_json())
 
     def species_densities(self) -> dict[int, float]:
@@ -541,7 +600,6 @@ class RunFolder:
             raise ReadError(f"{self.path} has no readable {RECORD_NAME}: {exc}") from None
 
     def write_record(self, record: RunRecord) -> None:
-        from .atomic_files import write_text
         write_text(self.path / RECORD_NAME, json.dumps(record.to_json(), indent=2))
 
     # -------------------------------------------------------------- tables
@@ -560,7 +618,6 @@ class RunFolder:
         return self._read_table(WALL_FORCES_TABLE, WALL_FORCE_SCHEMA, "wall-force")
 
     def _write_table(self, name: str, table) -> None:
-        from .atomic_files import write_text
         write_text(self.path / name, table.to_csv(index=False, float_format="%.17g"))
 
     def _read_table(self, name: str, schema: dict, what: str):
