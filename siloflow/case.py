@@ -639,7 +639,7 @@ class EngineSettings(Strict):
     def _pin_fast_profile(cls, data):
         """``profile: fast`` runs the benchmarked profile of this siloflow, copied into the case."""
         if isinstance(data, dict) and data.get("profile") == "fast" and data.get("fast_profile") is None:
-            from .profiles import packaged_fast_profile
+            from .packaged_profile import packaged_fast_profile
             data = {**data, "fast_profile": packaged_fast_profile()}
         return data
 

@@ -7,8 +7,8 @@
 - ``reference``: the papers' numerical settings: dt = t_c/50 (paper B), full stiffness, the dust at
   its true density;
 - ``fast``: the setting ``siloflow bench`` recommended, with the 95 % error bounds it was proven to
-  (``fast_profile.json`` beside this module, written from the committed benchmark by
-  ``benchmarks/publish_fast_profile.py``). It is a time-step fraction and a softness: the contacts
+  (``fast_profile.json``, read by :mod:`siloflow.packaged_profile`, written from the committed
+  benchmark by ``benchmarks/publish_fast_profile.py``). It is a time-step fraction and a softness: the contacts
   are softened until two of the smallest grains meeting at the fill's impact speed overlap by
   ``overlap_ratio`` of their radius, as the benchmark's recommended stiffness did in its case. A
   case already that soft keeps its stiffness: the profile never stiffens, and never softens a soft
@@ -20,31 +20,14 @@ profile ran, its settings and the bounds that come with it (``RunPlan.profile``)
 """
 from __future__ import annotations
 
-import json
 import math
-from functools import lru_cache
-from pathlib import Path
 
 from .case import DEFAULT_TIMESTEP_FRACTION, PROFILE_NAMES, Case
 from .errors import CaseError
+from .packaged_profile import FAST_PROFILE_FILE, PINNED, fast_profile, packaged_fast_profile  # noqa: F401 (their old home)
 
-#: the fast profile as the accuracy benchmark recommended it (benchmarks/publish_fast_profile.py)
-FAST_PROFILE_FILE = Path(__file__).with_name("fast_profile.json")
 #: the papers' numerical settings: paper B's dt = t_c/50, full stiffness, true dust density
 REFERENCE = {"timestep_fraction": 0.02, "stiffness_scale": 1.0}
-#: the fields of fast_profile.json a case carries (``siloflow.case.PinnedProfile``)
-PINNED = ("timestep_fraction", "overlap_ratio", "error_bounds", "tolerances", "speedup", "benchmark")
-
-
-@lru_cache(maxsize=1)
-def fast_profile() -> dict:
-    """The packaged fast profile's whole record (fast_profile.json)."""
-    return json.loads(FAST_PROFILE_FILE.read_text())
-
-
-def packaged_fast_profile() -> dict:
-    """The packaged fast profile as a case carries it (``engine.fast_profile``)."""
-    return {k: fast_profile()[k] for k in PINNED if fast_profile().get(k) is not None}
 
 
 def impact_overlap_ratio(case: Case, stiffness_scale: float = 1.0) -> float:
