@@ -13,9 +13,7 @@ from .case import Case, HopperGeometry, PlanarGeometry
 from .errors import CaseError, SetupError
 from .plan import (FACES, WALL, Discharge, EngineChoice, Fill, Guard, Profile, InsertionRegion, Material, Opening, Outlet,
                    Outputs, PairParameters, RunPlan, Sensors, Settle, Silo, Species, SteadyStop, TimeStep, Wall)
-
-#: speed at which grains are inserted downwards, m/s (keeps batches clear of the region)
-INSERTION_SPEED = 1.5
+from .species import INSERTION_SPEED, species_of
 
 #: planned steps above which a run needs an explicit override (``--allow-long``): LIGGGHTS takes
 #: about 1 us per particle and step, so 1e9 steps are days even for a bed of a few hundred grains
@@ -37,32 +35,6 @@ AIR_DENSITY, AIR_VISCOSITY = 1.2, 1.8e-5
 #: air drag at the outlet speed above this fraction of a grain's weight gives a warning
 #: (Newton drag goes as (v / v_terminal)^2: 10 % at v_terminal = 3.2 v)
 DRAG_WARNING = 0.1
-
-
-def species_of(case: Case) -> list[Species]:
-    """The species of a case's grains, in the plan's order: the size classes (in the order of the
-    case's radii) or the clump shape, then the dust."""
-    p = case.particles
-    rho = case.materials.particle.density
-    out = []
-    if p.kind == "clumps":
-        clump = p.clump
-        out.append(Species(name="clump", kind="clump", stream="grains", radius=max(clump.radii),
-                           bounding_radius=clump.bounding_radius, volume=clump.volume, density=rho,
-                           number_fraction=1.0, material="particle",
-                           spheres=[[*c, r] for c, r in zip(clump.centers, clump.radii)]))
-    else:
-        many = len(p.radii) > 1
-        for k, (r, n) in enumerate(zip(p.radii, p.number_fractions)):
-            out.append(Species(name=f"size{k + 1}" if many else "grain", kind="sphere",
-                               stream="grains", radius=r, bounding_radius=r, volume=cp.sphere_volume(r),
-                               density=rho, number_fraction=n, material="particle"))
-    dust = getattr(p, "dust", None)
-    if dust is not None:
-        out.append(Species(name="dust", kind="sphere", stream="dust", radius=dust.radius,
-                           bounding_radius=dust.radius, volume=cp.sphere_volume(dust.radius),
-                           density=dust.run_density, number_fraction=1.0, material="dust"))
-    return out
 
 
 def bed_volume(case: Case, height: float) -> float:

@@ -37,7 +37,7 @@ def impact_overlap_ratio(case: Case, stiffness_scale: float = 1.0) -> float:
     a linear spring (hooke, linear) v sqrt(m* / kn). A dimensionless softness, independent of the
     time step."""
     from . import contact_physics as cp
-    from .derived import INSERTION_SPEED, species_of
+    from .species import INSERTION_SPEED, species_of
     smallest = min((sp for sp in species_of(case) if sp.stream == "grains"), key=lambda sp: sp.radius)
     m = case.materials
     m_eff, r_eff = smallest.density * smallest.volume / 2.0, smallest.radius / 2.0
