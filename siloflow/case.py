@@ -794,10 +794,10 @@ class Case(Strict):
 
     @classmethod
     def from_yaml(cls, path) -> "Case":
-        """Read and validate a YAML case file (``siloflow.case_file.load_case``); ``CaseError``
-        lists every problem with its field path."""
-        from .case_file import load_case
-        return load_case(path)
+        """Read and validate a YAML case file (``siloflow.case_file.load_case``, read by
+        ``siloflow.case_reader``); ``CaseError`` lists every problem with its field path."""
+        from .case_reader import read_case
+        return read_case(Case, path)
 
     name: SafeName
     description: str = Field("", max_length=2000, description="free text, never written into a deck")
