@@ -102,16 +102,16 @@ def write_run_folder(case: Case, plan, engine, folder: Path) -> None:
     RunFolder(folder).write_plan(plan)
 
 
-def verify_deck(folder) -> None:
+def verify_deck(folder, get_engine) -> None:
     """Check that a run folder's deck is the one its own validated case renders, before an
     engine runs it: the case is loaded and validated again, the folder rendered anew into a
-    scratch folder, and every file of that render (deck, plan, meshes, ...) compared byte by
-    byte. A folder from elsewhere, edited by hand or rendered by another siloflow version is
-    refused with the first file that differs."""
+    scratch folder by the case's engine (``get_engine(name)``: the engine registry,
+    ``siloflow.engine.get_engine``, passed in by the engine asking), and every file of that
+    render (deck, plan, meshes, ...) compared byte by byte. A folder from elsewhere, edited by
+    hand or rendered by another siloflow version is refused with the first file that differs."""
     import tempfile
     from .case_file import load_case
     from .derived import derive
-    from .engine import get_engine
     folder = Path(folder)
     check_plain_tree(folder)        # no link or FIFO: the engine's writes stay inside, the reads end
     case = load_case(folder / CASE_NAME)
@@ -129,16 +129,15 @@ def verify_deck(folder) -> None:
                                  f"'siloflow render {folder / CASE_NAME} -o NEW_FOLDER'")
 
 
-def render(case: Case, folder, force: bool = False, keep=(), plan=None, engine=None) -> Path:
+def render(case: Case, folder, force: bool = False, keep=(), plan=None, *, engine) -> Path:
     """Render ``case`` into a new run folder (atomically: all or nothing). Returns the folder.
     ``plan`` is the case's (``derive(case)``, computed here when not given), ``engine`` the
-    case's engine. ``force`` replaces an existing siloflow folder (never one holding a file of
-    ``keep``, the files being read, nor one holding files siloflow did not write)."""
+    case's engine (``Engine.prepare`` passes itself; this module imports no engine). ``force``
+    replaces an existing siloflow folder (never one holding a file of ``keep``, the files being
+    read, nor one holding files siloflow did not write)."""
     from .derived import derive
-    from .engine import get_engine
     folder = Path(folder)
     plan = plan if plan is not None else derive(case)
-    engine = engine if engine is not None else get_engine(case.engine.name)
     keep = list(keep) + [ins.file for ins in case.inserts]
     with new_folder(folder, force=force, keep=keep) as tmp:
         write_run_folder(case, plan, engine, tmp)

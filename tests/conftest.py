@@ -22,6 +22,15 @@ def needs_liggghts(test):
         reason="LIGGGHTS not installed (make install-engine); CI installs it")(test))
 
 
+def render(case, folder, **kwargs):
+    """``siloflow.deck.render`` with the case's own engine (``siloflow.engine.get_engine``): the
+    deck module imports no engine, its callers pass one (``Engine.prepare`` passes itself)."""
+    from siloflow.deck import render as render_with
+    from siloflow.engine import get_engine
+    kwargs.setdefault("engine", get_engine(case.engine.name))
+    return render_with(case, folder, **kwargs)
+
+
 def render_deck(data: dict, folder: Path) -> str:
     """The LIGGGHTS deck ``siloflow render`` writes into ``folder`` for the case fields ``data``
     (their YAML beside it, ``folder.yaml``)."""

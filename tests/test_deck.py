@@ -6,10 +6,12 @@ import math
 import pytest
 
 from siloflow.case_file import case_from_dict
-from siloflow.deck import DeckError, _num, _safe_name, render
+from siloflow.deck import DeckError, _num, _safe_name
 from siloflow.engine.liggghts.deck import check_deck
 from siloflow.errors import CaseError, SetupError
 from siloflow.run_folder import RunFolder
+
+from conftest import render
 
 
 def test_deck_folder_is_complete_and_deterministic(quick_dict, tmp_path):

@@ -9,9 +9,8 @@ import subprocess
 import pytest
 import yaml
 
-from conftest import ROOT
+from conftest import ROOT, render
 from siloflow.case_file import case_from_dict
-from siloflow.deck import render
 from siloflow.engine import LiggghtsEngine
 from siloflow.run_folder import read_status
 from siloflow.engine.liggghts.log import LogState, diagnose

@@ -14,12 +14,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from siloflow.case_file import case_from_dict, load_case
-from siloflow.deck import FORBIDDEN_WORDS, render
+from siloflow.deck import FORBIDDEN_WORDS
 from siloflow.engine.liggghts.deck import check_deck, render_deck_text
 from siloflow.derived import check_run_length, derive
 from siloflow.errors import CaseError, SiloflowError
 
-from conftest import QUICK, ROOT
+from conftest import QUICK, ROOT, render
 from test_case_loading import memory_cap
 
 BASE = yaml.safe_load(QUICK.read_text())

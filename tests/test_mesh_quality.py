@@ -22,12 +22,11 @@ from stl import mesh as stl_mesh
 
 from siloflow import meshes
 from siloflow.case_file import case_from_dict, load_case
-from siloflow.deck import render
 from siloflow.derived import derive
 from siloflow.errors import CaseError, SetupError
 from siloflow.meshes import WallMesh, disc, rectangle, surface_of_revolution
 
-from conftest import QUICK, ROOT
+from conftest import QUICK, ROOT, render
 
 #: LIGGGHTS' default curvature (fix_mesh_surface.html: 0.256235 deg), and siloflow's own floor
 CURVATURE_DEG = 0.256235

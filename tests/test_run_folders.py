@@ -16,11 +16,12 @@ from typer.testing import CliRunner
 
 from siloflow.case_file import case_from_dict
 from siloflow.cli import app, printable
-from siloflow.deck import render
 from siloflow.engine import LiggghtsEngine
 from siloflow.run_folder import process_start, read_status, run_state, write_status
 from siloflow.errors import EngineRunError, ReadError, SetupError
 from siloflow.run_folder import MANIFEST_NAME, foreign_entries, record_products
+
+from conftest import render
 
 ROOT = Path(__file__).resolve().parents[1]
 runner = CliRunner()

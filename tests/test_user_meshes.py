@@ -11,13 +11,12 @@ from stl import Mode
 from stl import mesh as stl_mesh
 
 from siloflow.case_file import load_case
-from siloflow.deck import render
 from siloflow.derived import derive
 from siloflow.errors import CaseError
 from siloflow.meshes import rectangle
 from siloflow.run_folder import RunFolder
 
-from conftest import ROOT
+from conftest import ROOT, render
 
 SLAB = ROOT / "tests" / "data" / "slab_silo.yaml"
 

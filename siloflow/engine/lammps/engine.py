@@ -19,6 +19,7 @@ from ...deck import DeckError, check_deck_file, verify_deck
 from ...errors import EngineRunError, ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
 from ...run_folder import LAMMPS_FILES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree, run_state, write_status
+from .. import get_engine
 from ..base import Engine, ProgressCallback, RunRecord
 from ..processes import FILL_LOSS_LIMIT, die_with_parent, not_settled, read_plan, stop
 from ..liggghts.tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
@@ -196,7 +197,7 @@ class LammpsEngine(Engine):
         state = run_state(folder).get("state")
         if state in ("running", "complete"):
             raise SetupError(f"{folder} is {state}: there is nothing to resume")
-        verify_deck(folder)
+        verify_deck(folder, get_engine)
         first = resume_state(folder)
         if first.get("restart_step") is None or not (folder / RESTART_FILE).is_file():
             self.execute(folder, progress)

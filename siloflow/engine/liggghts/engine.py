@@ -17,6 +17,7 @@ from ...plan import RunPlan
 from ...run_folder import (LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree,
                            run_state, write_status)
 from ...guard import RunGuard
+from .. import get_engine
 from ..base import Engine, ProgressCallback, RunRecord
 from ..processes import FILL_LOSS_LIMIT, die_with_parent, not_settled, read_plan, stop
 from . import deck as liggghts_deck
@@ -242,7 +243,7 @@ class LiggghtsEngine(Engine):
         state = run_state(folder).get("state")
         if state in ("running", "complete"):
             raise SetupError(f"{folder} is {state}: there is nothing to resume")
-        verify_deck(folder)             # a folder can come from anyone: run only what its case renders
+        verify_deck(folder, get_engine)  # a folder can come from anyone: run only what its case renders
         restart = folder / RESTART_FILE
         step = _restart_step(folder)
         if not restart.is_file() or step is None:          # interrupted before the bed settled
