@@ -1,5 +1,6 @@
 """The seam between what a case means and how an engine writes it (issue 14): the run plan, the
-run folder's owner and its engine-neutral tables, the engine registry and launch profile."""
+run folder's owner and its engine-neutral tables, the engine registry and launch profile; and the
+import graph that follows the data flow, without cycles (issue 37)."""
 from __future__ import annotations
 
 import ast
@@ -110,6 +111,133 @@ def test_postprocess_never_derives_nor_reads_the_case():
             elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
                 hits = [n for n in names if n in node.value]
                 assert not hits, f"{path.name} line {node.lineno} spells {hits}"
+
+
+# ---------------------------------------------------------------- the import graph (issue 37)
+#: the low layers: errors, atomic writes, the case schema and its reading. They reach (through any
+#: chain of imports, inside functions too) nothing of the layers after the case in the data flow
+LOW_LAYERS = ("siloflow.errors", "siloflow.atomic_files", "siloflow.engines", "siloflow.case", "siloflow.case_reader",
+              "siloflow.case_file", "siloflow.packaged_profile")
+HIGH_LAYERS = ("siloflow.derived", "siloflow.run_folder", "siloflow.deck", "siloflow.engine", "siloflow.runs",
+               "siloflow.cli", "postprocess")
+
+
+def import_graph(root: Path = ROOT) -> tuple[dict[str, dict[str, int]], dict[str, Path]]:
+    """The internal imports of siloflow/ and postprocess/: every import statement anywhere in a
+    module (inside functions too), resolved as ../shared/tools/import-cycles resolves them: a
+    relative import from the module's package, ``from pkg import name`` to the module ``pkg.name``
+    when there is one, else to the nearest enclosing module (``from siloflow import X`` is the
+    package's ``__init__``). Returns (module -> {imported module: line}, module -> file)."""
+    files = {}
+    for pkg in ("siloflow", "postprocess"):
+        for path in sorted((root / pkg).rglob("*.py")):
+            rel = path.relative_to(root).with_suffix("")
+            files[".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)] = path
+
+    def module_of(name):
+        while name and name not in files:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph = {}
+    for name, path in files.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        edges = graph.setdefault(name, {})
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module
+                if node.level:
+                    parts = package.split(".")
+                    base = ".".join(parts[:len(parts) - (node.level - 1)] + ([node.module] if node.module else []))
+                targets = [f"{base}.{alias.name}" for alias in node.names] + [base]
+            else:
+                continue
+            found = {module_of(t) for t in targets} - {None, name}
+            for target in found:
+                if not any(other.startswith(target + ".") for other in found):   # the submodule, not its package
+                    edges[target] = min(edges.get(target, node.lineno), node.lineno)
+    return graph, files
+
+
+def import_cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on_stack, cycles = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return cycles
+
+
+def test_internal_imports_are_acyclic():
+    """Data flows one way (case file -> case -> plan -> deck -> engine -> run folder -> analyses ->
+    report) and so do imports: no chain of imports, not even one inside a function, leads from a
+    module back to itself (what ../shared/tools/import-cycles reports)."""
+    graph, files = import_graph()
+    assert {"siloflow", "siloflow.case", "siloflow.engine.base", "postprocess.first_results"} <= set(graph)
+    assert graph["siloflow.deck"]["siloflow.run_folder"] and graph["siloflow.runs"]["postprocess.first_results"]
+    problems = []
+    for cycle in import_cycles(graph):
+        edges = [f"{a} -> {b} ({files[a].relative_to(ROOT)}:{graph[a][b]})" for a in cycle for b in cycle
+                 if b in graph[a]]
+        problems.append(f"cycle of {len(cycle)}: " + "; ".join(edges))
+    assert not problems, "\n".join(problems)
+
+
+def test_import_cycles_are_found(tmp_path):
+    """The check above sees imports inside functions, relative ones, submodules imported from
+    their package and names imported from a package's ``__init__``, and finds their cycles."""
+    for name, text in {"siloflow/__init__.py": "def __getattr__(name):\n    from . import b\n",
+                       "siloflow/a.py": "def f():\n    from .b import g\n",
+                       "siloflow/b.py": "from siloflow import a\n",
+                       "siloflow/c.py": "import os\nfrom . import VERSION\n",
+                       "siloflow/engine/__init__.py": "from ..c import x\n",
+                       "postprocess/__init__.py": "import siloflow.engine\n"}.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    graph, _ = import_graph(tmp_path)
+    assert graph == {"siloflow": {"siloflow.b": 2}, "siloflow.a": {"siloflow.b": 2}, "siloflow.b": {"siloflow.a": 1},
+                     "siloflow.c": {"siloflow": 2}, "siloflow.engine": {"siloflow.c": 1},
+                     "postprocess": {"siloflow.engine": 1}}
+    assert import_cycles(graph) == [["siloflow.a", "siloflow.b"]]
+    assert import_cycles({**graph, "siloflow.b": {"siloflow.c": 1}}) == [["siloflow", "siloflow.b", "siloflow.c"]]
+
+
+def test_low_layers_import_no_later_step():
+    """errors, atomic writes, the engine names and the case (schema, reading, packaged profile)
+    import, directly or not, nothing of the plan, the run folder, decks, engines or analyses."""
+    graph, _ = import_graph()
+    for low in LOW_LAYERS:
+        reached, todo = set(), [low]
+        while todo:
+            for target in graph[todo.pop()]:
+                if target not in reached:
+                    reached.add(target)
+                    todo.append(target)
+        later = sorted(m for m in reached if any(m == h or m.startswith(h + ".") for h in HIGH_LAYERS))
+        assert not later, f"{low} imports (through a chain) {later}"
 
 
 # ---------------------------------------------------------------- the tables
