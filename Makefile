@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams golden paper-a-quick paper-b-quick paper-a paper-b clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly golden paper-a-quick paper-b-quick paper-a paper-b clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -200,6 +200,10 @@ bench-rank-fill: install
 # do sensor meshes change the flow? one side wall against band x sector meshes, 10 seeds a side (resumable in runs/)
 bench-seams: install
 	$(PY) benchmarks/seam_check.py
+
+# LIGGGHTS against LAMMPS on the polydisperse accuracy case, the same placed fill, 10 seeds each (resumable in runs/)
+bench-engines-poly: install
+	$(PY) benchmarks/engines_poly.py
 
 # the numerical-stability envelope of the same case (siloflow stability, two seeds; resumable in runs/)
 STABILITY = runs/bench_stability
