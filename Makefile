@@ -201,7 +201,7 @@ bench-rank-fill: install
 bench-seams: install
 	$(PY) benchmarks/seam_check.py
 
-# LIGGGHTS against LAMMPS on the polydisperse accuracy case, the same placed fill, 10 seeds each (resumable in runs/)
+# LIGGGHTS against LAMMPS on the polydisperse accuracy case, the same placed fill, 20 seeds each (resumable in runs/)
 bench-engines-poly: install
 	$(PY) benchmarks/engines_poly.py
 

@@ -9,7 +9,7 @@ is the walls (LIGGGHTS' faceted mesh, LAMMPS' round region) and the contact law.
 
 The case is the accuracy benchmark's (benchmarks/cases/accuracy_small.yaml: 1000 grains of paper B's
 7 sizes, hooke) at the settings of the engine rows (``E1e-2_dt0.1``: dt = 0.1 t_c, 1/100 of the
-stiffness), 2 ranks, ``SEEDS`` seeds per engine; a seed places the same grains in both engines. One
+stiffness), 2 ranks, ``SEEDS`` seeds per engine (the table resumes, so a larger ``SEEDS`` extends it); a seed places the same grains in both engines. One
 engine job at a time.
 
 Writes benchmarks/results/engines_poly/: runs.csv (every run: the accuracy bench's quantities),
@@ -35,7 +35,7 @@ from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_b
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
 OUT = ROOT / "benchmarks" / "results" / "engines_poly"
 WORK = ROOT / "runs" / "bench_engines_poly"
-SEEDS = 10
+SEEDS = 20
 ENGINES = ("liggghts", "lammps")
 RANKS = 2
 #: the settings measured (pinned: the table resumes on them)
