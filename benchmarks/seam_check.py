@@ -113,9 +113,6 @@ def figure(runs, summary, path: Path) -> None:
         rates = mine[~mine.clogged].flow_rate_kg_s * 1000
         ax.plot([x] * len(rates), rates, "o", color=colour, alpha=0.6)
         ax.hlines(rates.mean(), x - 0.25, x + 0.25, color=colour)
-        if mine.clogged.any():
-            ax.annotate(f"{int(mine.clogged.sum())} clogged", (x, rates.min()), textcoords="offset points",
-                        xytext=(0, -14), ha="center", fontsize=8)
     row = summary.set_index("quantity").loc["flow_rate_kg_s"]
     ax.set_xticks([0, 1], [f"{n}\n(n = {int((runs.variant == n).sum())}, flowing {int(((runs.variant == n) & ~runs.clogged).sum())})"
                            for n in VARIANTS])
