@@ -40,3 +40,14 @@ def run_case(data: dict, work: Path, *extra: str) -> tuple[Path, float]:
     folder = work / "runs" / data["name"]
     wall = timed(siloflow("run", str(case_path), "-o", str(folder), *extra), work / f"{data['name']}.log")
     return folder, wall
+
+
+def clogged(folder: Path) -> bool:
+    """Whether a finished run's discharge clogged, as its summary says (``summary.json``'s
+    ``clogged``, ``postprocess.discharge.clog``). A summary written before clog detection is refused:
+    ``siloflow post`` the folder again."""
+    from siloflow.run_folder import RunFolder
+    summary = RunFolder(folder).read_summary()
+    if "clogged" not in summary:
+        raise SystemExit(f"{folder}: its summary predates clog detection; run `siloflow post {folder}` again")
+    return summary["clogged"] is not None

@@ -24,13 +24,13 @@ from pathlib import Path
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_runs import ROOT  # noqa: E402
+from bench_runs import ROOT, clogged  # noqa: E402
 
 sys.path.insert(0, str(ROOT))
 from siloflow import bench_stats  # noqa: E402
-from siloflow.accuracy_bench import DISCHARGE_QUANTITIES, QUANTITIES, run_metrics  # noqa: E402
+from siloflow.accuracy_bench import DISCHARGE_QUANTITIES, QUANTITIES, Candidate, candidate_case, run_metrics  # noqa: E402
 from siloflow.atomic_files import atomic_path, write_text  # noqa: E402
-from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing, run_name  # noqa: E402
+from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing  # noqa: E402
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
 OUT = ROOT / "benchmarks" / "results" / "engines_poly"
@@ -44,18 +44,14 @@ TIMESTEP_FRACTION, STIFFNESS_SCALE = 0.1, 1e-2
 AGREE = 0.03
 
 
-def case_of(base: dict, engine: str, seed: int) -> dict:
-    """The case fields of one run."""
-    settings = {k: v for k, v in base["engine"].items() if k not in ("profile", "name")}
-    settings.update(name=engine, profile="custom", timestep_fraction=TIMESTEP_FRACTION,
-                    stiffness_scale=STIFFNESS_SCALE, ranks=RANKS)
-    return {**base, "engine": settings, "seed": seed, "name": run_name("engines_poly", engine, f"s{seed}")}
+def candidate(engine: str) -> Candidate:
+    """The settings measured on ``engine`` (the accuracy bench's ``E1e-2_dt0.1``, ``RANKS`` ranks)."""
+    return Candidate(f"E1e-2_dt0.1_{engine}", TIMESTEP_FRACTION, STIFFNESS_SCALE, ranks=RANKS, engine=engine)
 
 
 def measure(folder: Path) -> dict:
     """A finished run's quantities (``run_metrics``) and whether its discharge clogged."""
-    from siloflow.run_folder import RunFolder
-    return {**run_metrics(folder), "clogged": bool(RunFolder(folder).read_summary().get("clogged"))}
+    return {**run_metrics(folder), "clogged": clogged(folder)}
 
 
 def summary(runs: pd.DataFrame) -> pd.DataFrame:
@@ -94,7 +90,8 @@ def figure(table: pd.DataFrame, path: Path) -> None:
 
 def main() -> None:
     base, _ = read_base_case(CASE)
-    planned = [PlannedRun(key={"engine": e, "seed": base["seed"] + k}, case=case_of(base, e, base["seed"] + k))
+    planned = [PlannedRun(key={"engine": e, "seed": base["seed"] + k},
+                          case=candidate_case(base, candidate(e), base["seed"] + k))
                for k in range(SEEDS) for e in ENGINES]
     nan = {q: float("nan") for q in QUANTITIES}
     rows = run_missing(WORK, planned, measure, lambda f, reason: {"wall_s": engine_wall_time(f), "clogged": False, **nan},

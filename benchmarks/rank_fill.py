@@ -30,11 +30,11 @@ from bench_runs import ROOT  # noqa: E402
 
 sys.path.insert(0, str(ROOT))
 from siloflow import bench_stats  # noqa: E402
-from siloflow.accuracy_bench import QUANTITIES, run_metrics  # noqa: E402
+from siloflow.accuracy_bench import QUANTITIES, Candidate, candidate_case, run_metrics  # noqa: E402
 from siloflow.atomic_files import write_text  # noqa: E402
 from siloflow.engine.liggghts.log import PLACED, parse_log_text  # noqa: E402
 from siloflow.fill_placement import class_counts  # noqa: E402
-from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing, run_name  # noqa: E402
+from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing  # noqa: E402
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
 OUT = ROOT / "benchmarks" / "results" / "rank_fill"
@@ -48,11 +48,11 @@ TIMESTEP_FRACTION, STIFFNESS_SCALE = 0.2, 1e-3
 
 
 def case_of(base: dict, fraction: float, ranks: int, seed: int) -> dict:
-    """The case fields of one run."""
-    engine = {k: v for k, v in base["engine"].items() if k != "profile"}
-    engine.update(profile="custom", timestep_fraction=TIMESTEP_FRACTION, stiffness_scale=STIFFNESS_SCALE, ranks=ranks)
-    return {**base, "engine": engine, "seed": seed, "fill": {**base["fill"], "batch_volume_fraction": fraction},
-            "name": run_name("rank_fill", f"b{fraction:g}", f"r{ranks}", f"s{seed}")}
+    """The case fields of one run: the accuracy bench's candidate at the pinned settings on ``ranks``
+    ranks, with the batch fraction ``fraction``."""
+    cand = Candidate(f"b{fraction:g}_r{ranks}", TIMESTEP_FRACTION, STIFFNESS_SCALE, ranks=ranks)
+    data = candidate_case(base, cand, seed)
+    return {**data, "fill": {**data["fill"], "batch_volume_fraction": fraction}}
 
 
 def bed_weight(folder: Path) -> float:

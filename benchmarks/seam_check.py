@@ -27,26 +27,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_runs import run_case  # noqa: E402
+from bench_runs import clogged, run_case  # noqa: E402
 VARIANTS = {"one_wall": ["flow_rate", "force_balance"], "sensor_meshes": ["flow_rate", "force_balance", "wall_pressure"]}
 
 
 #: compared quantities: summary.json's flow rate (kg/s), the settled bed's force balance and wall
 #: friction share (dimensionless)
 QUANTITIES = ("flow_rate_kg_s", "force_balance", "wall_friction_share")
-
-
-def discharge_outcome(folder: Path) -> dict:
-    """Mass discharged (kg) and whether the run clogged (``postprocess.discharge.clog``: a fifth of
-    the bed or more still in the silo, none out over the last 40 % of the discharge). A clogged run's flow rate is no sample of
-    the flowing rate; the benchmark counts clogs apart."""
-    import pandas as pd
-
-    from postprocess.discharge import clog
-    d = pd.read_csv(folder / "results" / "discharge.csv")
-    initial = float(d.loc[d.time_since_open <= 0, "mass_total"].iloc[-1])
-    return {"discharged_kg": float(d.outlet_mass.iloc[-1]),
-            "clogged": clog(d.time_since_open, d.outlet_mass, d.mass_in_silo, initial) is not None}
 
 
 def main(case_file: Path, seeds: int, work: Path, out: Path) -> None:
@@ -73,14 +60,14 @@ def main(case_file: Path, seeds: int, work: Path, out: Path) -> None:
             rows.append({"variant": name, "seed": seed, "wall_s": wall,
                          "flow_rate_kg_s": s["flow_rate"]["rate"], "flow_rate_stderr_kg_s": s["flow_rate"]["stderr"],
                          "force_balance": s["force_balance"]["ratio"],
-                         "wall_friction_share": s["force_balance"]["wall_friction_share"]})
+                         "wall_friction_share": s["force_balance"]["wall_friction_share"],
+                         "discharged_kg": s["discharged_mass_kg"]})
             out.mkdir(parents=True, exist_ok=True)
             write_text(table, pd.DataFrame(rows).to_csv(index=False))
             print(f"{name} seed {seed}: {rows[-1]['flow_rate_kg_s'] * 1000:.2f} g/s")
     runs = pd.DataFrame(rows)
-    outcome = pd.DataFrame([discharge_outcome(work / "runs" / f"{base['name']}_{v}_{int(seed)}")
-                            for v, seed in zip(runs.variant, runs.seed)], index=runs.index)
-    runs[outcome.columns] = outcome
+    runs["clogged"] = [clogged(work / "runs" / f"{base['name']}_{v}_{int(seed)}")
+                       for v, seed in zip(runs.variant, runs.seed)]
     write_text(table, runs.to_csv(index=False))
     flowing = runs[~runs.clogged]
     one, sensed = (flowing[flowing.variant == v] for v in VARIANTS)

@@ -186,20 +186,20 @@ def profile_line(p: dict | None) -> str:
     return line
 
 
-def clog_line(clogged: dict | None) -> str:
-    """What a clogged discharge is said to be (empty if it did not clog, :func:`discharge.clog`)."""
-    if not clogged:
-        return ""
+def clog_line(clogged: dict, fr: dict) -> str:
+    """What a clogged discharge (:func:`discharge.clog`) is said to be, with the straight line over its
+    whole discharge (``fr``: the summary's flow rate) beside it, not as a result."""
     return (f"the discharge CLOGGED: nothing left the silo after t = {_fmt(clogged['t_last_outflow_s'], '.3g')} s "
             f"from opening ({_fmt(clogged['discharged_mass_kg'] * 1000)} g out), so the flow rate is not a steady "
-            "one; an orifice this size clogs by chance, so run more seeds or widen it")
+            "one; an orifice this size clogs by chance, so run more seeds or widen it (fitted over the whole "
+            f"discharge: {mass_rate(fr['rate'], fr.get('stderr'))})")
 
 
 def flow_rate_line(fr: dict, clogged: dict | None = None) -> str:
     """The report's flow-rate line: the one steady rate, its batch-means error, its window, or the
     clog that left no steady rate."""
     if clogged:
-        return f"- {clog_line(clogged)} (fitted over the whole discharge: {mass_rate(fr['rate'], fr.get('stderr'))})"
+        return f"- {clog_line(clogged, fr)}"
     line = (f"- steady flow rate Wf = {mass_rate(fr['rate'], fr.get('stderr'))} (t = {_fmt(fr['t_start'], '.3g')}-"
             f"{_fmt(fr['t_end'], '.3g')} s, {fr.get('n_samples')} samples, r2 {_fmt(fr['r2'], '.4f')}")
     if fr.get("batches"):

@@ -295,7 +295,7 @@ def _post(folder: Path, measured: Path | None = None) -> None:
                   f"({fb['wall_friction_share']:.2f} of it by wall friction)")
     from postprocess.numbers import mass_rate
     if summary.get("clogged"):
-        out.print(f"{clog_line(summary['clogged'])} (fitted over the whole discharge: {mass_rate(fr['rate'], fr['stderr'])})")
+        out.print(clog_line(summary["clogged"], fr))
     else:
         out.print(f"steady flow rate: {mass_rate(fr['rate'], fr['stderr'])} (standard error by batch means); "
                   f"discharged {summary['discharged_mass_kg'] * 1000:.1f} g")
