@@ -201,8 +201,12 @@ bench-rank-fill: install
 bench-seams: install
 	$(PY) benchmarks/seam_check.py
 
-# LIGGGHTS against LAMMPS on the polydisperse accuracy case, the same placed fill, 20 seeds each (resumable in runs/)
+# LIGGGHTS against LAMMPS on the polydisperse accuracy case, the same placed fill, 40 seeds each (resumable in
+# runs/bench_engines_poly, and from the committed runs.csv)
 bench-engines-poly: install
+	mkdir -p runs/bench_engines_poly
+	if [ ! -f runs/bench_engines_poly/runs.csv ] && [ -f benchmarks/results/engines_poly/runs.csv ]; then \
+	  cp benchmarks/results/engines_poly/runs.csv runs/bench_engines_poly/; fi
 	$(PY) benchmarks/engines_poly.py
 
 # the numerical-stability envelope of the same case (siloflow stability, two seeds; resumable in runs/)
