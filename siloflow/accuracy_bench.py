@@ -19,6 +19,7 @@ from typing import Callable, Optional
 
 from .errors import SetupError
 from .case import PROFILE_FIELDS
+from .profiles import REFERENCE as REFERENCE_SETTINGS
 from .run_table import run_name
 
 #: the quantities compared, from each run's results (SI): steady flow rate (kg/s), static band
@@ -54,7 +55,7 @@ class Candidate:
     engine: Optional[str] = None            # engine.name (None: the case's): the other engine's cost
 
 
-REFERENCE = Candidate("reference", 0.02, 1.0)
+REFERENCE = Candidate("reference", REFERENCE_SETTINGS["timestep_fraction"], REFERENCE_SETTINGS["stiffness_scale"])
 #: the default candidates, reference first, then cheapest first (a stopped bench has the cheap ones)
 CANDIDATES = (
     REFERENCE,

@@ -714,38 +714,15 @@ def stability(case_file: Path = typer.Argument(..., help="YAML case file"),
     out.print(f"envelope: {output} (envelope.csv, edges.json, envelope.png)")
 
 
-def _sweep_table_runs(table_file: Path) -> list[Path]:
-    """The run folders of a sweep table's complete runs (its ``run`` column; a relative path is
-    taken from the table's folder). Raises ``ReadError``."""
-    import pandas as pd
-    try:
-        rows = pd.read_csv(table_file)
-    except (OSError, ValueError) as exc:
-        raise ReadError(f"cannot read the sweep table {table_file}: {exc}") from None
-    if "run" not in rows.columns:
-        raise ReadError(f"{table_file} has no 'run' column: give run folders, or the sweep.csv of siloflow sweep")
-    if "status" in rows.columns:
-        rows = rows[rows.status == "complete"]
-    runs = [path if path.is_absolute() else table_file.parent / path for path in map(Path, rows.run.astype(str))]
-    if not runs:
-        raise ReadError(f"{table_file} lists no complete run")
-    return runs
-
-
 @app.command()
 def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folders (different orifices or grains), "
                                                   "or one sweep table (sweep.csv: its complete runs)"),
              output: Path = typer.Option(Path("beverloo.csv"), "-o", "--output", help="table of the runs and the fit")) -> None:
     """Fit Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) across runs: C and k with standard errors."""
-    from postprocess.flow_rate import beverloo_table, fit_beverloo
+    from .answers import beverloo as fit_runs
     from .atomic_files import write_json, write_text
     try:
-        if len(folders) == 1 and folders[0].suffix == ".csv" and folders[0].is_file():
-            folders = _sweep_table_runs(folders[0])
-        table = beverloo_table(folders)
-        if table.g.nunique() > 1:
-            raise ReadError("the runs differ in gravity; one Beverloo fit needs one g")
-        fit = fit_beverloo(table.D0, table.d, table.W, table.rho_b, float(table.g.iloc[0]))
+        table, fit = fit_runs(folders)
     except SiloflowError as exc:
         _fail(exc)
     except ValueError as exc:
@@ -767,41 +744,20 @@ def design(case_file: Path = typer.Argument(..., help="YAML case file (its desig
            top: str = typer.Option("flat", help="free surface: flat (h_o = 0) or heap (a cone at the angle of repose)")) -> None:
     """EN 1991-4 design loads of the case's silo filled to its bed height: filling, discharge, patch, hopper."""
     import numpy as np
-    import pandas as pd
     from postprocess.design_figure import compare_with_dem, design_figure
+    from .answers import design as design_of
     from .atomic_files import write_text
-    from .case import DesignSettings
-    from .design_loads import CASE_FIELDS, bulk_solid, design_loads
-    from .errors import SetupError
-    from .run_folder import RESULT_TABLES, case_differences
     try:
-        case = load_case(case_file)
-        d = plan_of(case, case_file)
-        differs = case_differences(case, RunFolder(run_folder).case, CASE_FIELDS) if run_folder else []
-        if differs:
-            raise SetupError(f"--run {run_folder} is a run of another case: its {RunFolder(run_folder).case_file.name} "
-                             f"differs from {case_file} in what the design loads and its band pressures depend on:\n"
-                             + "\n".join(f"  {path}: {msg}" for path, msg in differs[:10])
-                             + (f"\n  and {len(differs) - 10} more" if len(differs) > 10 else "")
-                             + f"\ngive a run of this case, or design with the run's own case: "
-                             f"siloflow design {RunFolder(run_folder).case_file}")
-        s = case.design or DesignSettings(material="wheat")
-        solid = bulk_solid(s.material, unit_weight=s.unit_weight, K=s.K, mu=s.mu, phi_r=s.phi_r_deg, C_op=s.C_op)
-        loads = design_loads(d.geometry, solid, d.fill.bed_height_estimate, s.wall_type, s.action_assessment_class,
-                             s.eccentricity, top=top)
-        bands_file = RunFolder(run_folder).results / RESULT_TABLES["bands"] if run_folder else None
-        if bands_file is not None and not bands_file.is_file():
-            raise ReadError(f"{bands_file} not found: post-process the run first (siloflow post {run_folder})")
-        bands = pd.read_csv(bands_file) if bands_file is not None else None
+        result = design_of(case_file, run_folder, top=top)
         output.mkdir(parents=True, exist_ok=True)
     except SiloflowError as exc:
         _fail(exc)
     except ValueError as exc:
         _fail(SiloflowError(str(exc)))
-    if case.design is None:
-        rho_g = case.materials.particle.density * d.fill.packing_fraction * case.gravity
+    loads, bands = result.loads, result.bands
+    if result.defaulted:
         out.print(f"note: the case has no design section: wheat (Annex E), wall D2, AAC 2; the DEM grains' bulk "
-                  f"unit weight is about {rho_g:.4g} N/m3 (design: unit_weight, K, mu to use them)")
+                  f"unit weight is about {result.bulk_unit_weight:.4g} N/m3 (design: unit_weight, K, mu to use them)")
     m, v = loads.material, loads.values["max_horizontal"]
     out.print(printable(f"{m.name}, {loads.wall_type}, AAC {loads.aac}: {loads.classification} silo ({loads.top} top), h_c/d_c "
                         f"{loads.aspect_ratio:.3g}; K {v.K:.3g}, mu {v.mu:.3g}, z_o {v.z_o:.3g} m; C_h {loads.C_h:.3g}, "

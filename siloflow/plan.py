@@ -15,7 +15,7 @@ from typing import Literal, Optional
 
 from pydantic import BaseModel, ConfigDict, PrivateAttr, ValidationError
 
-from .case import Analysis, DesignSettings
+from .case import DEFAULT_TIMESTEP_FRACTION, Analysis, DesignSettings
 from .errors import ReadError
 
 #: bumped whenever a field changes meaning; a plan of another version is refused
@@ -279,7 +279,7 @@ class Profile(Frozen):
     the accuracy benchmark's speed-up and 95 % error bounds {quantity: relative bound}."""
 
     name: Literal["custom", "reference", "fast"] = "custom"
-    timestep_fraction: float = 0.15
+    timestep_fraction: float = DEFAULT_TIMESTEP_FRACTION
     stiffness_scale: float = 1.0
     overlap_ratio: Optional[float] = None     # fast: the impact overlap / radius the stiffness was softened to
     speedup: Optional[float] = None

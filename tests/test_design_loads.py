@@ -530,3 +530,18 @@ def test_material_table_matches_en1991_4_table_e1():
     # maize C_op 0.9 in the filling patch: C_pf = 0.21 * 0.9 * (1 - exp(-1.5 (20/6 - 1))) = 0.18329
     maize = design_loads(cylinder(3.0), "maize", 20.0)
     assert maize.C_pf == pytest.approx(0.21 * 0.9 * (1.0 - math.exp(-3.5)), rel=1e-9)
+
+
+def test_design_api_is_what_the_cli_writes(tmp_path):
+    """siloflow.design (issue 37: the CLI's answers have API functions) gives the loads the CLI tabulates."""
+    import siloflow
+    from siloflow.case_file import load_case
+    from siloflow.errors import CaseError
+    out = tmp_path / "d"
+    assert CliRunner().invoke(app, ["design", str(QUICK), "-o", str(out)]).exit_code == 0
+    result = siloflow.design(load_case(QUICK))
+    assert result.defaulted and result.bands is None and result.bulk_unit_weight > 0
+    assert result.loads.table().round(9).equals(pd.read_csv(out / "design_loads.csv").round(9))
+    assert siloflow.design(QUICK, top="heap").loads.h_o > 0
+    with pytest.raises(CaseError, match="missing.yaml"):
+        siloflow.design(tmp_path / "missing.yaml")

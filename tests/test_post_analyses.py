@@ -419,5 +419,8 @@ def test_beverloo_command_fits_across_run_folders(tmp_path, quick_dict):
     assert result.exit_code == 0, result.output
     fit = json.loads(out.with_suffix(".json").read_text())
     assert fit["C"] == pytest.approx(0.6, rel=1e-4) and fit["k"] == pytest.approx(1.4, rel=1e-3)
+    import siloflow                                  # the same fit from Python
+    table, api_fit = siloflow.beverloo(folders)
+    assert len(table) == 5 and (api_fit.C, api_fit.k) == pytest.approx((fit["C"], fit["k"]), rel=1e-12)
     result = CliRunner().invoke(app, ["beverloo", folders[0], str(tmp_path)])
     assert result.exit_code == 1 and "summary.json" in result.output
