@@ -241,8 +241,9 @@ bench-coverage: install
 bench-mobilise-engines: install
 	$(PY) benchmarks/mobilise_engines.py --seeds 5
 
-# rewrite tests/golden/ (the decks every shipped case renders) after a change that alters decks on
-# purpose; commit them with the change (tests/test_golden_decks.py compares)
+# rewrite tests/golden/ (the plan and the decks every shipped case renders, in LIGGGHTS and, in each
+# case's lammps/, in LAMMPS; none for a case LAMMPS refuses) after a change that alters decks or plans
+# on purpose; commit them with the change (tests/test_golden_decks.py compares)
 golden: $(VENV)/.installed
 	$(PY) tests/golden.py
 
