@@ -33,7 +33,7 @@ def test_hertz_numbers_are_liggghts_moduli_written_exactly(plans):
     words = cl.pair_coeff_args(plan, pair).split()
     assert words[:5] == ["hertz", repr(4 / 3 * pair.y_eff), repr(pair.restitution), "damping", "coeff_restitution"]
     assert float(words[1]) == pytest.approx(4 / 3 * y_eff, rel=1e-14)
-    assert words[5:7] == ["tangential", "mindlin"]
+    assert words[5:7] == ["tangential", "mindlin_rescale/force"]
     assert float(words[7]) == pytest.approx(8 * g_eff, rel=1e-14)
     assert float(words[8]) == pytest.approx(2 * math.sqrt(g_eff / y_eff), rel=1e-14)   # gamma_t / gamma_n
     assert words[9] == repr(pair.friction) and len(words) == 10        # no limit_damping, no rolling
