@@ -185,48 +185,38 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         profile: Optional[str] = typer.Option(None, "--profile", help="numerical profile for this run, over the "
                                               "case's: reference (the papers': dt = t_c/50, full stiffness), fast "
                                               "(the accuracy benchmark's, with its error bounds) or custom")) -> None:
-    """Render, run LIGGGHTS with a progress bar, check the run, and compute first results."""
-    from .derived import check_run_length
-    from .disk_estimate import check_disk_space
-    from .engine import get_engine
-    from .engine.base import check_case
+    """Render, run the case's engine with a progress bar, check the run, and compute first results."""
+    from .runs import prepare_resume, prepare_run
     if resume is not None:
         if case_file is not None or output is not None:
             _fail(SiloflowError("--resume DIR takes no case file and no --output: the folder has both"))
         if profile is not None:
             _fail(SiloflowError("--resume DIR takes no --profile: a run resumes with the profile it started with"))
-        _resume(resume, liggghts, post_process)
+        try:
+            prepared = prepare_resume(resume, executable=liggghts)
+        except SiloflowError as exc:
+            _fail(exc)
+        signal.signal(signal.SIGTERM, _interrupt)
+        out.print(f"resuming {resume} (it was {prepared.state_before})")
+        _drive(prepared.folder, prepared.execute, post_process)
         return
     if case_file is None or output is None:
         _fail(SiloflowError("give a case file and -o/--output (or --resume DIR)"))
     try:
-        case = load_case(case_file)
-        if profile is not None:
-            from .profiles import with_profile
-            case, dropped = with_profile(case, profile)
-            if dropped:
-                out.print(f"--profile {profile} replaces the case's {', '.join(dropped)}")
-        engine = get_engine(case.engine.name, executable=liggghts)
-        check_case(case, engine)
-        engine.preflight(case.engine.ranks)  # engine and launcher present before anything is written
-        derived = plan_of(case, case_file)  # the run plan: computed once, handed on
-        check_run_length(derived, allow_long)
-        sizes = check_disk_space(case, derived, output, allow_large_output)
-        folder = engine.prepare(case, output, force=force, keep=[case_file], plan=derived)
+        prepared = prepare_run(case_file, output, force=force, allow_long=allow_long,
+                               allow_large_output=allow_large_output, profile=profile, executable=liggghts)
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
-    _warn(derived, engine, case)
+    derived, folder, sizes = prepared.plan, prepared.folder, prepared.output_estimate
+    if prepared.profile_replaced:
+        out.print(f"--profile {profile} replaces the case's {', '.join(prepared.profile_replaced)}")
+    _warn(derived, prepared.engine, prepared.case)
     out.print(profile_note(derived.profile))
     out.print(f"run folder: {folder} (expected output up to {sizes['total'] / 1e6:.0f} MB, "
               f"{sizes['frames']} dump frames)")
     if dust_note(derived):
         out.print(dust_note(derived))
-    if cache is None:
-        _drive(folder, lambda progress: (engine.execute(folder, progress=progress), engine.collect(folder))[1],
-               post_process)
-        return
-    from .fill_cache import FillCache, run_with_cache
 
     def hit(key: str) -> None:
         out.print(f"fill from the cache {cache} (key {key[:12]}): the settled bed is reused, the run starts "
@@ -235,8 +225,8 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     def warn(message: str) -> None:
         err.print(printable(f"warning: {message}"), markup=False, highlight=False)
 
-    _drive(folder, lambda progress: run_with_cache(engine, folder, derived, FillCache(cache), progress, on_hit=hit,
-                                                   on_warning=warn), post_process)
+    _drive(folder, lambda progress: prepared.execute(progress, cache=cache, on_cache_hit=hit, on_warning=warn),
+           post_process)
 
 
 def _drive(folder: Path, work, post_process: bool) -> None:
@@ -263,32 +253,13 @@ def _drive(folder: Path, work, post_process: bool) -> None:
         _post(folder)
 
 
-def _resume(folder: Path, liggghts: Optional[str], post_process: bool) -> None:
-    from .engine import get_engine
-    from .run_folder import RunFolder, run_state
-    try:
-        case = load_case(RunFolder(folder).case_file)
-        engine = get_engine(case.engine.name, executable=liggghts)
-        engine.preflight(case.engine.ranks)
-        state = run_state(folder).get("state")
-    except SiloflowError as exc:
-        _fail(exc)
-    signal.signal(signal.SIGTERM, _interrupt)
-    out.print(f"resuming {folder} (it was {state})")
-    _drive(folder, lambda progress: engine.resume(folder, progress=progress), post_process)
-
-
 def _post(folder: Path, measured: Path | None = None) -> None:
-    from postprocess.first_results import analyse
     from postprocess.report import clog_line, console_lines
-    from .run_folder import RunFolder, record_products
-    since = time.time()
+    from .runs import post_process
     try:
-        summary = analyse(folder, measured)
+        summary = post_process(folder, measured)
     except SiloflowError as exc:
         _fail(exc)
-    finally:                # what post wrote is siloflow's: --force may replace it later
-        record_products(folder, RunFolder(folder).results, since)
     fb, fr = summary["force_balance"], summary["flow_rate"]
     if fb:
         out.print(f"force balance of the settled bed: walls+bottom carry {fb['ratio']:.4f} x the weight "

@@ -16,10 +16,12 @@ post-processed is analysed on first access.
 from __future__ import annotations
 
 import os
+import time
 import warnings
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import Iterator, Optional
+from typing import Callable, Iterator, Optional
 
 import pandas as pd
 
@@ -144,36 +146,134 @@ def open_run(folder, unfinished: bool = False) -> Run:
     return Run(folder, unfinished=unfinished)
 
 
-def run(case, folder, force: bool = False, progress=None, allow_long: bool = False,
-        allow_large_output: bool = False) -> Run:
-    """Render ``case`` (a ``Case``, a dict of case fields or a case-file path) into ``folder``,
-    run its engine, check the run and compute the first results, as ``siloflow run`` does;
-    return the ``Run``. As there, a run over the step cap (``allow_long``) or whose estimated
-    output exceeds the free disk (``allow_large_output``) is refused before anything is written."""
-    from postprocess.first_results import analyse
+@dataclass
+class PreparedRun:
+    """A run ready to start (:func:`prepare_run`, :func:`prepare_resume`): its rendered folder, the
+    case and plan it was rendered from, the engine that runs it, and what the command line reports
+    before the run starts. :meth:`execute` runs it; :func:`post_process` computes its results."""
+
+    folder: Path
+    case: object                       # siloflow.case.Case
+    plan: object                       # siloflow.plan.RunPlan
+    engine: object                     # siloflow.engine.base.Engine
+    output_estimate: dict = field(default_factory=dict)     # check_disk_space: bytes and frames
+    profile_replaced: list = field(default_factory=list)    # the case's fields a --profile replaced
+    resuming: bool = False
+    state_before: str = "rendered"     # a resumed folder's state when it was opened
+
+    def execute(self, progress: Optional[Callable[[str, int, int], None]] = None, cache=None,
+                on_cache_hit: Optional[Callable[[str], None]] = None,
+                on_warning: Optional[Callable[[str], None]] = None):
+        """Run the engine in the folder (through the fill cache folder ``cache``, when given: a cached
+        settled bed of the same fill is reused, ``on_cache_hit(key)`` told), check what it left and
+        return the run record; ``EngineRunError`` when it failed, ``KeyboardInterrupt`` (the engine
+        stopped and the folder marked interrupted) when interrupted. A resumed run finishes from its
+        last restart point, without the cache."""
+        if self.resuming:
+            return self.engine.resume(self.folder, progress=progress)
+        if cache is None:
+            self.engine.execute(self.folder, progress=progress)
+            return self.engine.collect(self.folder)
+        from .fill_cache import FillCache, run_with_cache
+        return run_with_cache(self.engine, self.folder, self.plan, FillCache(cache), progress,
+                              on_hit=on_cache_hit, on_warning=on_warning)
+
+
+def _case_of(case) -> tuple[object, list, str]:
+    """(Case, files to keep in the folder, where the case came from) of a Case, a dict of case fields
+    or a case-file path."""
     from .case import Case
     from .case_file import case_from_dict, load_case
-    from .derived import check_run_length, derive
-    from .disk_estimate import check_disk_space
-    from .engine import get_engine
-    from .engine.base import check_case
-    keep = []
-    _path(folder, "siloflow.run's folder")
     if not isinstance(case, (Case, dict, str, os.PathLike)) or isinstance(case, str) and not case:
         raise CaseError([("(case)", f"give a Case, a dict of case fields or a case-file path, not "
                                     f"{type(case).__name__} {case!r:.60}")], "siloflow.run")
     if isinstance(case, dict):
-        case = case_from_dict(case)
-    elif not isinstance(case, Case):
-        keep = [case]
-        case = load_case(case)
-    engine = get_engine(case.engine.name)
+        return case_from_dict(case), [], "case"
+    if isinstance(case, Case):
+        return case, [], "case"
+    return load_case(case), [case], str(case)
+
+
+def prepare_run(case, folder, force: bool = False, allow_long: bool = False, allow_large_output: bool = False,
+                profile: Optional[str] = None, executable: Optional[str] = None) -> PreparedRun:
+    """Everything before the engine starts, as ``siloflow run`` does it: read ``case`` (a ``Case``, a
+    dict of case fields or a case-file path, which is kept in the folder), apply the numerical
+    ``profile`` (reference, fast or custom; None: the case's), check it against its engine (binary
+    ``executable``, default the engine's own) and that engine's presence, derive the run plan,
+    refuse a run over the step cap (``allow_long``) or whose estimated output exceeds the free disk
+    (``allow_large_output``), and render the folder (``force``: replace one siloflow made).
+    Nothing is written when anything is refused."""
+    from .derived import check_run_length, derive
+    from .disk_estimate import check_disk_space
+    from .engine import get_engine
+    from .engine.base import check_case
+    folder = _path(folder, "siloflow.run's folder")
+    case, keep, source = _case_of(case)
+    replaced = []
+    if profile is not None:
+        from .profiles import with_profile
+        case, replaced = with_profile(case, profile)
+    engine = get_engine(case.engine.name, executable=executable)
     check_case(case, engine)
-    plan = derive(case)
+    engine.preflight(case.engine.ranks)         # engine and launcher present before anything is written
+    try:
+        plan = derive(case)
+    except CaseError as exc:
+        raise CaseError(exc.problems, source) from None
     check_run_length(plan, allow_long)
-    check_disk_space(case, plan, folder, allow_large_output)
+    sizes = check_disk_space(case, plan, folder, allow_large_output)
     folder = engine.prepare(case, folder, force=force, keep=keep, plan=plan)
-    engine.execute(folder, progress=progress)
-    engine.collect(folder)
-    analyse(folder)
-    return Run(folder)
+    return PreparedRun(folder, case, plan, engine, sizes, list(replaced))
+
+
+def prepare_resume(folder, executable: Optional[str] = None) -> PreparedRun:
+    """An interrupted (or failed, or rendered) run folder, to finish from its last restart point
+    (``siloflow run --resume``): its own case, plan and engine (binary ``executable``)."""
+    from .case_file import load_case
+    from .engine import get_engine
+    from .run_folder import run_state
+    folder = _path(folder, "the run folder to resume")
+    run_folder = RunFolder(folder)
+    case = load_case(run_folder.case_file)
+    engine = get_engine(case.engine.name, executable=executable)
+    engine.preflight(case.engine.ranks)
+    state = run_state(folder).get("state")
+    return PreparedRun(folder, case, run_folder.plan, engine, resuming=True, state_before=str(state))
+
+
+def post_process(folder, measured_pressure=None) -> dict:
+    """The first results of a finished run folder (``postprocess.first_results.analyse``: tables,
+    figures, reports in results/), recorded in its manifest as siloflow's; returns the summary."""
+    from postprocess.first_results import analyse
+    from .run_folder import record_products
+    since = time.time()
+    try:
+        return analyse(folder, measured_pressure)
+    finally:                # what post wrote is siloflow's: --force may replace it later
+        record_products(folder, RunFolder(folder).results, since)
+
+
+def run(case, folder, force: bool = False, progress=None, allow_long: bool = False,
+        allow_large_output: bool = False, profile: Optional[str] = None, cache=None,
+        executable: Optional[str] = None, post: bool = True) -> Run:
+    """Render ``case`` (a ``Case``, a dict of case fields or a case-file path) into ``folder``, run
+    its engine, check the run and compute the first results, as ``siloflow run`` does (the same
+    pipeline: :func:`prepare_run`, :meth:`PreparedRun.execute`, :func:`post_process`); return the
+    ``Run``. ``progress(stage, step, total)`` is told the engine's progress; ``cache``: a fill cache
+    folder; ``post``: compute the first results now (else on first access)."""
+    prepared = prepare_run(case, folder, force=force, allow_long=allow_long, allow_large_output=allow_large_output,
+                           profile=profile, executable=executable)
+    prepared.execute(progress, cache=cache)
+    if post:
+        post_process(prepared.folder)
+    return Run(prepared.folder)
+
+
+def resume(folder, progress=None, executable: Optional[str] = None, post: bool = True) -> Run:
+    """Finish an interrupted run folder from its last restart point (``siloflow run --resume``) and
+    compute its first results; return the ``Run``."""
+    prepared = prepare_resume(folder, executable)
+    prepared.execute(progress)
+    if post:
+        post_process(prepared.folder)
+    return Run(prepared.folder)
