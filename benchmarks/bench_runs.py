@@ -1,5 +1,6 @@
-"""What the engine benchmarks share: running one ``siloflow`` command, timed, its output to a log,
-and running one case (a dict) into a work folder. A failed run stops the benchmark."""
+"""What the engine benchmarks share: running one case (a dict) into a work folder through
+``siloflow.run``, timed, and (for the benchmarks that time what a user types) one ``siloflow``
+command line. A failed run stops the benchmark."""
 from __future__ import annotations
 
 import os
@@ -32,14 +33,22 @@ def timed(cmd: list[str], log: Path) -> float:
     return wall
 
 
-def run_case(data: dict, work: Path, *extra: str) -> tuple[Path, float]:
-    """``siloflow run`` of the case ``data`` (named by its ``name``) into ``work/runs/<name>``,
-    its case file and log beside it in ``work``: (run folder, wall time s)."""
+def run_case(data: dict, work: Path, force: bool = False) -> tuple[Path, float]:
+    """``siloflow.run`` of the case ``data`` (named by its ``name``) into ``work/runs/<name>``, its
+    case file beside it in ``work`` (``force``: replace a folder siloflow made): (run folder, wall
+    time s of the whole pipeline, render to first results). A refused or failed run stops the
+    benchmark with siloflow's message."""
+    from siloflow.errors import SiloflowError
+    from siloflow.runs import run
     case_path = work / f"{data['name']}.yaml"
     case_path.write_text(yaml.safe_dump(data))
     folder = work / "runs" / data["name"]
-    wall = timed(siloflow("run", str(case_path), "-o", str(folder), *extra), work / f"{data['name']}.log")
-    return folder, wall
+    t0 = time.perf_counter()
+    try:
+        run(case_path, folder, force=force)
+    except SiloflowError as exc:
+        raise SystemExit(f"{data['name']} failed: {exc}") from None
+    return folder, time.perf_counter() - t0
 
 
 def clogged(folder: Path) -> bool:

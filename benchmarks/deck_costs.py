@@ -28,7 +28,7 @@ import pandas as pd
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_runs import LOOP, ROOT, siloflow, timed  # noqa: E402
+from bench_runs import LOOP, ROOT  # noqa: E402
 
 sys.path.insert(0, str(ROOT))
 from siloflow.atomic_files import write_text  # noqa: E402
@@ -73,6 +73,14 @@ def fill_deck(folder: Path, skin_factor: float | None) -> str:
 VARIANTS = {"sensors 5x4": None, "sensors 5x3": None, "one side wall": None, "skin 0.25 r": 0.25, "skin 1.0 r": 1.0}
 
 
+def render_folder(case_path: Path, folder: Path) -> None:
+    """``siloflow render`` of the case file into ``folder`` (LIGGGHTS), through the engine's API."""
+    from siloflow.case_file import load_case
+    from siloflow.engine import get_engine
+    case = load_case(case_path)
+    get_engine("liggghts").prepare(case, folder, keep=[case_path])
+
+
 def prepare(variant: str) -> Path:
     """The variant's deck folder (rendered once) with ``fill.in``."""
     base = variant if VARIANTS[variant] is None else "sensors 5x4"
@@ -82,7 +90,7 @@ def prepare(variant: str) -> Path:
         WORK.mkdir(parents=True, exist_ok=True)
         case_path = WORK / f"{data['name']}.yaml"
         case_path.write_text(yaml.safe_dump(data))
-        timed(siloflow("render", str(case_path), "-o", str(folder)), WORK / f"{data['name']}.render.log")
+        render_folder(case_path, folder)
     name = "fill_" + re.sub(r"[^a-z0-9]+", "_", variant) + ".in"
     (folder / name).write_text(fill_deck(folder, VARIANTS[variant]))
     return folder / name

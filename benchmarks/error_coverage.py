@@ -22,7 +22,6 @@ import argparse
 import copy
 import json
 import math
-import subprocess
 import sys
 from pathlib import Path
 
@@ -34,9 +33,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_runs import run_case, siloflow  # noqa: E402
+from bench_runs import run_case  # noqa: E402
 from siloflow.case_file import case_from_dict  # noqa: E402
 from siloflow.run_folder import RunFolder, case_differences  # noqa: E402
+from siloflow.runs import post_process  # noqa: E402
 
 #: a band is loaded when its mean static pressure is above this share of the largest one's
 LOADED_BAND = 0.2
@@ -154,7 +154,7 @@ def main() -> None:
         if complete(folder):
             check_same_case(folder, seed_case(base, seed))
             if args.repost:
-                    subprocess.run(siloflow("post", str(folder)), cwd=ROOT, check=True, stdout=subprocess.DEVNULL)
+                    post_process(folder)
         elif folder.exists():
             raise SystemExit(f"{folder} exists but is not finished: remove it or finish it "
                              f"(siloflow run --resume {folder})")

@@ -133,7 +133,7 @@ def main(args) -> None:
             check_same_case(folder, data)
             wall = float("nan")          # ran by an earlier call that stopped before writing its row
         else:
-            folder, wall = run_case(data, args.work, *(["--force"] if folder.exists() else []))
+            folder, wall = run_case(data, args.work, force=folder.exists())
         rows.append(row_of(name, engine, seed, folder, wall))
         write_text(table, pd.DataFrame(rows, columns=list(COLUMNS)).to_csv(index=False))
         r = rows[-1]
