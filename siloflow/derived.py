@@ -492,7 +492,7 @@ def derive(case: Case) -> RunPlan:
         particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass,
         analysis=case.analysis, design=case.design, run_length_fields=run_length_fields(case, source, settings["profile"]),
     )
-    from .meshes import silo_meshes
+    from .geometry import silo_meshes
     meshes = silo_meshes(case, plan.outlet.z, plan.outlet.radius, sensors=needs["wall_pressure"])
     walls = [Wall(**m.info()) for m in meshes]
     if f.mobilise is not None or f.protocol != "rain":

@@ -342,7 +342,7 @@ class RunPlan(Frozen):
     run_length_fields: dict[str, list[str]] = {}   # stage (and "timestep") -> case fields setting it
     warnings: list[str] = []        # physics warnings, each naming its consequence
 
-    _meshes: Optional[list] = PrivateAttr(default=None)    # the walls' triangles (siloflow.meshes.WallMesh)
+    _meshes: Optional[list] = PrivateAttr(default=None)    # the walls' triangles (siloflow.geometry.WallMesh)
 
     # ---------------------------------------------------------------- views
     @property
@@ -398,7 +398,7 @@ class RunPlan(Frozen):
 
     @property
     def meshes(self) -> list:
-        """The walls' triangles (``siloflow.meshes.WallMesh``) of a freshly derived plan; a plan read
+        """The walls' triangles (``siloflow.geometry.WallMesh``) of a freshly derived plan; a plan read
         back from plan.json has none (``ReadError``): its triangles are the run folder's meshes."""
         if self._meshes is None:
             raise ReadError("this plan was read from plan.json: its wall triangles are in the run folder's meshes/")

@@ -73,7 +73,7 @@ RECORD_KIND = "siloflow sweep"
 TABLE_NAME = "sweep.csv"
 #: most tasks of one Slurm job array by default (Slurm's MaxArraySize is 1001 unless raised)
 DEFAULT_MAX_ARRAY_SIZE = 1000
-#: the case sections that shape the walls' meshes (with the counting disc, siloflow.meshes.silo_meshes)
+#: the case sections that shape the walls' meshes (with the counting disc, siloflow.geometry.silo_meshes)
 MESH_SECTIONS = {"geometry", "sensors", "inserts", "particles"}
 #: columns of the sweep table before the ``--set`` paths, and after them
 TABLE_HEAD = ("run", "name")
@@ -288,10 +288,10 @@ def sweep_engine(variants: list[Variant], need_binary: bool = True):
 @contextmanager
 def _shared_meshes():
     """Within the block, ``derive`` computes the walls of each distinct silo once: it takes
-    ``siloflow.meshes.silo_meshes`` when called, here memoised by what shapes the walls (the
+    ``siloflow.geometry.silo_meshes`` when called, here memoised by what shapes the walls (the
     case's :data:`MESH_SECTIONS`, the counting disc and whether the side walls are sensors).
     Most of a plan's time is its meshes, the same for every variant of a silo."""
-    from . import meshes
+    from . import geometry as meshes
     original = meshes.silo_meshes
     memo: dict[str, list] = {}
 

@@ -20,11 +20,11 @@ import pytest
 import yaml
 from stl import mesh as stl_mesh
 
-from siloflow import meshes
+from siloflow import geometry as meshes
 from siloflow.case_file import case_from_dict, load_case
 from siloflow.derived import derive
 from siloflow.errors import CaseError, SetupError
-from siloflow.meshes import WallMesh, disc, rectangle, surface_of_revolution
+from siloflow.geometry import WallMesh, disc, rectangle, surface_of_revolution
 
 from conftest import QUICK, ROOT, render
 

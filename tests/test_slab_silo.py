@@ -15,7 +15,7 @@ from siloflow.derived import bed_volume, derive
 from siloflow.engine.liggghts.deck import render_deck_text
 from siloflow.engine.liggghts.encoding import encode
 from siloflow.errors import CaseError
-from siloflow.meshes import silo_meshes
+from siloflow.geometry import silo_meshes
 from siloflow.run_folder import LIGGGHTS_TABLES, RunFolder
 
 from conftest import ROOT, set_path

@@ -428,7 +428,8 @@ def test_cli_max_array_size(tmp_path, fake_engine):
 
 
 def test_plans_are_made_once_per_case_and_silo_and_group_as_before(quick_dict, monkeypatch):
-    from siloflow import derived, meshes
+    from siloflow import derived
+    from siloflow import geometry as meshes
     from siloflow.fill_cache import fill_key
     variants = expand(quick_dict, [parse_set("geometry.orifice_radius=0.006,0.008"), parse_set("fill.count=4000,4500"),
                                    parse_set("materials.particle_particle.friction=0.4,0.5")], seeds=3)

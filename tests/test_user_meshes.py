@@ -13,7 +13,7 @@ from stl import mesh as stl_mesh
 from siloflow.case_file import load_case
 from siloflow.derived import derive
 from siloflow.errors import CaseError
-from siloflow.meshes import rectangle
+from siloflow.geometry import rectangle
 from siloflow.run_folder import RunFolder
 
 from conftest import ROOT, render

@@ -45,7 +45,7 @@ import numpy as np
 from ...atomic_files import write_text
 from ...case import Case
 from ...deck import DeckError, _num, _safe_name, check_commands, template_environment
-from ...meshes import write_stl
+from ...geometry import write_stl
 from ...plan import FACES, WALL, RunPlan
 from ...run_folder import LAMMPS_FILES, RESTART_FILE, DumpLayout, RunFolder
 from .contact_law import pair_coeff_args, wall_args

@@ -16,7 +16,7 @@ from ...case import Case
 from ...contact_physics import sphere_volume
 from ...deck import DeckError, check_commands, template_environment
 from ...fill_placement import Batch, fill_batches, fill_steps
-from ...meshes import write_stl
+from ...geometry import write_stl
 from ...plan import RunPlan
 from ...run_folder import LIGGGHTS_FILES, RESTART_FILE, DumpLayout, RunFolder
 from .encoding import LiggghtsEncoding, encode

@@ -1,0 +1,163 @@
+"""The whole case: every section together and the checks across them."""
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+from pydantic import Field, model_validator
+
+from .analysis import Analysis, DesignSettings, WallInsert
+from .engine_settings import EngineSettings
+from .fields import Int, Positive, SafeName, Strict
+from .geometry import Geometry, WallSensors
+from .materials import Materials, _contact_problems
+from .outputs import Outputs
+from .particles import Particles
+from .stages import Discharge, Fill, Settle
+
+STATIC_WINDOW_SAMPLES = 20
+
+
+def default_static_window(sample_interval: float, check_interval: float) -> float:
+    """The static window (s) when the case sets none: ``STATIC_WINDOW_SAMPLES`` wall-force samples
+    of ``sample_interval`` (s), and at least two settling checks of ``check_interval`` (s), the
+    time over which the bed was judged settled."""
+    return max(STATIC_WINDOW_SAMPLES * sample_interval, 2 * check_interval)
+
+
+def _with_static_window(data):
+    """The raw case ``data`` with ``fill.settle.static_window`` set to its default if it is not
+    given (a copy; anything malformed is left for validation to name)."""
+    if not isinstance(data, dict) or not isinstance(data.get("fill"), dict):
+        return data
+    fill = dict(data["fill"])
+    settle = fill.get("settle", {})
+    if not isinstance(settle, dict) or settle.get("static_window") is not None:
+        return data
+    outputs = data.get("outputs", {})
+    sample = outputs.get("sample_interval") if isinstance(outputs, dict) else None
+    sample = sample if sample is not None else Outputs.model_fields["sample_interval"].default
+    check = settle.get("check_interval", Settle.model_fields["check_interval"].default)
+    if isinstance(sample, bool) or isinstance(check, bool) or not all(
+            isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in (sample, check)):
+        return data
+    fill["settle"] = {**settle, "static_window": min(default_static_window(float(sample), float(check)), 100.0)}
+    return {**data, "fill": fill}
+
+
+class Case(Strict):
+    """A complete, validated silo case (``Case.from_yaml(path)``, ``Case.model_validate(dict)``)."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_static_window(cls, data):
+        return _with_static_window(data)
+
+    @classmethod
+    def from_yaml(cls, path) -> "Case":
+        """Read and validate a YAML case file (``siloflow.case_file.load_case``, read by
+        ``siloflow.case_reader``); ``CaseError`` lists every problem with its field path."""
+        from ..case_reader import read_case
+        return read_case(Case, path)
+
+    name: SafeName
+    description: str = Field("", max_length=2000, description="free text, never written into a deck")
+    gravity: Positive = Field(9.81, le=1000, description="m/s2, acting along -z")
+    geometry: Geometry
+    sensors: WallSensors
+    materials: Materials
+    particles: Particles
+    fill: Fill
+    discharge: Discharge
+    outputs: Outputs = Outputs()
+    engine: EngineSettings = EngineSettings()
+    analysis: Analysis = Analysis()
+    inserts: list[WallInsert] = Field(default_factory=list, max_length=20,
+                                      description="extra walls from STL files (inserts, baffles)")
+    seed: Int = Field(12345, ge=0, le=2**31 - 1)
+    design: Optional[DesignSettings] = Field(None, description="EN 1991-4 design loads' bulk solid "
+                                             "(siloflow design); post-processing only")
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        g, p, f = self.geometry, self.particles, self.fill
+        problems = []
+        problems += _particle_problems(self)
+        d = 2 * p.max_radius
+        field = {"spheres": "particles.radius", "clumps": "particles.length"}.get(p.kind, "particles.radii")
+        outlet = "geometry.outlet_width" if g.kind == "planar" else "outlet radius"
+        if p.max_radius >= g.outlet_radius:
+            problems.append(f"{field} ({p.max_radius:.6g} m) must be smaller than the {outlet} "
+                            f"(half width {g.outlet_radius} m): nothing could leave")
+        if 3 * d > g.half_width:
+            problems.append(f"{field} ({p.max_radius:.6g} m) is too large for a silo of half width "
+                            f"{g.half_width} m (need >= 3 particle diameters)")
+        if g.kind == "planar":
+            # the grains' thickness across the slab: spheres their diameter, wheat lies flat in it
+            across = p.width if p.kind == "clumps" and p.shape == "wheat" else 2 * p.max_radius
+            if p.kind == "clumps" and p.shape != "wheat":
+                problems.append("geometry.kind planar: clumps in a slab need shape 'wheat' (inserted flat)")
+            if g.thickness <= 1.01 * across:
+                problems.append(f"geometry.thickness ({g.thickness} m) must exceed the grains' thickness "
+                                f"({across:.6g} m) by 1 %")
+        top = g.hopper_height + g.height
+        if f.mobilise is not None and g.kind != "cylinder":
+            problems.append(f"fill.mobilise lowers a flat floor: it needs geometry.kind cylinder, not {g.kind} "
+                            "(a hopper or slab floor cannot move down without opening a gap at its walls)")
+        if f.height is not None and f.height >= top:
+            problems.append(f"fill.height ({f.height} m) must be below the top of the silo ({top:.6g} m)")
+        zmin, zmax = f.insertion_z_min, f.insertion_z_max
+        if zmax is not None and zmax > top:
+            problems.append(f"fill.insertion_z_max ({zmax} m) is above the top of the silo ({top:.6g} m)")
+        if zmin is not None and zmin < g.hopper_height:
+            problems.append(f"fill.insertion_z_min ({zmin} m) must be above the hopper "
+                            f"({g.hopper_height:.6g} m)")
+        if zmin is not None and zmax is not None and zmax - zmin < 2 * d:
+            problems.append("fill.insertion_z_max must exceed insertion_z_min by 2 particle diameters")
+        if f.pour_radius is not None and not 2 * d <= f.pour_radius <= g.half_width:
+            problems.append(f"fill.pour_radius ({f.pour_radius} m) must be between two grain diameters "
+                            f"({2 * d:.6g} m) and the silo's half width ({g.half_width} m)")
+        names = [i.name for i in self.inserts]
+        if len(set(names)) != len(names):
+            problems.append("inserts: names must be unique")
+        if self.sensors.heights is not None and self.sensors.heights[-1] > g.height:
+            problems.append(f"sensors.heights: last boundary ({self.sensors.heights[-1]} m) is above "
+                            f"the vertical wall ({g.height} m)")
+        problems += _sampling_problems(self)
+        if problems:
+            raise ValueError("; ".join(problems))
+        return self
+
+
+def _sampling_problems(case: "Case") -> list[str]:
+    """The sample interval must fit the stages it measures: the discharge (flow rate, dynamic
+    wall loads) and the static window (post-processing averages only samples taken wholly inside
+    it, which needs two intervals)."""
+    si, dis, static = case.outputs.sample_interval, case.discharge, case.fill.settle.static_window
+    field, t_dis = ("discharge.duration", dis.duration) if dis.duration is not None else \
+        ("discharge.max_time", dis.max_time)
+    problems = []
+    if si > t_dis:
+        problems.append(f"outputs.sample_interval ({si} s) is longer than the discharge ({field} {t_dis} s): "
+                        "no sample of the flow or the dynamic wall loads would be written")
+    if static < 2 * si:
+        problems.append(f"fill.settle.static_window ({static} s) must be at least two "
+                        f"outputs.sample_interval (2 x {si} s): the static wall loads are averaged over "
+                        "samples taken wholly inside the window")
+    return problems
+
+
+def _particle_problems(case: "Case") -> list[str]:
+    """Cross-section checks of the particles: dust contact laws and sizes."""
+    p, model = case.particles, case.materials.model
+    problems = []
+    dust = getattr(p, "dust", None)
+    if dust is not None:
+        for name in ("dust_dust", "dust_particle", "dust_wall"):
+            problems += _contact_problems(model, f"particles.dust.{name}", getattr(dust, name))
+        if model != "linear" and dust.youngs_modulus is None:
+            problems.append(f"particles.dust.youngs_modulus is required by model '{model}'")
+        if dust.radius >= p.min_radius:
+            problems.append(f"particles.dust.radius ({dust.radius} m) must be smaller than the grains "
+                            f"({p.min_radius} m)")
+    return problems                 # what an engine cannot do is its own check: Engine.check

@@ -1,0 +1,4 @@
+"""``python -m siloflow.cli``: the ``siloflow`` command."""
+from . import main
+
+main()

@@ -1,0 +1,210 @@
+"""``siloflow post | cg | cg-scaling | beverloo | design``: results of finished runs or any dump, and EN 1991-4 loads."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from ..errors import ReadError, SiloflowError
+from ..run_folder import RunFolder
+from .app import _fail, app, out, printable
+from .run_commands import _post
+
+
+@app.command()
+def post(source: str = typer.Argument(..., help="a finished run folder, or dump file(s): a file, glob or folder"),
+         contacts: Optional[str] = typer.Option(None, help="dump local file(s) of pair contacts for a dump source"),
+         contact_keywords: Optional[str] = typer.Option(
+             None, help="keywords of the pair/gran/local compute that wrote --contacts, e.g. pos,id,force "
+                        "(names its columns)"),
+         sphere: List[str] = typer.Option([], help="measurement sphere x,y,z,R in m (repeatable)"),
+         every: int = typer.Option(1, min=1, help="analyse every n-th frame of a dump source"),
+         measured: Optional[Path] = typer.Option(None, help="measured wall pressure CSV (time, band_<k> in Pa) "
+                                                 "to compare a run with"),
+         output: Optional[Path] = typer.Option(None, "-o", "--output",
+                                               help="results folder for a dump source (default: <dumps>/siloflow_post)")) -> None:
+    """(Re)compute the results of a run folder, or analyse dump files written by any LIGGGHTS/LAMMPS run."""
+    path = Path(source)
+    if path.is_dir() and RunFolder(path).is_run_folder():
+        _post(path, measured)
+        return
+    from postprocess.any_dump import analyse_any, parse_sphere
+
+    from ..engine.liggghts.tables import local_columns
+    try:
+        columns = local_columns(contact_keywords.split(",")) if contact_keywords else None
+        regions = [parse_sphere(s, k + 1) for k, s in enumerate(sphere)] or None
+        base = path if path.is_dir() else (path.parent if path.exists() else Path(source.split("*")[0]).parent)
+        target = output or base / "siloflow_post"
+        summary = analyse_any(source, target, contacts, columns, regions, every)
+    except SiloflowError as exc:
+        _fail(exc)
+    out.print(f"{summary['frames']} frames; last step {summary['last_step']} with {summary['particles_last']} particles")
+    if "porosity_last" in summary:
+        out.print("porosity (last frame): " + ", ".join(f"{k} {v:.4f}" for k, v in summary["porosity_last"].items()))
+    if "coordination_last" in summary:
+        c = summary["coordination_last"]
+        out.print(f"coordination number (last frame, from {c['source']}): {c['z_mean']:.3f} (mechanical {c['z_mech']:.3f})")
+    out.print(f"results: {target}")
+@app.command()
+def cg(source: str = typer.Argument(..., help="a finished run folder, or dump file(s): a file, glob or folder"),
+       output: Optional[Path] = typer.Option(None, "-o", "--output", help="results folder (default <run>/results/cg)"),
+       kernel: str = typer.Option("gaussian", help="gaussian (paper B) or lucy"),
+       width: float = typer.Option(2.0, help="kernel width w (Gaussian) or c (Lucy)"),
+       unit: str = typer.Option("radius", help="unit of --width: radius (mean particle radius) or m"),
+       nr: int = typer.Option(100, min=1, help="radial cells (or x and y cells of a Cartesian grid)"),
+       nz: int = typer.Option(300, min=1, help="vertical cells"),
+       grid: str = typer.Option("rz", help="rz (axisymmetric) or cartesian"),
+       method: str = typer.Option("exact", help="rz sums: exact, or lattice (sources on a finer lattice, tabulated "
+                                  "kernel moments: many times faster, small error; see docs/coarse_graining.md)"),
+       refine: int = typer.Option(2, min=2, help="lattice nodes per grid cell and direction (even; --method lattice)"),
+       species: Optional[str] = typer.Option("radius", help="partial fields by radius, type, or none"),
+       per_frame: bool = typer.Option(False, help="keep per-frame fields (time evolution) as well"),
+       every: int = typer.Option(1, min=1, help="use every n-th frame"),
+       contacts: Optional[str] = typer.Option(None, help="dump local of contacts (for a dump source)"),
+       contact_keywords: Optional[str] = typer.Option(None, help="keywords of the compute that wrote --contacts"),
+       wall_contacts: Optional[str] = typer.Option(None, help="dump local of wall contacts (wall/gran/local pos id "
+                                                   "force), boundary terms of the contact stress"),
+       wall_contact_keywords: str = typer.Option("pos,id,force", help="keywords of the compute that wrote --wall-contacts"),
+       r_max: Optional[float] = typer.Option(None, help="grid radius, m (dump source)"),
+       z_lo: Optional[float] = typer.Option(None, help="grid bottom, m (dump source)"),
+       z_hi: Optional[float] = typer.Option(None, help="grid top, m (dump source)"),
+       z_outlet: float = typer.Option(0.0, help="outlet height, m (dump source)"),
+       outlet_radius: Optional[float] = typer.Option(None, help="outlet radius R, m (dump source)"),
+       particle_density: Optional[float] = typer.Option(None, help="kg/m3 when the dump has no mass column"),
+       steps: Optional[str] = typer.Option(None, help="time window FIRST:LAST in timesteps (dump source)")) -> None:
+    """Coarse-grain particles and contacts into continuum fields (paper B): fields.nc, profiles, figures."""
+    from postprocess.cg_run import CgSetup, run_cg, setup_from_run
+
+    from ..engine.liggghts.tables import local_columns
+    from ..run_folder import record_products
+    path = Path(source)
+    try:
+        if grid not in ("rz", "cartesian"):
+            raise ReadError("--grid must be rz or cartesian")
+        if method not in ("exact", "lattice") or (method == "lattice" and grid != "rz"):
+            raise ReadError("--method must be exact or lattice, and lattice needs --grid rz")
+        if path.is_dir() and RunFolder(path).is_run_folder():
+            setup = setup_from_run(path)
+            target = output or path / "results" / "cg"
+        else:
+            from postprocess.dumps import dump_files
+            missing = [n for n, v in (("--r-max", r_max), ("--z-lo", z_lo), ("--z-hi", z_hi),
+                                      ("--outlet-radius", outlet_radius)) if v is None]
+            if missing:
+                raise ReadError(f"a dump source needs {', '.join(missing)} (the grid and the outlet)")
+            lo_hi = [None, None]
+            if steps:
+                try:
+                    lo_hi = [int(v) if v else None for v in steps.split(":")]
+                except ValueError:
+                    raise ReadError(f"--steps {steps!r}: expected FIRST:LAST timesteps") from None
+            setup = CgSetup(dump_files(source), dump_files(contacts) if contacts else None,
+                            local_columns(contact_keywords.split(",")) if contact_keywords else None,
+                            r_max, z_lo, z_hi, z_outlet, outlet_radius, particle_density, *lo_hi,
+                            dump_files(wall_contacts) if wall_contacts else None,
+                            local_columns(wall_contact_keywords.split(","), wall=True) if wall_contacts else None)
+            target = output or Path("cg_results")
+        since = time.time()
+        try:
+            summary = run_cg(setup, target, kernel, width, unit, nr, nz, None if species == "none" else species,
+                             per_frame, grid, every, method, refine)
+        finally:
+            if path.is_dir() and RunFolder(path).is_run_folder():
+                record_products(path, target, since)
+    except SiloflowError as exc:
+        _fail(exc)
+    except ValueError as exc:
+        _fail(SiloflowError(str(exc)))
+    out.print(f"coarse-grained {summary['frames']} frames (steps {summary['steps'][0]}-{summary['steps'][1]}) "
+              f"on a {grid} grid ({summary['method']} sums) with a {summary['kernel']} kernel; contacts: {summary['contacts']}, "
+              f"wall contacts: {summary['wall_contacts']}")
+    if "v_z_centre_outlet" in summary:
+        out.print(f"outlet centre: solid fraction {summary['solid_fraction_centre_outlet']:.3f}, "
+                  f"v_z {summary['v_z_centre_outlet']:.3f} m/s; kinetic pressure peaks "
+                  f"{summary['kinetic_peak_height_m'] * 1000:.1f} mm above the outlet")
+    out.print(f"results: {target} (fields.nc, *.csv, cg_summary.json, figures)")
+
+
+@app.command("cg-scaling")
+def cg_scaling(folders: List[Path] = typer.Argument(..., help="cg result folders of runs with different outlets"),
+               output: Path = typer.Option(Path("cg_scaling.json"), "-o", "--output")) -> None:
+    """Power-law fits across runs: outlet centre velocity v_z(0) ~ R^b and h_c ~ R^b (paper B)."""
+    from postprocess.cg_run import scaling_across_runs
+
+    from ..atomic_files import write_json
+    try:
+        result = scaling_across_runs(folders)
+    except SiloflowError as exc:
+        _fail(exc)
+    write_json(output, result)
+    v = result["v_z0"]
+    out.print(f"v_z(0) ~ R^{v['exponent']:.3f} +/- {v['exponent_stderr']:.3f} (paper B: 1/2)")
+    if "h_c" in result:
+        h = result["h_c"]
+        out.print(f"h_c ~ R^{h['exponent']:.3f} +/- {h['exponent_stderr']:.3f} (paper B: 1)")
+    out.print(f"written: {output}")
+@app.command()
+def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folders (different orifices or grains), "
+                                                  "or one sweep table (sweep.csv: its complete runs)"),
+             output: Path = typer.Option(Path("beverloo.csv"), "-o", "--output", help="table of the runs and the fit")) -> None:
+    """Fit Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) across runs: C and k with standard errors."""
+    from ..answers import beverloo as fit_runs
+    from ..atomic_files import write_json, write_text
+    try:
+        table, fit = fit_runs(folders)
+    except SiloflowError as exc:
+        _fail(exc)
+    except ValueError as exc:
+        _fail(SiloflowError(str(exc)))
+    write_text(output, table.to_csv(index=False))
+    write_json(output.with_suffix(".json"), {"C": fit.C, "C_stderr": fit.C_stderr, "k": fit.k,
+                                             "k_stderr": fit.k_stderr, "runs": fit.n_runs,
+                                             "rms_relative_residual": fit.rms_relative_residual})
+    out.print(f"Beverloo over {fit.n_runs} runs: C = {fit.C:.3f} +/- {fit.C_stderr:.3f}, "
+              f"k = {fit.k:.2f} +/- {fit.k_stderr:.2f} (rms residual {fit.rms_relative_residual:.1%})")
+    out.print(f"table: {output}; fit: {output.with_suffix('.json')}")
+
+
+@app.command()
+def design(case_file: Path = typer.Argument(..., help="YAML case file (its design section: the bulk solid)"),
+           output: Path = typer.Option(Path("design"), "-o", "--output", help="folder for design_loads.csv and .png"),
+           run_folder: Optional[Path] = typer.Option(None, "--run", help="a finished run of the case: its band "
+                                                     "pressures beside the EN loads (design_vs_dem.csv)"),
+           top: str = typer.Option("flat", help="free surface: flat (h_o = 0) or heap (a cone at the angle of repose)")) -> None:
+    """EN 1991-4 design loads of the case's silo filled to its bed height: filling, discharge, patch, hopper."""
+    import numpy as np
+
+    from postprocess.design_figure import compare_with_dem, design_figure
+
+    from ..answers import design as design_of
+    from ..atomic_files import write_text
+    try:
+        result = design_of(case_file, run_folder, top=top)
+        output.mkdir(parents=True, exist_ok=True)
+    except SiloflowError as exc:
+        _fail(exc)
+    except ValueError as exc:
+        _fail(SiloflowError(str(exc)))
+    loads, bands = result.loads, result.bands
+    if result.defaulted:
+        out.print(f"note: the case has no design section: wheat (Annex E), wall D2, AAC 2; the DEM grains' bulk "
+                  f"unit weight is about {result.bulk_unit_weight:.4g} N/m3 (design: unit_weight, K, mu to use them)")
+    m, v = loads.material, loads.values["max_horizontal"]
+    out.print(printable(f"{m.name}, {loads.wall_type}, AAC {loads.aac}: {loads.classification} silo ({loads.top} top), h_c/d_c "
+                        f"{loads.aspect_ratio:.3g}; K {v.K:.3g}, mu {v.mu:.3g}, z_o {v.z_o:.3g} m; C_h {loads.C_h:.3g}, "
+                        f"C_w {loads.C_w:.3g}, C_pe {loads.C_pe:.3g}, p_vft {loads.p_vft:.4g} Pa"), markup=False)
+    out.print(f"{'z (m)':>9} {'p_hf':>10} {'p_wf':>10} {'p_vf':>10} {'p_he':>10} {'p_patch':>10}  (Pa)")
+    for z in np.linspace(loads.transition, loads.surface - loads.h_o, 6)[::-1]:
+        out.print(f"{z:9.4g} " + " ".join(f"{float(loads.at(c, z)):10.4g}" for c in ("p_hf", "p_wf", "p_vf", "p_he",
+                                                                                    "p_patch")))
+    for line in loads.notes:
+        out.print(printable(f"note: {line}"), markup=False)
+    write_text(output / "design_loads.csv", loads.table().to_csv(index=False))
+    design_figure(loads, output / "design_loads.png", bands)
+    if bands is not None:
+        write_text(output / "design_vs_dem.csv", compare_with_dem(loads, bands).to_csv(index=False))
+    out.print(f"written: {output / 'design_loads.csv'}, {output / 'design_loads.png'}"
+              + (f", {output / 'design_vs_dem.csv'}" if bands is not None else ""))

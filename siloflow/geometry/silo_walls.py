@@ -1,0 +1,294 @@
+"""The silo's walls as meshes: cylinder, cone hopper and slab, the side walls cut into sensor bands and sectors (z = 0 at the outlet, m)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..case import Case, CylinderGeometry, HopperGeometry, PlanarGeometry
+from ..errors import CaseError
+from .quality import (
+    LIGGGHTS_MIN_MESH_EXTENT,
+    LIGGGHTS_PRECISION,
+    MAX_FACET_ASPECT,
+    MAX_MESH_TRIANGLES,
+    MIN_ANGLE_DEG,
+    MIN_EDGE,
+    MeshQualityError,
+    _budget,
+    _good,
+    as_written,
+    mesh_quality,
+)
+from .triangulation import (
+    _balanced_rectangle,
+    _chord,
+    _divisions,
+    _grid_triangles,
+    _refine_polygon,
+    disc,
+    graded_disc,
+    revolution_rows,
+    surface_of_revolution,
+)
+from .user_meshes import insert_meshes
+from .wall_mesh import WallMesh
+
+
+def band_boundaries(case: Case) -> list[float]:
+    """Band boundaries in m above the cylinder's base (the top of the hopper, if any)."""
+    s = case.sensors
+    if s.heights is not None:
+        return list(s.heights)
+    h = case.geometry.height
+    return [h * i / s.bands for i in range(s.bands + 1)]
+
+
+def silo_meshes(case: Case, outlet_z: float, outlet_radius: float, sensors: bool = True) -> list[WallMesh]:
+    """All meshes of a silo (cylinder, hopper or slab) and its inserts, in the order the deck lists them.
+
+    ``outlet_z``, ``outlet_radius``: position and size of the counting disc below the orifice.
+    Without ``sensors`` the side walls' pieces (bands and the rest) are one mesh ``wall`` of the
+    same facets: no result reads their pressure. Every generated wall is checked
+    (:func:`check_wall`); one that cannot be triangulated well is refused with a ``CaseError``
+    naming the geometry fields that shape it.
+    """
+    g = case.geometry
+    try:
+        if isinstance(g, PlanarGeometry):
+            meshes = slab_meshes(case, outlet_z, outlet_radius)
+        elif isinstance(g, (CylinderGeometry, HopperGeometry)):
+            meshes = cylinder_meshes(case, outlet_z, outlet_radius)
+        else:
+            raise NotImplementedError(f"no meshes for geometry kind {g.kind!r}")
+        if not sensors:
+            meshes = merge_side_walls(meshes)
+        for w in meshes:
+            check_wall(w)
+    except MeshQualityError as exc:
+        fields = shaping_fields(case, exc.role, exc.kind)
+        raise CaseError([(fields[0], f"the wall mesh '{exc.wall}' cannot be triangulated for LIGGGHTS: "
+                          f"{exc.reason}; change {' or '.join(fields)}")], case.name) from None
+    return meshes[:-1] + insert_meshes(case) + meshes[-1:]          # the counting mesh stays last
+
+
+def merge_side_walls(meshes: list[WallMesh]) -> list[WallMesh]:
+    """The meshes with every side-wall piece (roles ``band`` and ``wall``) merged into one plain
+    wall ``wall`` of the same triangles, where the first piece was."""
+    side = [m for m in meshes if m.role in ("band", "wall")]
+    if not side:
+        return meshes
+    merged = WallMesh("wall", "wall", np.concatenate([m.triangles for m in side]))
+    first = meshes.index(side[0])
+    rest = [m for m in meshes if m.role not in ("band", "wall")]
+    return rest[:first] + [merged] + rest[first:]
+
+
+def check_wall(wall: WallMesh) -> None:
+    """Raise ``MeshQualityError`` if a generated wall, as written (float32), has a triangle with an
+    angle below ``MIN_ANGLE_DEG`` or an edge shorter than ``MIN_EDGE``."""
+    quality = mesh_quality(as_written(wall.triangles))
+    problem = quality.problem()
+    if problem:
+        kind = "edge" if quality.n_triangles and quality.min_angle >= MIN_ANGLE_DEG else "angle"
+        raise MeshQualityError(problem, wall.name, wall.role, kind)
+    points = np.asarray(wall.triangles).reshape(-1, 3)
+    extent = float((points.max(axis=0) - points.min(axis=0)).max())
+    if extent < 1.05 * LIGGGHTS_MIN_MESH_EXTENT:      # 5 % margin over the measured limit
+        raise MeshQualityError(f"the mesh is {extent:.3g} m across; LIGGGHTS refuses meshes smaller than about "
+                               f"{LIGGGHTS_MIN_MESH_EXTENT:g} m ('Mesh error ... dimensions too small')",
+                               wall.name, wall.role, "edge")
+
+
+def shaping_fields(case: Case, role: str, kind: str = "angle") -> list[str]:
+    """The case fields that shape a wall of ``role``, the likeliest culprit first (for ``kind``
+    'edge', a too short edge: the outlet's size, which sets the hopper's shortest sides)."""
+    g = case.geometry
+    sensors = "sensors.heights" if case.sensors.heights is not None else "sensors.bands"
+    if kind == "edge" and role in ("hopper", "cone", "bottom", "plate", "outlet"):
+        if isinstance(g, PlanarGeometry):
+            return ["geometry.outlet_width", "geometry.width", "geometry.half_angle_deg", "geometry.thickness"]
+        orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
+        return [orifice, "geometry.mesh_segments", "geometry.radius"]
+    if isinstance(g, PlanarGeometry):
+        return {"band": [sensors, "geometry.height", "geometry.thickness"],
+                "wall": [sensors, "geometry.height", "geometry.thickness"],
+                "hopper": ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width", "geometry.thickness"],
+                "face": ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width", "geometry.height"],
+                }.get(role, ["geometry.outlet_width", "geometry.thickness"])
+    orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
+    return {"band": [sensors, "geometry.height", "geometry.mesh_segments", "sensors.sectors"],
+            "wall": [sensors, "geometry.height", "geometry.mesh_segments"],
+            "cone": ["geometry.half_angle_deg", orifice, "geometry.radius", "geometry.mesh_segments"],
+            "bottom": [orifice, "geometry.radius", "geometry.mesh_segments"],
+            }.get(role, [orifice, "geometry.mesh_segments"])
+
+
+def _wall(name: str, role: str, build, **kw) -> WallMesh:
+    """``WallMesh(name, role, build(), **kw)``, with a triangulation failure named after the wall."""
+    try:
+        return WallMesh(name, role, build(), **kw)
+    except MeshQualityError as exc:
+        raise MeshQualityError(exc.reason, name, role, exc.kind) from None
+
+
+def _structured_or_graded(count: int, structured, graded) -> np.ndarray:
+    """The structured triangles (``count`` of them) where they are good, else the graded ones."""
+    if count <= MAX_MESH_TRIANGLES:
+        tris = structured()
+        if _good(tris):
+            return tris
+    return graded()
+
+
+def cylinder_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallMesh]:
+    """Meshes of a cylindrical silo or hopper (see :func:`silo_meshes`)."""
+    g = case.geometry
+    R = g.radius
+    base = g.hopper_height
+    n_seg = g.mesh_segments
+    sectors = case.sensors.sectors
+    per_sector = max(1, math.ceil(n_seg / sectors))
+    n_ring = per_sector * sectors
+    h_facet = 2 * math.pi * R / n_ring
+    meshes: list[WallMesh] = []
+    side = _chord(g.outlet_radius, n_ring)
+    if side < MIN_EDGE:                  # the orifice's polygon itself: no need to mesh the rest first
+        raise MeshQualityError(f"its {n_ring}-gon of radius {g.outlet_radius:.3g} m has sides of {side:.3g} m; "
+                               f"LIGGGHTS merges mesh nodes closer than {LIGGGHTS_PRECISION:g} m, so siloflow "
+                               f"needs edges >= {MIN_EDGE:g} m", "plate", "plate", "edge")
+
+    def cylinder_tris(z_lo, z_hi, th0, th1, n_th):
+        dz = z_hi - z_lo
+        if not dz > 0:
+            raise MeshQualityError(f"it spans no height (z {z_lo:.9g} to {z_hi:.9g} m)")
+        # the wall is straight along z: tall facets are exact and keep the triangle count
+        # (which dominates LIGGGHTS' mesh-wall cost) low
+        n_ax = max(1, math.ceil(dz / (MAX_FACET_ASPECT * h_facet)))
+        if 2 * n_th * n_ax <= MAX_MESH_TRIANGLES:
+            tris = surface_of_revolution(R, z_lo, R, z_hi, th0, th1, n_th, n_ax)
+            if _good(tris):
+                return tris
+        # a piece much lower than its facets are wide: split each facet along its chord (flat, so the
+        # wall stays the same polygon) into pieces at most MAX_FACET_ASPECT times wider than high
+        m = max(1, math.ceil(h_facet / (MAX_FACET_ASPECT * dz) - 1e-9))
+        _budget(2 * n_th * m * n_ax, f"a piece {dz:.3g} m high of facets {h_facet:.3g} m wide")
+        theta = np.linspace(th0, th1, n_th + 1)
+        corners = np.stack([R * np.cos(theta), R * np.sin(theta)], axis=-1)
+        f = np.arange(m) / m
+        xy = (corners[:-1, None, :] + f[None, :, None] * (corners[1:] - corners[:-1])[:, None, :]).reshape(-1, 2)
+        xy = np.concatenate([xy, corners[-1:]])
+        z = np.linspace(z_lo, z_hi, n_ax + 1)
+        pts = np.concatenate([np.broadcast_to(xy[None], (len(z),) + xy.shape),
+                              np.broadcast_to(z[:, None, None], (len(z), len(xy), 1))], axis=-1)
+        return _grid_triangles(pts)
+
+    def cylinder_piece(name, role, z_lo, z_hi, th0, th1, n_th, **kw):
+        sensor = {}
+        if role == "band":   # a sector's net force is along its mid direction (postprocess.wall_pressure)
+            tc = 0.5 * (th0 + th1)
+            sensor = {"normal": (math.cos(tc), math.sin(tc)),
+                      "projected_area": 2.0 * R * (z_hi - z_lo) * math.sin(0.5 * (th1 - th0))}
+        meshes.append(_wall(name, role, lambda: cylinder_tris(z_lo, z_hi, th0, th1, n_th), z0=z_lo, z1=z_hi,
+                            theta0=th0, theta1=th1, radius=R, **sensor, **kw))
+
+    bounds = band_boundaries(case)
+    if bounds[0] > 0:
+        cylinder_piece("wall_below", "wall", base, base + bounds[0], 0.0, 2 * math.pi, n_ring)
+    for b, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
+        for s in range(sectors):
+            th0, th1 = 2 * math.pi * s / sectors, 2 * math.pi * (s + 1) / sectors
+            cylinder_piece(f"band{b:02d}_s{s:02d}", "band", base + lo, base + hi, th0, th1,
+                           per_sector, band=b, sector=s)
+    if bounds[-1] < g.height:
+        cylinder_piece("wall_above", "wall", base + bounds[-1], base + g.height, 0.0, 2 * math.pi, n_ring)
+
+    def disc_tris(radius, z, inner=0.0):
+        h = 2 * math.pi * radius / n_ring
+        n_r = max(1, math.ceil((radius - inner) / h))
+        count = 2 * n_ring * n_r if inner > 0 else n_ring * (2 * n_r - 1)
+        return _structured_or_graded(count, lambda: disc(radius, z, n_ring, inner_radius=inner),
+                                     lambda: graded_disc(inner, radius, z, n_ring))
+
+    r_out = g.outlet_radius
+    if isinstance(g, HopperGeometry):
+        slant = math.hypot(R - r_out, base)
+        n_ax = max(1, math.ceil(slant / h_facet))
+        meshes.append(_wall("cone", "cone", lambda: _structured_or_graded(
+            2 * n_ring * n_ax, lambda: surface_of_revolution(r_out, 0.0, R, base, 0.0, 2 * math.pi, n_ring, n_ax),
+            lambda: revolution_rows(r_out, 0.0, R, base, n_ring))))
+    else:
+        meshes.append(_wall("bottom", "bottom", lambda: disc_tris(R, 0.0, r_out)))
+    meshes.append(_wall("plate", "plate", lambda: disc_tris(r_out, 0.0)))
+    meshes.append(_wall("outlet", "outlet", lambda: disc_tris(outlet_radius, outlet_z)))
+    return meshes
+def slab_meshes(case: Case, outlet_z: float, outlet_half: float) -> list[WallMesh]:
+    """Meshes of a quasi-2D slab silo (x across, y through the slab, z up; z = 0 the outlet):
+    side walls cut into sensor sections (sector 0 at x = -width/2, sector 1 at +width/2),
+    the wedge hopper, the front and back faces (role ``face``), the plate and the counting
+    rectangle ``outlet_half`` wide at ``outlet_z`` (m)."""
+    g = case.geometry
+    a, b, hh, top = g.half_width, 0.5 * g.thickness, g.hopper_height, g.hopper_height + g.height
+    w0 = g.outlet_radius
+    # faces: few large facets (every grain touches the faces: their facet count is what costs);
+    # thin walls: one facet across, at most MAX_FACET_ASPECT times longer
+    facet = max(g.width / 2.0, g.thickness)
+    long = MAX_FACET_ASPECT * g.thickness                # thin walls' facets along their length
+    meshes: list[WallMesh] = []
+
+    def side_piece(name, role, side, z_lo, z_hi, **kw):
+        x = -a if side == 0 else a
+        sensor = {"normal": (-1.0 if side == 0 else 1.0, 0.0), "projected_area": 2 * b * (z_hi - z_lo)} \
+            if role == "band" else {}
+        meshes.append(_wall(name, role, lambda: _balanced_rectangle(
+            (x, -b, z_lo), (0.0, 2 * b, 0.0), (0.0, 0.0, z_hi - z_lo), 1, _divisions(z_hi - z_lo, long)),
+            z0=z_lo, z1=z_hi, sector=side, **sensor, **kw))
+
+    bounds = band_boundaries(case)
+    for side in (0, 1):
+        if bounds[0] > 0:
+            side_piece(f"wall_below_s{side:02d}", "wall", side, hh, hh + bounds[0])
+    for k, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
+        for side in (0, 1):
+            side_piece(f"band{k:02d}_s{side:02d}", "band", side, hh + lo, hh + hi, band=k)
+    for side in (0, 1):
+        if bounds[-1] < g.height:
+            side_piece(f"wall_above_s{side:02d}", "wall", side, hh + bounds[-1], top)
+    slant = math.hypot(a - w0, hh)
+    for side, sign in ((0, -1.0), (1, 1.0)):
+        meshes.append(_wall(f"hopper_s{side:02d}", "hopper", lambda sign=sign: _balanced_rectangle(
+            (sign * w0, -b, 0.0), (0.0, 2 * b, 0.0), (sign * (a - w0), 0.0, hh), 1, _divisions(slant, long)),
+            sector=side))
+    # faces: the silo's outline in x-z (wedge, then the full width), on a grid of trapezoid rows where
+    # that grid is good, else triangulated anew (a nearly flat or very steep wedge, a narrow slot)
+    nz_h, nz_v = _divisions(hh, facet), _divisions(g.height, facet)
+    nx = _divisions(g.width, facet)
+
+    def face_grid(y):
+        z = np.concatenate([np.linspace(0.0, hh, nz_h + 1), np.linspace(hh, top, nz_v + 1)[1:]])
+        half = np.where(z < hh, w0 + (a - w0) * z / max(hh, 1e-300), a)
+        u = np.linspace(-1.0, 1.0, nx + 1)
+        pts = np.stack([half[:, None] * u[None, :], np.full((len(z), nx + 1), y),
+                        np.broadcast_to(z[:, None], (len(z), nx + 1))], axis=-1)
+        return _grid_triangles(pts)
+
+    outline = None
+
+    def face_refined(y):
+        nonlocal outline
+        if outline is None:
+            outline = _refine_polygon(np.array([(-w0, 0.0), (w0, 0.0), (a, hh), (a, top), (-a, top), (-a, hh)]),
+                                      facet)
+        p, tri = outline
+        xyz = np.column_stack([p[:, 0], np.full(len(p), y), p[:, 1]])
+        return xyz[tri[:, [0, 2, 1]]]            # counter-clockwise in x-z: normal +y, like the grid's
+
+    for side, y in ((0, -b), (1, b)):
+        meshes.append(_wall(f"face_s{side:02d}", "face", lambda y=y: _structured_or_graded(
+            2 * nx * (nz_h + nz_v), lambda: face_grid(y), lambda: face_refined(y)), sector=side))
+    meshes.append(_wall("plate", "plate", lambda: _balanced_rectangle(
+        (-w0, -b, 0.0), (2 * w0, 0.0, 0.0), (0.0, 2 * b, 0.0), _divisions(2 * w0, facet), 1)))
+    meshes.append(_wall("outlet", "outlet", lambda: _balanced_rectangle(
+        (-outlet_half, -1.5 * b, outlet_z), (2 * outlet_half, 0.0, 0.0), (0.0, 3 * b, 0.0),
+        _divisions(2 * outlet_half, facet), 1)))
+    return meshes
