@@ -622,3 +622,15 @@ def test_cli_sweep_runs_and_beverloo_reads_its_table(tmp_path, fake_engine, fake
     table[["name"]].to_csv(tmp_path / "no_runs.csv", index=False)
     result = runner.invoke(app, ["beverloo", str(tmp_path / "no_runs.csv")])
     assert result.exit_code == 1 and "no 'run' column" in result.output
+
+
+def test_no_benchmark_starts_a_siloflow_command():
+    """Issue 37: the benchmarks run cases through the API (siloflow.runs.run, siloflow.sweep.sweep),
+    never a ``siloflow`` command line (``python -m siloflow.cli``, or ``siloflow`` as a program)."""
+    root = Path(__file__).resolve().parents[1] / "benchmarks"
+    found = []
+    for path in sorted(root.glob("*.py")):
+        text = path.read_text()
+        if "siloflow.cli" in text or re.search(r"""\[\s*["']siloflow["']\s*,""", text):
+            found.append(path.name)
+    assert found == []
