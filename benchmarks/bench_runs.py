@@ -1,12 +1,9 @@
 """What the engine benchmarks share: running one case (a dict) into a work folder through
-``siloflow.run``, timed, and (for the benchmarks that time what a user types) one ``siloflow``
-command line. A failed run stops the benchmark."""
+``siloflow.run``, timed, in this process (no benchmark starts a ``siloflow`` command). A failed run
+stops the benchmark."""
 from __future__ import annotations
 
-import os
 import re
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -15,22 +12,6 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 #: LIGGGHTS' and LAMMPS' "Loop time of T on P procs for N steps with A atoms", one per ``run``
 LOOP = re.compile(r"^Loop time of (\S+) on (\d+) procs for (\d+) steps with (\d+) atoms", re.M)
-
-
-def siloflow(*args: str) -> list[str]:
-    """The command line of ``siloflow ARGS`` in this checkout's Python."""
-    return [sys.executable, "-m", "siloflow.cli", *args]
-
-
-def timed(cmd: list[str], log: Path) -> float:
-    """Run ``cmd`` in the repository (output to ``log``); its wall time, s."""
-    t0 = time.perf_counter()
-    with open(log, "w") as fh:
-        proc = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT, env={**os.environ, "COLUMNS": "200"})
-    wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode}); see {log}")
-    return wall
 
 
 def run_case(data: dict, work: Path, force: bool = False) -> tuple[Path, float]:

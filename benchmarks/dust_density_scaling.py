@@ -35,7 +35,8 @@ from siloflow.accuracy_bench import QUANTITIES, run_metrics  # noqa: E402
 from siloflow.atomic_files import write_text  # noqa: E402
 from siloflow.case_file import case_from_dict  # noqa: E402
 from siloflow.derived import derive  # noqa: E402
-from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing, run_name  # noqa: E402
+from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, run_missing, run_name  # noqa: E402
+from siloflow.study_case import read_study_case  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "results" / "dust"
 WORK = ROOT / "runs" / "bench_dust"
@@ -78,7 +79,7 @@ def planned_runs(base: dict, scales: list[float], seeds: int, keep_dt: bool) -> 
 
 
 def main(case_file: Path, scales: list[float], seeds: int, keep_dt: bool = True) -> pd.DataFrame:
-    base, _ = read_base_case(case_file)
+    base, _ = read_study_case(case_file)
     nan = {q: float("nan") for q in QUANTITIES}
     rows = run_missing(WORK, planned_runs(base, scales, seeds, keep_dt),
                        lambda f: {**run_metrics(f), **dust_columns(f)},

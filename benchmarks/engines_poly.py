@@ -32,7 +32,8 @@ sys.path.insert(0, str(ROOT))
 from siloflow import bench_stats  # noqa: E402
 from siloflow.accuracy_bench import DISCHARGE_QUANTITIES, QUANTITIES, Candidate, candidate_case, run_metrics  # noqa: E402
 from siloflow.atomic_files import atomic_path, write_text  # noqa: E402
-from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing  # noqa: E402
+from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, run_missing  # noqa: E402
+from siloflow.study_case import read_study_case  # noqa: E402
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
 OUT = ROOT / "benchmarks" / "results" / "engines_poly"
@@ -92,7 +93,7 @@ def figure(table: pd.DataFrame, path: Path) -> None:
 
 
 def main() -> None:
-    base, _ = read_base_case(CASE)
+    base, _ = read_study_case(CASE)
     planned = [PlannedRun(key={"engine": e, "seed": base["seed"] + k},
                           case=candidate_case(base, candidate(e), base["seed"] + k))
                for k in range(SEEDS) for e in ENGINES]

@@ -34,7 +34,8 @@ from siloflow.accuracy_bench import QUANTITIES, Candidate, candidate_case, run_m
 from siloflow.atomic_files import write_text  # noqa: E402
 from siloflow.engine.liggghts.log import PLACED, parse_log_text  # noqa: E402
 from siloflow.fill_placement import class_counts  # noqa: E402
-from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing  # noqa: E402
+from siloflow.run_table import PlannedRun, case_digest, engine_wall_time, run_missing  # noqa: E402
+from siloflow.study_case import read_study_case  # noqa: E402
 
 CASE = ROOT / "benchmarks" / "cases" / "accuracy_small.yaml"
 OUT = ROOT / "benchmarks" / "results" / "rank_fill"
@@ -115,7 +116,7 @@ def figure(table: pd.DataFrame, path: Path) -> None:
 
 
 def main() -> None:
-    base, _ = read_base_case(CASE)
+    base, _ = read_study_case(CASE)
     planned = [PlannedRun(key={"batch_volume_fraction": b, "ranks": r, "seed": base["seed"] + k},
                           case=case_of(base, b, r, base["seed"] + k))
                for k in range(SEEDS) for b in BATCH_FRACTIONS for r in RANKS]

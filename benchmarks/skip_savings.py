@@ -12,14 +12,16 @@ Runs, one engine job at a time (2 ranks each, as the case says):
   case's duration);
 - ``cached``: the full case started from the full run's settled bed (fill cache hit);
 - ``separate_<r>`` and ``sweep``: three orifice radii run separately without a cache, against
-  ``siloflow sweep`` of the same three (one fill, two cache hits).
+  the sweep of the same three (``siloflow.sweep.sweep``: one fill, two cache hits).
 
 Each finished run is kept under ``--work`` (run folders, logs, caches; default
 ``$TMPDIR/siloflow-bench-skip``) and its row in ``--out``/``runs.csv``; a second invocation skips
 what is there, so the benchmark resumes where it stopped. The table ``skip_savings.csv`` and the
-figure ``skip_savings.png`` are written from all rows. Wall times are whole ``siloflow run``
-processes (render, engine, checks, first results), measured here, one at a time: the machine is
-noisy, so a ratio is given with the spread of repeated runs where there are any (see the note).
+figure ``skip_savings.png`` are written from all rows. Wall times are whole runs through the API,
+in this process (``siloflow.runs.run``: render, engine, checks, first results; the sweep's
+``siloflow.sweep.sweep``, whose runs go in worker processes), measured here, one at a time: the
+machine is noisy, so a ratio is given with the spread of repeated runs where there are any (see
+the note). No ``siloflow`` command is started.
 """
 from __future__ import annotations
 
@@ -27,6 +29,7 @@ import argparse
 import copy
 import os
 import sys
+import time
 from pathlib import Path
 
 import yaml
@@ -35,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_runs import siloflow, timed  # noqa: E402
+from siloflow.errors import SiloflowError  # noqa: E402
 
 #: three orifices that flow: D0/d = 5.3, 6 and 6.7 for the quick case's 3 mm beads (4 and 4.7 clog)
 ORIFICES = (0.008, 0.009, 0.010)
@@ -73,6 +76,18 @@ def result_row(name: str, folder: Path, wall: float) -> dict:
             "discharge_s": s["flow_rate"]["t_end"] - s["time_open_s"]}
 
 
+def timed_run(case_path: Path, folder: Path, cache=None) -> float:
+    """``siloflow.runs.run`` of a case file into ``folder`` (through the fill cache ``cache``), in this
+    process: its wall time, s, render to first results. A refused or failed run stops the benchmark."""
+    from siloflow.runs import run
+    t0 = time.perf_counter()
+    try:
+        run(case_path, folder, cache=cache)
+    except SiloflowError as exc:
+        raise SystemExit(f"{case_path.stem} failed: {exc}") from None
+    return time.perf_counter() - t0
+
+
 def main(case_file: Path, out: Path, work: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     work.mkdir(parents=True, exist_ok=True)
@@ -90,7 +105,7 @@ def main(case_file: Path, out: Path, work: Path) -> None:
         case_path = work / f"{name}.yaml"
         case_path.write_text(yaml.safe_dump({**data, "name": f"{base['name']}_{name}".replace(".", "p")}))
         folder = work / "runs" / name
-        cmd = siloflow("run", str(case_path), "-o", str(folder))
+        cache_root = None
         if name == "cached":            # the full run's settled bed, published, then a hit
             from siloflow.case_file import load_case
             from siloflow.derived import derive
@@ -101,8 +116,8 @@ def main(case_file: Path, out: Path, work: Path) -> None:
             cache = FillCache(work / "cache_cached")
             cache.put(fill_key(plan, engine), engine.fill_files(work / "runs" / "full"),
                       fill_key_inputs(plan, engine), source="full")
-            cmd += ["--cache", str(cache.root)]
-        wall = timed(cmd, work / f"{name}.log")
+            cache_root = cache.root
+        wall = timed_run(case_path, folder, cache_root)
         rows.append(result_row(name, folder, wall))
         pd.DataFrame(rows).to_csv(table, index=False)
         print(f"{name}: {wall:.1f} s")
@@ -111,8 +126,13 @@ def main(case_file: Path, out: Path, work: Path) -> None:
         case_path = work / "sweep.yaml"
         case_path.write_text(yaml.safe_dump({**base, "name": f"{base['name']}_sweep"}))
         values = ",".join(f"{r:g}" for r in ORIFICES)
-        wall = timed(siloflow("sweep", str(case_path), "--set", f"geometry.orifice_radius={values}",
-                              "--cores", "2", "-o", str(sweep_dir)), work / "sweep.log")
+        from siloflow.sweep import sweep as run_sweep
+        t0 = time.perf_counter()
+        try:
+            run_sweep(case_path, [f"geometry.orifice_radius={values}"], sweep_dir, cores=2)
+        except SiloflowError as exc:
+            raise SystemExit(f"the sweep failed: {exc}") from None
+        wall = time.perf_counter() - t0
         sweep = pd.read_csv(sweep_dir / "sweep.csv")
         rows.append({"run": "sweep", "wall_s": wall, "engine_s": float(sweep.wall_s.sum()),
                      "flow_rate_kg_s": float("nan"), "cache_hit": int(sweep.fill_from_cache.sum())})

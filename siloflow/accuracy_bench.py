@@ -20,6 +20,7 @@ from typing import Callable, Optional
 from .errors import SetupError
 from .case import PROFILE_FIELDS
 from .profiles import REFERENCE as REFERENCE_SETTINGS
+from .run_row import LOADED_BAND  # noqa: F401  (a band counts as loaded above this fraction of the largest's)
 from .run_table import run_name
 
 #: the quantities compared, from each run's results (SI): steady flow rate (kg/s), static band
@@ -35,8 +36,6 @@ FILL_ONLY_SEED_OFFSET = 2000
 SEED_RANGE = 1000
 #: default tolerances of the recommendation (relative 95 % bounds)
 TOLERANCES = {"flow_rate": 0.03, "static_pressure": 0.05}
-#: a band counts as loaded when its static pressure exceeds this fraction of the largest band's
-LOADED_BAND = 0.05
 
 
 @dataclass(frozen=True)
@@ -173,30 +172,12 @@ def upscaled_case(data: dict, factor: float) -> dict:
 
 
 def run_metrics(folder: Path) -> dict:
-    """The compared quantities of a finished, post-processed run folder (NaN where not measured)."""
-    from .run_folder import RunFolder
-    s = RunFolder(folder).read_summary()
-    nan = float("nan")
-    out = {q: nan for q in QUANTITIES}
-    out["wall_s"] = s.get("engine_wall_time_s", nan)
-    fr = s.get("flow_rate") or {}
-    out["flow_rate"] = fr.get("rate", nan)
-    if "fit_stderr" in fr:      # the headline stderr is batch means (summaries before it: the line's)
-        out["flow_rate_fit_se"], out["flow_rate_batch_se"] = fr["fit_stderr"], fr.get("stderr", nan)
-    else:
-        out["flow_rate_fit_se"], out["flow_rate_batch_se"] = fr.get("stderr", nan), fr.get("batch_stderr", nan)
-    bands = [b for b in s.get("bands") or [] if b.get("static_pressure") is not None]
-    if bands:
-        top = max(b["static_pressure"] for b in bands)
-        loaded = [b for b in bands if b["static_pressure"] > LOADED_BAND * top]
-        out["static_pressure"] = sum(b["static_pressure"] for b in loaded) / len(loaded)
-        dyn = [b.get("dynamic_max_pressure") for b in loaded if b.get("dynamic_max_pressure") is not None]
-        out["dynamic_pressure_max"] = sum(dyn) / len(dyn) if dyn else nan
-    frames = s.get("frame_analyses") or {}
-    out["solid_fraction"] = frames.get("bulk_solid_fraction", nan)
-    out["coordination"] = (frames.get("coordination_settled") or {}).get("z_mean", nan)
-    # a measurement that could not be made is a dict with its reason, not a number
-    return {k: float(v) if isinstance(v, (int, float)) else nan for k, v in out.items()}
+    """The compared quantities of a finished, post-processed run folder (NaN where not measured):
+    its row (:func:`siloflow.run_row.run_row`) cut to ``wall_s``, :data:`QUANTITIES` and the flow
+    rate's two standard errors."""
+    from .run_row import run_row
+    row = run_row(folder)
+    return {k: row[k] for k in ("wall_s", *QUANTITIES, "flow_rate_fit_se", "flow_rate_batch_se")}
 
 
 def refuse_repeated_seeds(runs, out: Path) -> None:
@@ -252,12 +233,13 @@ def run_bench(case_file: Path, out: Path, seeds: int = 3, candidates=CANDIDATES,
     static stage (:func:`fill_only_case`, column ``fill_only`` true); return all rows
     (``siloflow.run_table``: a failed or guard-stopped run is a row with its reason)."""
     import pandas as pd
-    from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, read_rows, run_missing
+    from .run_table import PlannedRun, case_digest, engine_wall_time, read_rows, run_missing
+    from .study_case import read_study_case
     check_seed_count(seeds, "seeds", seed_offset)
     check_seed_count(fill_only_seeds, "fill-only seeds", FILL_ONLY_SEED_OFFSET + seed_offset)
     if isinstance(candidates, str) or any(not isinstance(c, Candidate) for c in candidates):
         raise SetupError("candidates: give Candidate objects (choose_candidates('a,b') reads a list of names)")
-    base, case = read_base_case(case_file)
+    base, case = read_study_case(case_file)
     if REFERENCE.name not in [c.name for c in candidates]:
         raise SetupError("the bench needs the reference candidate (the papers' settings) to compare with")
     rows = pd.DataFrame(read_rows(out))

@@ -42,21 +42,6 @@ def run_name(*parts) -> str:
     return (f"{head}-{tail}" if head else tail)[:64]
 
 
-def read_base_case(case_file: Path):
-    """(fields, validated ``Case``) of a study's case file, checked as ``siloflow validate`` does; the
-    fields' inserts are made absolute (relative to the case file's folder), so the study's runs find
-    them wherever they are written."""
-    from .case_file import case_from_dict, parse_case_yaml, read_case_bytes
-    case_file = Path(case_file)
-    base = parse_case_yaml(read_case_bytes(case_file), str(case_file))
-    case = case_from_dict(base, str(case_file))
-    for ins in base.get("inserts") or []:
-        if isinstance(ins, dict) and "file" in ins:
-            path = Path(str(ins["file"]))
-            ins["file"] = str((path if path.is_absolute() else case_file.parent / path).resolve())
-    return base, case
-
-
 def read_rows(out: Path) -> list[dict]:
     """The rows of ``out/runs.csv`` (none if it does not exist)."""
     import pandas as pd
@@ -131,13 +116,14 @@ def run_missing(out: Path, planned: list[PlannedRun], measure: Callable[[Path], 
                 failed: Callable[[Path, str], dict], report: Callable[[str], None] = lambda s: None,
                 case_sha: str = "") -> list[dict]:
     """Run every planned run whose ``key`` is not yet a row of ``out/runs.csv`` (``siloflow.run``
-    into ``out/runs/<case name>``); its row is the key, the columns, ``state``, ``reason``,
+    into ``out/runs/<case name>``, one after the other in this process, through the scheduler
+    :func:`siloflow.scheduler.run_jobs`); its row is the key, the columns, ``state``, ``reason``,
     ``folder``, ``machine`` (:func:`machine_id`), ``case_sha`` (:func:`case_digest` of the study's
     case) and ``measure(folder)`` (complete) or ``failed(folder, reason)``. Returns all rows.
     ``SetupError`` before anything runs when the table holds rows of another case (rows written
     before the column existed are taken as they are)."""
     from .case_file import case_from_dict
-    from .runs import run
+    from .scheduler import InOrder, Job, Outcome, run_jobs
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rows = read_rows(out)
@@ -150,25 +136,40 @@ def run_missing(out: Path, planned: list[PlannedRun], measure: Callable[[Path], 
         return tuple(sorted((k, key_text(d.get(k))) for k in planned[0].key)) if planned else ()
 
     done = {key_of(r) for r in rows}
-    for p in planned:
-        if key_of(p.key) in done:
-            continue
-        name = p.case["name"]
-        folder = _free_folder(out / "runs" / name)
+    folders: dict[str, Path] = {}
+    of_job: dict[str, PlannedRun] = {}
+
+    def work(p: PlannedRun):
+        def run_it():
+            from . import runs              # looked up when it runs: siloflow.runs.run as it is then
+            name = p.case["name"]
+            folders[name] = folder = _free_folder(out / "runs" / name)
+            report(f"{name}: running")
+            runs.run(case_from_dict(p.case, name), folder)
+        return run_it
+
+    def ended(job: Job, outcome: Outcome) -> None:
+        p, folder = of_job[job.name], folders[job.name]
         row = {**p.key, **p.columns, "folder": str(folder.relative_to(out)), "machine": machine_id(),
                "case_sha": case_sha}
-        report(f"{name}: running")
-        try:
-            run(case_from_dict(p.case, name), folder)
+        if outcome.ok:
             row.update(state="complete", reason="", **measure(folder))
-        except SiloflowError as exc:
-            reason = " ".join(str(exc).split())[:400]
+        else:
+            reason = " ".join(outcome.reason.split())[:400]
             if not folder.exists():          # refused before anything ran (the step cap, the disk, ...):
-                report(f"{name}: not run: {reason}")       # no result to keep; the next call tries again
-                continue
+                report(f"{job.name}: not run: {reason}")   # no result to keep; the next call tries again
+                return
             row.update(state="failed", reason=reason, **failed(folder, reason))
         rows.append(row)
         _write_rows(rows, out)
-        report(f"{name}: {row['state']} ({row.get('wall_s', float('nan')):.1f} s)"
+        report(f"{job.name}: {row['state']} ({row.get('wall_s', float('nan')):.1f} s)"
                + (f": {row['reason']}" if row["reason"] else ""))
+
+    jobs = []
+    for p in planned:
+        if key_of(p.key) in done:
+            continue
+        of_job[p.case["name"]] = p
+        jobs.append(Job(p.case["name"], work(p)))
+    run_jobs(InOrder(jobs), 1, ended, isolate=False)
     return rows

@@ -111,21 +111,11 @@ def classify(reason: str) -> tuple[str, str]:
 def peaks(folder: Path) -> dict:
     """The largest speed (m/s) and pair overlap (fraction of the smallest grain radius) a run reached
     (the guard's ``guard_peaks`` in its run record), each against the guard's limit (``speed_ratio``,
-    ``overlap_ratio``: 1 = at the limit); NaN for a run that never started."""
-    from .errors import SiloflowError
-    from .run_folder import RunFolder
-    nan = float("nan")
-    out = {"max_speed": nan, "max_overlap_fraction": nan, "speed_ratio": nan, "overlap_ratio": nan}
-    try:
-        run = RunFolder(folder)
-        g, seen = run.plan.guard, run.record.guard_peaks
-    except (SiloflowError, OSError, TypeError, ValueError):     # no plan or record: nothing ran
-        return out
-    if g is None or not seen:
-        return out
-    speed, overlap = seen["max_speed"], seen["max_overlap"]
-    return {"max_speed": speed, "max_overlap_fraction": overlap / g.grain_radius, "speed_ratio": speed / g.max_speed,
-            "overlap_ratio": overlap / g.max_overlap}
+    ``overlap_ratio``: 1 = at the limit); NaN for a run that never started. From its row
+    (:func:`siloflow.run_row.run_row`)."""
+    from .run_row import run_row
+    row = run_row(folder)
+    return {k: row[k] for k in ("max_speed", "max_overlap_fraction", "speed_ratio", "overlap_ratio")}
 
 
 def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIFFNESS, dust_scales=None,
@@ -134,9 +124,10 @@ def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIF
     """Run every grid point not yet in ``out/runs.csv``; return all rows."""
     from .case_file import case_from_dict
     from .errors import CaseError, SetupError
-    from .run_table import PlannedRun, case_digest, engine_wall_time, read_base_case, run_missing
+    from .run_table import PlannedRun, case_digest, run_missing
+    from .study_case import read_study_case
     check_options(fractions, stiffness, dust_scales, seed, burst)
-    base, case = read_base_case(case_file)
+    base, case = read_study_case(case_file)
     seed = case.seed if seed is None else seed
     has_dust = getattr(case.particles, "dust", None) is not None
     if dust_scales is not None and not has_dust:
@@ -151,12 +142,17 @@ def run_envelope(case_file: Path, out: Path, fractions=FRACTIONS, stiffness=STIF
         except CaseError as exc:
             raise CaseError(exc.problems, f"{case_file}, envelope point {p.case['name']}") from None
 
+    def numbers(folder) -> dict:
+        from .run_row import run_row
+        row = run_row(folder)
+        return {k: row[k] for k in ("wall_s", "max_speed", "max_overlap_fraction", "speed_ratio", "overlap_ratio")}
+
     def measure(folder):
-        return {"signal": "", "wall_s": engine_wall_time(folder), **peaks(folder)}
+        return {"signal": "", **numbers(folder)}
 
     def failed(folder, reason):
         state, signal = classify(reason)
-        return {"signal": signal, "verdict": state, "wall_s": engine_wall_time(folder), **peaks(folder)}
+        return {"signal": signal, "verdict": state, **numbers(folder)}
 
     rows = run_missing(out, planned, measure, failed, report, case_digest(base))
     if not rows:

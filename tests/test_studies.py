@@ -111,7 +111,8 @@ def test_a_run_table_is_of_one_case_and_says_where_each_run_ran(tmp_path, monkey
 
 
 def test_an_insert_counts_in_the_case_digest_by_its_bytes_not_its_path(tmp_path):
-    from siloflow.run_table import case_digest, read_base_case
+    from siloflow.run_table import case_digest
+    from siloflow.study_case import read_study_case
     base = yaml.safe_load(SMALL.read_text())
     solid = "solid b\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0.05\nvertex 0.004 0 0.05\nvertex 0 0.004 0.05\n" \
             "endloop\nendfacet\nendsolid b\n"
@@ -121,10 +122,10 @@ def test_an_insert_counts_in_the_case_digest_by_its_bytes_not_its_path(tmp_path)
         (tmp_path / where / "baffle.stl").write_text(solid)
         (tmp_path / where / "case.yaml").write_text(yaml.safe_dump(
             {**base, "inserts": [{"name": "baffle", "file": "baffle.stl"}]}))
-        digests[where] = case_digest(read_base_case(tmp_path / where / "case.yaml")[0])
+        digests[where] = case_digest(read_study_case(tmp_path / where / "case.yaml")[0])
     assert digests["a"] == digests["b"] != case_digest(base)           # a moved folder: the same case
     (tmp_path / "b" / "baffle.stl").write_text(solid.replace("0.05", "0.06"))
-    assert case_digest(read_base_case(tmp_path / "b" / "case.yaml")[0]) != digests["a"]    # an edited mesh: another
+    assert case_digest(read_study_case(tmp_path / "b" / "case.yaml")[0]) != digests["a"]    # an edited mesh: another
 
 
 @pytest.mark.parametrize("sha", ["0123456789012345", "1234e56789012345", "12345678901234e5"])
@@ -312,8 +313,8 @@ def test_upscaling_keeps_the_bed_and_scales_the_grains():
     fine, coarse = derive(case_from_dict(ab.candidate_case(base, ab.CANDIDATES[0], 3))), derive(case_from_dict(data))
     assert coarse.total_mass == pytest.approx(fine.total_mass, rel=0.01)       # the same bed, fewer grains
     assert not cand.profile
-    from siloflow.run_table import read_base_case
-    lin, _ = read_base_case(ROOT / "decks" / "paper_a_spheres_quick.yaml")
+    from siloflow.study_case import read_study_case
+    lin, _ = read_study_case(ROOT / "decks" / "paper_a_spheres_quick.yaml")
     up = ab.upscaled_case(lin, 2.0)
     assert up["materials"]["particle_particle"]["kn"] == 2.0 * float(lin["materials"]["particle_particle"]["kn"])
 

@@ -24,6 +24,7 @@ from siloflow.case_file import load_case
 from siloflow.cli import app
 from siloflow.errors import CaseError, SetupError
 from siloflow.run_folder import RECORD_NAME, RESULTS, SUMMARY_NAME, RunFolder
+from siloflow.study_case import read_study_case
 from siloflow.sweep import expand, group_by_fill, parse_set, run_sweep, write_slurm
 
 from conftest import QUICK
@@ -162,13 +163,14 @@ def test_set_seed_gives_the_seeds(quick_dict):
     assert [v.seed for v in expand(quick_dict, [parse_set("seed=7,9")])] == [7, 9]
 
 
-def test_read_case_data_makes_insert_paths_absolute(tmp_path, quick_dict):
+def test_the_study_case_reader_makes_insert_paths_absolute(tmp_path, quick_dict):
     (tmp_path / "m").mkdir()
     (tmp_path / "m" / "baffle.stl").write_text("solid baffle\nendsolid baffle\n")   # read only with the walls
     quick_dict["inserts"] = [{"name": "baffle", "file": "m/baffle.stl"}]
     (tmp_path / "case.yaml").write_text(yaml.safe_dump(quick_dict))
-    data = sweep.read_case_data(tmp_path / "case.yaml")
-    assert data["inserts"][0]["file"] == str((tmp_path / "m" / "baffle.stl").resolve())
+    data, case = read_study_case(tmp_path / "case.yaml")
+    assert data["inserts"][0]["file"] == str((tmp_path / "m" / "baffle.stl").resolve()) == case.inserts[0].file
+    assert data["name"] == case.name == quick_dict["name"]
 
 
 # ------------------------------------------------------------------ fill groups
@@ -189,58 +191,54 @@ def test_particle_radii_and_seeds_do_not(quick_dict):
     assert list(groups.values())[0][0].index == 0                 # insertion-ordered
 
 
-# ------------------------------------------------------------------ the local runner, with a fake siloflow run
-FAKE_RUN = """
-import json, os, sys, time
-from pathlib import Path
-import yaml
-case_file, dash_o, folder, dash_cache, cache = sys.argv[1:6]
-assert dash_o == "-o" and dash_cache == "--cache", sys.argv
-case = yaml.safe_load(open(case_file))
-name, ranks = case["name"], case.get("engine", {{}}).get("ranks", 1)
-folder, cache = Path(folder), Path(cache)
-assert not folder.exists(), "siloflow run refuses an existing folder"
-marker = cache / "fills" / f"{{case['particles']['radius']}}-{{case['seed']}}"   # what the bed depends on here
-hit = marker.exists()
-pid_file = os.environ.get("FAKE_PIDS")
-if pid_file:
-    with open(pid_file, "a") as fh:
-        fh.write(f"{{os.getpid()}}\\n")
-start = time.time()
-time.sleep(float(os.environ.get("FAKE_SLEEP", "0.2")))
-end = time.time()
-with open(os.environ["FAKE_TIMES"], "a") as fh:
-    fh.write(json.dumps({{"name": name, "ranks": ranks, "start": start, "end": end, "hit": hit,
-                         "columns": os.environ.get("COLUMNS")}}) + "\\n")
-print(f"fake run of {{name}}")
-if name in os.environ.get("FAKE_FAIL", "").split(","):
-    print("fake failure", file=sys.stderr)
-    sys.exit(1)
-(folder / {results!r}).mkdir(parents=True)
-record = {{"folder": str(folder), "engine": "fake", "command": ["fake"], "returncode": 0, "wall_time": end - start,
-          "stage_steps": {{}}, "inserted": 10, "settled_ke_pe": 1e-6, "completed": True,
-          "fill_cache": {{"key": "k", "hit": hit}}}}
-(folder / {record!r}).write_text(json.dumps(record))
-summary = {{"flow_rate": {{"rate": 1000 * case["geometry"]["orifice_radius"], "stderr": 0.001}},
-           "force_balance": {{"ratio": 0.99}}, "frame_analyses": {{"bulk_solid_fraction": 0.6}}}}
-(folder / {results!r} / {summary!r}).write_text(json.dumps(summary))
-marker.parent.mkdir(parents=True, exist_ok=True)
-marker.touch()
-"""
+# ------------------------------------------------------------------ the local runner, with a fake run
+def fake_runner(case_file, folder, cache, resuming):
+    """A fake run of a variant (in its worker process, as ``sweep.run_variant`` would run it): sleeps,
+    records itself in FAKE_TIMES, fails (exit code 1) when named in FAKE_FAIL, else leaves a record
+    and a summary. Its bed depends on the radius and the seed: a marker in the cache."""
+    assert not resuming
+    case = yaml.safe_load(open(case_file))
+    name, ranks = case["name"], case.get("engine", {}).get("ranks", 1)
+    folder, cache = Path(folder), Path(cache)
+    assert not folder.exists(), "siloflow run refuses an existing folder"
+    marker = cache / "fills" / f"{case['particles']['radius']}-{case['seed']}"   # what the bed depends on here
+    hit = marker.exists()
+    pid_file = os.environ.get("FAKE_PIDS")
+    if pid_file:
+        with open(pid_file, "a") as fh:
+            fh.write(f"{os.getpid()}\n")
+    start = time.time()
+    time.sleep(float(os.environ.get("FAKE_SLEEP", "0.2")))
+    end = time.time()
+    with open(os.environ["FAKE_TIMES"], "a") as fh:
+        fh.write(json.dumps({"name": name, "ranks": ranks, "start": start, "end": end, "hit": hit,
+                             "columns": os.environ.get("COLUMNS"), "pid": os.getpid()}) + "\n")
+    print(f"fake run of {name}")
+    if name in os.environ.get("FAKE_FAIL", "").split(","):
+        print("fake failure", file=sys.stderr)
+        sys.exit(1)
+    (folder / RESULTS).mkdir(parents=True)
+    record = {"folder": str(folder), "engine": "fake", "command": ["fake"], "returncode": 0, "wall_time": end - start,
+              "stage_steps": {}, "inserted": 10, "settled_ke_pe": 1e-6, "completed": True,
+              "fill_cache": {"key": "k", "hit": hit}}
+    (folder / RECORD_NAME).write_text(json.dumps(record))
+    summary = {"flow_rate": {"rate": 1000 * case["geometry"]["orifice_radius"], "stderr": 0.001},
+               "force_balance": {"ratio": 0.99}, "frame_analyses": {"bulk_solid_fraction": 0.6}}
+    (folder / RESULTS / SUMMARY_NAME).write_text(json.dumps(summary))
+    marker.parent.mkdir(parents=True, exist_ok=True)
+    marker.touch()
 
 
 @pytest.fixture
 def fake_run(tmp_path, monkeypatch):
-    """A fake `siloflow run`: the command, and a reader of the runs it recorded (name -> record)."""
-    script = tmp_path / "fake_run.py"
-    script.write_text(FAKE_RUN.format(results=RESULTS, record=RECORD_NAME, summary=SUMMARY_NAME))
+    """A fake run of a variant: the runner, and a reader of the runs it recorded (name -> record)."""
     times = tmp_path / "times.jsonl"
     monkeypatch.setenv("FAKE_TIMES", str(times))
 
     def runs() -> dict:
         lines = times.read_text().splitlines() if times.exists() else []
         return {r["name"]: r for r in map(json.loads, lines)}
-    return [sys.executable, str(script)], runs
+    return fake_runner, runs
 
 
 def most_ranks_at_once(records) -> int:
@@ -262,7 +260,7 @@ def test_fills_first_within_the_cores_and_a_failure_recorded(quick_dict, tmp_pat
     monkeypatch.setenv("FAKE_FAIL", "quick-004")
     calls = []
     out = tmp_path / "sweep"
-    table = run_sweep(variants, out, cores=2, cache=tmp_path / "cache", command=command,
+    table = run_sweep(variants, out, cores=2, cache=tmp_path / "cache", runner=command,
                       progress=lambda done, total, names: calls.append((done, total, list(names))), groups=groups)
     done = runs()
     assert set(done) == {v.name for v in variants}
@@ -306,7 +304,7 @@ def test_a_failed_fill_hands_the_fill_to_the_next_of_its_group(quick_dict, tmp_p
     variants = expand(quick_dict, [parse_set("geometry.orifice_radius=0.006,0.007,0.008"), parse_set("engine.ranks=1")])
     groups = group_by_fill(variants, FakeEngine())
     monkeypatch.setenv("FAKE_FAIL", "quick-000")
-    table = run_sweep(variants, tmp_path / "s", cores=2, cache=tmp_path / "c", command=command, groups=groups)
+    table = run_sweep(variants, tmp_path / "s", cores=2, cache=tmp_path / "c", runner=command, groups=groups)
     done = runs()
     assert done["quick-000"]["end"] <= done["quick-001"]["start"]           # one fill at a time
     assert not done["quick-001"]["hit"] and done["quick-002"]["hit"]
@@ -319,7 +317,7 @@ def test_ranks_add_up_to_at_most_the_cores(quick_dict, tmp_path, fake_run):
     variants = expand(quick_dict, [parse_set("engine.ranks=1,2"), parse_set("seed=1,2,3")])
     groups = group_by_fill(variants, FakeEngine())
     assert len(groups) == 3                                       # by seed: ranks are the engine's part of the key
-    table = run_sweep(variants, tmp_path / "s", cores=3, cache=tmp_path / "c", command=command, groups=groups)
+    table = run_sweep(variants, tmp_path / "s", cores=3, cache=tmp_path / "c", runner=command, groups=groups)
     assert (table.status == "complete").all()
     assert most_ranks_at_once(runs().values()) <= 3
 
@@ -328,7 +326,7 @@ def test_a_run_wider_than_the_cores_is_refused_up_front(quick_dict, tmp_path, fa
     command, runs = fake_run
     variants = expand(quick_dict, [parse_set("engine.ranks=1,2")])
     with pytest.raises(SetupError, match=r"engine.ranks = 2 but --cores is 1"):
-        run_sweep(variants, tmp_path / "s", cores=1, cache=tmp_path / "c", command=command,
+        run_sweep(variants, tmp_path / "s", cores=1, cache=tmp_path / "c", runner=command,
                   groups=group_by_fill(variants, FakeEngine()))
     assert not (tmp_path / "s").exists() and runs() == {}
 
@@ -348,7 +346,7 @@ def test_ctrl_c_stops_the_running_runs(quick_dict, tmp_path, fake_run, monkeypat
             raise KeyboardInterrupt
     began = time.monotonic()
     with pytest.raises(KeyboardInterrupt):
-        run_sweep(variants, tmp_path / "s", cores=2, cache=tmp_path / "c", command=command, progress=progress,
+        run_sweep(variants, tmp_path / "s", cores=2, cache=tmp_path / "c", runner=command, progress=progress,
                   groups=group_by_fill(variants, FakeEngine()))
     assert time.monotonic() - began < 30
     for pid in map(int, pids.read_text().split()):
@@ -357,11 +355,82 @@ def test_ctrl_c_stops_the_running_runs(quick_dict, tmp_path, fake_run, monkeypat
     assert runs() == {}                         # none got past its sleep
 
 
-def test_a_command_that_cannot_start_is_a_setup_error(quick_dict, tmp_path):
+def test_a_log_that_cannot_be_written_is_a_setup_error(quick_dict, tmp_path, fake_run):
+    command, runs = fake_run
     variants = expand(quick_dict, [])
-    with pytest.raises(SetupError, match="cannot start"):
-        run_sweep(variants, tmp_path / "s", cores=2, cache=tmp_path / "c", command=[str(tmp_path / "nothing")],
+    (tmp_path / "s" / "logs" / f"{variants[0].name}.log").mkdir(parents=True)     # a folder where the log goes
+    with pytest.raises(SetupError, match="cannot write the log"):
+        run_sweep(variants, tmp_path / "s", cores=2, cache=tmp_path / "c", runner=command,
                   groups=group_by_fill(variants, FakeEngine()))
+    assert runs() == {}
+
+
+def test_each_run_is_its_own_worker_process_of_this_python(quick_dict, tmp_path, fake_run):
+    command, runs = fake_run
+    variants = expand(quick_dict, [parse_set("geometry.orifice_radius=0.006,0.007"), parse_set("engine.ranks=1")])
+    run_sweep(variants, tmp_path / "s", cores=2, cache=tmp_path / "c", runner=command,
+              groups=group_by_fill(variants, FakeEngine()))
+    pids = {r["pid"] for r in runs().values()}
+    assert len(pids) == 2 and os.getpid() not in pids
+
+
+class _Prepared:
+    """What ``siloflow.runs.prepare_run`` returns, for a run that writes its record and nothing else."""
+
+    def __init__(self, case_file, folder):
+        self.case = load_case(case_file)
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True)
+
+    def execute(self, progress=None, cache=None, on_cache_hit=None, on_warning=None):
+        from siloflow.run_folder import RunRecord
+        record = RunRecord(folder=str(self.folder), engine="fake", command=["fake"], returncode=0, wall_time=0.5,
+                           stage_steps={}, inserted=10, settled_ke_pe=1e-6, completed=True,
+                           fill_cache={"key": "k", "hit": False})
+        (self.folder / RECORD_NAME).write_text(json.dumps(record.to_json()))
+        return record
+
+
+def test_the_sweep_runs_the_api_and_starts_no_siloflow_command(quick_dict, tmp_path, monkeypatch):
+    """Issue 37: the sweep calls siloflow.runs, in worker processes, and starts no ``siloflow`` subprocess."""
+    import siloflow.runs
+    tried = tmp_path / "siloflow_commands.txt"
+
+    def refuse(real):
+        def guarded(*args, **kwargs):
+            argv = args[0] if args else kwargs.get("args", [])
+            text = " ".join(map(str, argv)) if isinstance(argv, (list, tuple)) else str(argv)
+            if "siloflow" in text:
+                with open(tried, "a") as fh:         # the worker's memory is its own: say it in a file
+                    fh.write(text + "\n")
+                raise AssertionError(f"a siloflow subprocess: {text}")
+            return real(*args, **kwargs)
+        return guarded
+    monkeypatch.setattr(subprocess, "Popen", refuse(subprocess.Popen))
+    for name in ("system", "execv", "execve", "execvp", "posix_spawn", "posix_spawnp"):
+        if hasattr(os, name):
+            monkeypatch.setattr(os, name, refuse(getattr(os, name)))
+    monkeypatch.setattr(siloflow.runs, "prepare_run", lambda case_file, folder, **kw: _Prepared(case_file, folder))
+
+    def post(folder, measured=None):
+        summary = {"flow_rate": {"rate": 0.25, "stderr": 0.01}}
+        (Path(folder) / RESULTS).mkdir(exist_ok=True)
+        (Path(folder) / RESULTS / SUMMARY_NAME).write_text(json.dumps(summary))
+        return summary
+    monkeypatch.setattr(siloflow.runs, "post_process", post)
+    variants = expand(quick_dict, [parse_set("geometry.orifice_radius=0.006,0.007,0.008"), parse_set("engine.ranks=1")])
+    out = tmp_path / "s"
+    table = run_sweep(variants, out, cores=2, cache=tmp_path / "c", groups=group_by_fill(variants, FakeEngine()))
+    assert not tried.exists(), tried.read_text()
+    assert table.status.tolist() == ["complete"] * 3, [Path(p).read_text() for p in table.log]
+    assert table.flow_rate_kg_s.tolist() == [0.25] * 3 and table.wall_s.tolist() == [0.5] * 3
+    log = (out / "logs" / "quick-000.log").read_text()
+    assert "siloflow.runs in a worker process" in log and "engine finished in 0.5 s" in log
+    # the guard works: a siloflow command line in a worker is caught, and the run fails
+    monkeypatch.setattr(siloflow.runs, "post_process", lambda folder, measured=None: subprocess.run(["siloflow", "post"]))
+    table = run_sweep(variants[:1], tmp_path / "t", cores=1, cache=tmp_path / "c",
+                      groups=group_by_fill(variants[:1], FakeEngine()))
+    assert table.status.tolist() == ["failed"] and "siloflow post" in tried.read_text()
 
 
 # ------------------------------------------------------------------ Slurm
@@ -517,7 +586,7 @@ def test_cli_sweep_refusals(tmp_path, fake_engine, args, words):
 
 def test_cli_sweep_runs_and_beverloo_reads_its_table(tmp_path, fake_engine, fake_run, monkeypatch):
     command, runs = fake_run
-    monkeypatch.setattr(sweep, "default_command", lambda: command)
+    monkeypatch.setattr(sweep, "run_variant", command)
     monkeypatch.setenv("FAKE_FAIL", "quick-003")
     out = tmp_path / "sweep"
     result = runner.invoke(app, ["sweep", str(QUICK), "--set", "geometry.orifice_radius=0.005,0.006,0.007,0.008",
@@ -553,3 +622,15 @@ def test_cli_sweep_runs_and_beverloo_reads_its_table(tmp_path, fake_engine, fake
     table[["name"]].to_csv(tmp_path / "no_runs.csv", index=False)
     result = runner.invoke(app, ["beverloo", str(tmp_path / "no_runs.csv")])
     assert result.exit_code == 1 and "no 'run' column" in result.output
+
+
+def test_no_benchmark_starts_a_siloflow_command():
+    """Issue 37: the benchmarks run cases through the API (siloflow.runs.run, siloflow.sweep.sweep),
+    never a ``siloflow`` command line (``python -m siloflow.cli``, or ``siloflow`` as a program)."""
+    root = Path(__file__).resolve().parents[1] / "benchmarks"
+    found = []
+    for path in sorted(root.glob("*.py")):
+        text = path.read_text()
+        if "siloflow.cli" in text or re.search(r"""\[\s*["']siloflow["']\s*,""", text):
+            found.append(path.name)
+    assert found == []

@@ -1,7 +1,7 @@
 """Sweeps (issue 34, items 2, 5, 6): the files a sweep wrote are replaced only while unchanged
 (sweep.json records them), an interrupted sweep resumes, a folder of another sweep is refused,
 large Slurm sweeps are split into arrays of at most --max-array-size tasks, and the plans are made
-once per distinct case and silo. A fake `siloflow run` (with --resume) stands in for the engine."""
+once per distinct case and silo. A fake run (and resumption) stands in for the engine."""
 from __future__ import annotations
 
 import json
@@ -15,12 +15,14 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+import yaml
 from typer.testing import CliRunner
 
-from siloflow import sweep
+from siloflow import sweep, sweep_folder, sweep_plan
 from siloflow.cli import app
 from siloflow.errors import SetupError
 from siloflow.run_folder import MANIFEST_NAME, RESULTS, SUMMARY_NAME, run_state, write_status
+from siloflow.study_case import read_study_case
 from siloflow.sweep import expand, group_by_fill, parse_set, run_sweep, write_slurm
 
 from conftest import QUICK
@@ -74,7 +76,7 @@ def test_unchanged_files_are_replaced_and_identical_runs_are_harmless(tmp_path, 
     assert f"--cache {tmp_path / 'elsewhere'}" in (out / "fills.sbatch").read_text()
     record = json.loads((out / "sweep.json").read_text())
     for name in ("fills.sbatch", "runs.sbatch", "fills.txt", "runs.txt", "submit.sh"):
-        assert record["files"][name] == [sweep._sha256_text((out / name).read_text())]
+        assert record["files"][name] == [sweep_folder._sha256_text((out / name).read_text())]
     assert os.access(out / "submit.sh", os.X_OK)
 
 
@@ -101,18 +103,18 @@ def test_a_write_cut_short_leaves_files_siloflow_still_owns(tmp_path, quick_dict
     groups = group_by_fill(variants, FakeEngine())
     out = tmp_path / "s"
     write_slurm(variants, groups, out, tmp_path / "c1")
-    real, calls = sweep.write_text, []
+    real, calls = sweep_folder.write_text, []
 
     def failing(path, text):
         calls.append(path)
         if Path(path).name == "runs.sbatch":
             raise OSError("disk full")
         real(path, text)
-    monkeypatch.setattr(sweep, "write_text", failing)
+    monkeypatch.setattr(sweep_folder, "write_text", failing)
     with pytest.raises(OSError):
         write_slurm(variants, groups, out, tmp_path / "c2")       # fills.sbatch new, runs.sbatch old
     assert len(json.loads((out / "sweep.json").read_text())["files"]["runs.sbatch"]) == 2    # old and new
-    monkeypatch.setattr(sweep, "write_text", real)
+    monkeypatch.setattr(sweep_folder, "write_text", real)
     write_slurm(variants, groups, out, tmp_path / "c1")         # either way: every file is still siloflow's
     assert f"--cache {tmp_path / 'c1'}" in (out / "fills.sbatch").read_text()
     write_slurm(variants, groups, out, tmp_path / "c2")
@@ -120,62 +122,49 @@ def test_a_write_cut_short_leaves_files_siloflow_still_owns(tmp_path, quick_dict
 
 
 # ------------------------------------------------------------------ item 5: resuming
-FAKE_RUN = """
-import json, os, signal, sys, time
-from pathlib import Path
-import yaml
-from siloflow.run_folder import write_status
-args = sys.argv[1:]
-if args[0] == "--resume":
-    folder = Path(args[1])
-    state = json.loads((folder / "status.json").read_text())["state"]
-    assert state not in ("complete", "running"), state
-    case = yaml.safe_load((folder / "case.yaml").read_text())
-    resumed = True
-else:
-    case_file, dash_o, folder, dash_cache, cache = args
-    assert dash_o == "-o" and dash_cache == "--cache", args
+def fake_runner(case_file, folder, cache, resuming):
+    """A fake run of a variant (and its resumption) that keeps a status like siloflow's; Ctrl-C
+    (SIGTERM in its worker) marks it interrupted, as the engine does."""
     folder = Path(folder)
-    assert not folder.exists(), "siloflow run refuses an existing folder"
-    case = yaml.safe_load(open(case_file))
-    folder.mkdir(parents=True)
-    (folder / {manifest!r}).write_text(json.dumps({{"files": {{}}}}))
-    (folder / "case.yaml").write_text(yaml.safe_dump(case))
-    resumed = False
-name = case["name"]
-
-
-def stop(signum, frame):
-    write_status(folder, "interrupted")
-    sys.exit(130)
-signal.signal(signal.SIGTERM, stop)
-write_status(folder, "running")
-with open(os.environ["FAKE_STARTED"], "a") as fh:
-    fh.write(name + "\\n")
-start = time.time()
-time.sleep(60 if name in os.environ.get("FAKE_SLOW", "").split(",") else 0.1)
-if name in os.environ.get("FAKE_FAIL", "").split(","):
-    write_status(folder, "failed", reason="fake")
-    sys.exit(1)
-(folder / {results!r}).mkdir(exist_ok=True)
-record = {{"folder": str(folder), "engine": "fake", "command": ["fake"], "returncode": 0,
-          "wall_time": time.time() - start, "stage_steps": {{}}, "inserted": 10, "settled_ke_pe": 1e-6,
-          "completed": True, "fill_cache": {{"key": "k", "hit": resumed}}}}
-(folder / "run_record.json").write_text(json.dumps(record))
-summary = {{"flow_rate": {{"rate": 1000 * case["geometry"]["orifice_radius"], "stderr": 0.001}}}}
-(folder / {results!r} / {summary!r}).write_text(json.dumps(summary))
-write_status(folder, "complete")
-with open(os.environ["FAKE_DONE"], "a") as fh:
-    fh.write(json.dumps({{"name": name, "resumed": resumed}}) + "\\n")
-"""
+    if resuming:
+        state = json.loads((folder / "status.json").read_text())["state"]
+        assert state not in ("complete", "running"), state
+        case = yaml.safe_load((folder / "case.yaml").read_text())
+    else:
+        assert not folder.exists(), "siloflow run refuses an existing folder"
+        case = yaml.safe_load(open(case_file))
+        folder.mkdir(parents=True)
+        (folder / MANIFEST_NAME).write_text(json.dumps({"files": {}}))
+        (folder / "case.yaml").write_text(yaml.safe_dump(case))
+    name = case["name"]
+    write_status(folder, "running")
+    with open(os.environ["FAKE_STARTED"], "a") as fh:
+        fh.write(name + "\n")
+    start = time.time()
+    try:
+        time.sleep(60 if name in os.environ.get("FAKE_SLOW", "").split(",") else 0.1)
+    except KeyboardInterrupt:
+        write_status(folder, "interrupted")
+        raise
+    if name in os.environ.get("FAKE_FAIL", "").split(","):
+        write_status(folder, "failed", reason="fake")
+        sys.exit(1)
+    (folder / RESULTS).mkdir(exist_ok=True)
+    record = {"folder": str(folder), "engine": "fake", "command": ["fake"], "returncode": 0,
+              "wall_time": time.time() - start, "stage_steps": {}, "inserted": 10, "settled_ke_pe": 1e-6,
+              "completed": True, "fill_cache": {"key": "k", "hit": resuming}}
+    (folder / "run_record.json").write_text(json.dumps(record))
+    summary = {"flow_rate": {"rate": 1000 * case["geometry"]["orifice_radius"], "stderr": 0.001}}
+    (folder / RESULTS / SUMMARY_NAME).write_text(json.dumps(summary))
+    write_status(folder, "complete")
+    with open(os.environ["FAKE_DONE"], "a") as fh:
+        fh.write(json.dumps({"name": name, "resumed": resuming}) + "\n")
 
 
 @pytest.fixture
 def fake_run(tmp_path, monkeypatch):
-    """A fake `siloflow run` (and `run --resume`) that keeps a status like siloflow's: the
-    command, and readers of the runs it started and finished."""
-    script = tmp_path / "fake_run.py"
-    script.write_text(FAKE_RUN.format(manifest=MANIFEST_NAME, results=RESULTS, summary=SUMMARY_NAME))
+    """A fake run of a variant (and its resumption) that keeps a status like siloflow's: the
+    runner, and readers of the runs it started and finished."""
     started, done = tmp_path / "started.txt", tmp_path / "done.jsonl"
     monkeypatch.setenv("FAKE_STARTED", str(started))
     monkeypatch.setenv("FAKE_DONE", str(done))
@@ -185,7 +174,7 @@ def fake_run(tmp_path, monkeypatch):
 
     def finished() -> list:
         return [json.loads(line) for line in done.read_text().splitlines()] if done.exists() else []
-    return [sys.executable, str(script)], starts, finished
+    return fake_runner, starts, finished
 
 
 def interrupt_when(starts, name: str):
@@ -200,7 +189,7 @@ def interrupt_when(starts, name: str):
 
 
 def four_runs():
-    data = sweep.read_case_data(QUICK)
+    data, _ = read_study_case(QUICK)
     variants = expand(data, [parse_set("geometry.orifice_radius=0.005,0.006,0.007,0.008"), parse_set("engine.ranks=1")])
     return variants, group_by_fill(variants, FakeEngine())
 
@@ -211,7 +200,7 @@ def test_an_interrupted_sweep_resumes_to_a_complete_table(tmp_path, fake_run, mo
     out, cache = tmp_path / "sweep", tmp_path / "cache"
     monkeypatch.setenv("FAKE_SLOW", "quick-002")
     with pytest.raises(KeyboardInterrupt):
-        run_sweep(variants, out, cores=1, cache=cache, command=command, groups=groups,
+        run_sweep(variants, out, cores=1, cache=cache, runner=command, groups=groups,
                   progress=interrupt_when(starts, "quick-002"))
     assert [r["name"] for r in finished()] == ["quick-000", "quick-001"]
     assert run_state(out / "runs" / "quick-002")["state"] == "interrupted"
@@ -222,7 +211,7 @@ def test_an_interrupted_sweep_resumes_to_a_complete_table(tmp_path, fake_run, mo
     # the same call again resumes it
     monkeypatch.delenv("FAKE_SLOW")
     calls = []
-    table = run_sweep(variants, out, cores=1, cache=cache, command=command, groups=groups,
+    table = run_sweep(variants, out, cores=1, cache=cache, runner=command, groups=groups,
                       progress=lambda done, total, running: calls.append((done, total)))
     assert calls[0] == (2, 4) and calls[-1] == (4, 4)
     assert finished()[2:] == [{"name": "quick-002", "resumed": True}, {"name": "quick-003", "resumed": False}]
@@ -233,7 +222,7 @@ def test_an_interrupted_sweep_resumes_to_a_complete_table(tmp_path, fake_run, mo
     assert saved.status.tolist() == ["complete"] * 4
     assert "--resume" in (out / "logs" / "quick-002.log").read_text()
     # once more: nothing left to run, the same table
-    again = run_sweep(variants, out, cores=1, cache=cache, command=command, groups=groups)
+    again = run_sweep(variants, out, cores=1, cache=cache, runner=command, groups=groups)
     assert len(starts()) == 5 and again.status.tolist() == ["complete"] * 4
 
 
@@ -244,11 +233,11 @@ def test_a_failed_run_is_kept_with_its_exit_code(tmp_path, fake_run, monkeypatch
     monkeypatch.setenv("FAKE_FAIL", "quick-001")
     monkeypatch.setenv("FAKE_SLOW", "quick-002")
     with pytest.raises(KeyboardInterrupt):
-        run_sweep(variants, out, cores=1, cache=tmp_path / "c", command=command, groups=groups,
+        run_sweep(variants, out, cores=1, cache=tmp_path / "c", runner=command, groups=groups,
                   progress=interrupt_when(starts, "quick-002"))
     monkeypatch.delenv("FAKE_FAIL")
     monkeypatch.delenv("FAKE_SLOW")
-    table = run_sweep(variants, out, cores=1, cache=tmp_path / "c", command=command, groups=groups)
+    table = run_sweep(variants, out, cores=1, cache=tmp_path / "c", runner=command, groups=groups)
     assert starts().count("quick-001") == 1                    # a failure is a result: not run again
     assert table.status.tolist() == ["complete", "failed", "complete", "complete"]
     assert table.returncode.tolist() == [0, 1, 0, 0]
@@ -264,7 +253,7 @@ def test_run_folders_a_sweep_cannot_resume_are_refused(tmp_path, fake_run):
     (live / MANIFEST_NAME).write_text("{}")
     write_status(live, "running")                             # this process: alive
     with pytest.raises(SetupError) as info:
-        run_sweep(variants, out, cores=1, cache=tmp_path / "c", command=command, groups=groups)
+        run_sweep(variants, out, cores=1, cache=tmp_path / "c", runner=command, groups=groups)
     assert "quick-001 (no siloflow run" in str(info.value) and "quick-002 (still running" in str(info.value)
     assert starts() == [] and not (out / "cases").exists() and not (out / "sweep.json").exists()
 
@@ -273,10 +262,10 @@ def test_another_sweep_in_the_folder_is_refused(tmp_path, fake_run):
     command, starts, finished = fake_run
     variants, groups = four_runs()
     out = tmp_path / "sweep"
-    run_sweep(variants[:2], out, cores=1, cache=tmp_path / "c", command=command,
+    run_sweep(variants[:2], out, cores=1, cache=tmp_path / "c", runner=command,
               groups={k: [v for v in g if v.index < 2] for k, g in groups.items()})
     with pytest.raises(SetupError, match="holds another sweep"):
-        run_sweep(variants, out, cores=1, cache=tmp_path / "c", command=command, groups=groups)
+        run_sweep(variants, out, cores=1, cache=tmp_path / "c", runner=command, groups=groups)
     with pytest.raises(SetupError, match="holds another sweep"):
         sweep.check_sweep_folder(out, variants, force=True)
     assert len(starts()) == 2
@@ -286,18 +275,18 @@ def test_an_edited_table_is_refused_before_anything_runs(tmp_path, fake_run):
     command, starts, finished = fake_run
     variants, groups = four_runs()
     out = tmp_path / "sweep"
-    run_sweep(variants[:1], out, cores=1, cache=tmp_path / "c", command=command,
+    run_sweep(variants[:1], out, cores=1, cache=tmp_path / "c", runner=command,
               groups={next(iter(groups)): variants[:1]})
     (out / "sweep.csv").write_text("my notes\n")
     with pytest.raises(SetupError, match=r"sweep\.csv \(edited since siloflow wrote it\)"):
-        run_sweep(variants[:1], out, cores=1, cache=tmp_path / "c", command=command,
+        run_sweep(variants[:1], out, cores=1, cache=tmp_path / "c", runner=command,
                   groups={next(iter(groups)): variants[:1]})
     assert (out / "sweep.csv").read_text() == "my notes\n"
 
 
 def test_cli_says_how_to_resume_and_the_same_command_resumes(tmp_path, fake_engine, fake_run, monkeypatch):
     command, starts, finished = fake_run
-    monkeypatch.setattr(sweep, "default_command", lambda: command)
+    monkeypatch.setattr(sweep, "run_variant", command)
     monkeypatch.setenv("FAKE_SLOW", "quick-002")
     real = sweep.run_sweep
 
@@ -454,7 +443,7 @@ def test_plans_are_made_once_per_case_and_silo_and_group_as_before(quick_dict, m
     assert counts == {"derive": 8, "meshes": 2}           # 24 variants: 8 cases but the seed, 2 silos
     assert meshes.silo_meshes is counted_meshes           # put back
     assert stages[-1] == ("planning", 24, 24) and len(stages) == 24
-    with sweep._shared_meshes():                          # the shared meshes make the same plan
+    with sweep_plan._shared_meshes():                          # the shared meshes make the same plan
         for v in variants[:2]:
             assert real_derive(v.case).model_dump_json() == real_derive(v.case).model_dump_json()
         shared = real_derive(variants[5].case)

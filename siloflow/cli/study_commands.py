@@ -46,7 +46,8 @@ def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
     import os
     import shlex
 
-    from ..sweep import prepare_sweep, run_sweep, table_summary, write_slurm
+    from ..slurm import write_slurm
+    from ..sweep import prepare_sweep, run_sweep, table_summary
     again = shlex.join(["siloflow", "sweep", str(case_file), *[a for spec in set_specs for a in ("--set", spec)],
                         *(["--seeds", str(seeds)] if seeds != 1 else []), *(["--cores", str(cores)] if cores else []),
                         "-o", str(output), *(["--cache", str(cache)] if cache else [])])
