@@ -20,7 +20,7 @@ from typing import Callable, Optional
 
 from ..case import Case
 from ..errors import EngineRunError, SetupError
-from ..run_folder import RECORD_NAME, RESTART_FILE, RunFolder, RunRecord, check_plain_tree, run_state, write_status
+from ..run_folder import RECORD_NAME, RunFolder, RunRecord, check_plain_tree, run_state, write_status
 from .processes import DISK_FIX, FILL_LOSS_LIMIT, disk_full, not_settled, read_plan
 from .tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 
@@ -102,6 +102,8 @@ class Engine(ABC):
     #: the deck the engine runs, and the one a resumed run runs (relative to the run folder)
     deck_name: str = ""
     resume_deck_name: str = ""
+    #: the file a failed run's reader is sent to
+    log_name: str = "the engine's log"
     #: the engine's sampled tables, in the layout of ``siloflow.engine.tables``
     flow_table: str = "output/flow.txt"
     wall_forces_table: str = "output/wall_forces.txt"
