@@ -95,7 +95,7 @@ def write_run_folder(case: Case, plan, engine, folder: Path) -> None:
     """Write the files of a run folder into the existing, empty ``folder``: the validated case (its
     inserts naming the folder's own mesh copies, in metres), the plan, and the engine's deck."""
     folder = Path(folder)
-    engine.write_deck(plan, case, folder)
+    engine.write_deck(plan, folder)
     stored = case.model_copy(update={"inserts": [
         ins.model_copy(update={"file": f"meshes/{ins.mesh_name}.stl", "scale": 1.0}) for ins in case.inserts]})
     write_text(folder / CASE_NAME, case_to_yaml(stored))

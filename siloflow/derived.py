@@ -300,6 +300,12 @@ def physics_warnings(case: Case, d: RunPlan) -> list[str]:
     return out
 
 
+def _engine_options(case) -> dict[str, int]:
+    """The case's settings only some engine reads (``EngineChoice.options``)."""
+    tries = getattr(case.particles, "monte_carlo_tries", None)
+    return {} if tries is None else {"monte_carlo_tries": tries}
+
+
 def derive(case: Case) -> RunPlan:
     """The run plan of a case: every value any engine needs, computed once, with the walls' meshes
     (generated, and the inserts' read from their files and checked).
@@ -458,7 +464,7 @@ def derive(case: Case) -> RunPlan:
                                      poisson_ratio=_modulus_of(case, "dust")[1])
     plan = RunPlan(
         siloflow_version=__version__, name=case.name,
-        engine=EngineChoice(name=case.engine.name, ranks=case.engine.ranks),
+        engine=EngineChoice(name=case.engine.name, ranks=case.engine.ranks, options=_engine_options(case)),
         profile=Profile(name=settings["profile"], timestep_fraction=settings["timestep_fraction"],
                         stiffness_scale=settings["stiffness_scale"], overlap_ratio=settings.get("overlap_ratio"),
                         speedup=settings.get("speedup"),

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import Literal, Optional
 
-from pydantic import BaseModel, ConfigDict, PrivateAttr, ValidationError
+from pydantic import BaseModel, ConfigDict, PrivateAttr, ValidationError, model_serializer
 
 from .case import DEFAULT_TIMESTEP_FRACTION, Analysis, DesignSettings
 from .errors import ReadError
@@ -270,8 +270,20 @@ class Outputs(Frozen):
 
 
 class EngineChoice(Frozen):
+    """The case's engine, its MPI ranks, and the case's settings only some engine reads (``options``:
+    ``monte_carlo_tries``, the multisphere template's samples of a clump, LIGGGHTS), so that a deck
+    writer needs the plan alone. Empty options are left out of plan.json."""
+
     name: str
     ranks: int
+    options: dict[str, int] = {}
+
+    @model_serializer(mode="wrap")
+    def _omit_empty_options(self, handler):
+        data = handler(self)
+        if isinstance(data, dict) and not data.get("options"):
+            data.pop("options", None)
+        return data
 
 
 class Profile(Frozen):

@@ -161,7 +161,7 @@ def liggghts_contact_lines(plan, case) -> tuple[list[str], str]:
     """The contact-law lines of the case's resumed LIGGGHTS deck (friction restored) and its
     walls' ``fix wall/gran`` line."""
     from siloflow.engine.liggghts import deck
-    text = rendered(deck, plan, case, True).splitlines()
+    text = rendered(deck, plan, True).splitlines()
     law = [ln for ln in text if ln.startswith(("fix             material", "pair_style", "pair_coeff"))]
     walls = next(ln for ln in text if ln.startswith("fix             walls "))
     return law, walls

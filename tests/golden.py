@@ -50,7 +50,7 @@ def golden_files(case_file: Path, engine: str = "liggghts") -> dict[str, bytes] 
         with tempfile.TemporaryDirectory(prefix="siloflow-golden-") as scratch:
             folder = renderer.prepare(case, Path(scratch) / "deck", plan=plan)
             if engine == "liggghts":
-                write_resume_deck(plan, case, folder)
+                write_resume_deck(plan, folder)
             out = {p.name: p.read_bytes() for pattern in ["plan.json", *DECKS[engine]] for p in sorted(folder.glob(pattern))}
             for name, sub, pattern in (("meshes.sha256", "meshes", "*.stl"), ("fill.sha256", "fill", "*.txt")):
                 if (folder / sub).is_dir():      # fill/: spheres' placed batches (siloflow.fill_placement)

@@ -191,7 +191,7 @@ def test_dust_density_scaling_lengthens_the_time_step_as_its_square_root():
 def test_clump_deck_uses_multisphere_and_keeps_dust_on_its_own_integrator():
     case = load_case(CLUMPS)
     d = derive(case)
-    text = render_deck_text(d, case)
+    text = render_deck_text(d)
     line = next(ln for ln in text.splitlines() if "particletemplate/multisphere" in ln)
     assert "nspheres 3" in line and "ntry 200000" in line and "density constant 1000" in line
     assert "fix             integrate all multisphere" in text

@@ -149,7 +149,7 @@ def test_polydisperse_number_and_mass_fractions_and_time_step(quick_dict):
                                                                                               [0.0015, 0.001, 0.00075])))
     # the fill holds the number fractions' counts (siloflow.fill_placement), each size its own type and density
     assert class_counts(d) == {0: 0.2 * d.fill.count, 1: 0.3 * d.fill.count, 2: 0.5 * d.fill.count}
-    deck = render_deck_text(d, case)
+    deck = render_deck_text(d)
     assert "particletemplate" not in deck and "read_dump" in deck
     assert [ln.split()[2] for ln in deck.splitlines() if ln.startswith("set ")][:3] == ["1", "2", "3"]
     # the same distribution given by mass converts back to the number fractions

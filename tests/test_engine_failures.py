@@ -288,7 +288,7 @@ def test_grains_below_liggghts_default_volume_limit_get_their_own(quick_dict):
 
     def templates(case):
         plan = derive(case)
-        return particle_templates(plan, encode(plan), monte_carlo_tries(case))
+        return particle_templates(plan, encode(plan), monte_carlo_tries(plan))
 
     case = _tiny_grain_case(quick_dict)
     (t,) = templates(case)

@@ -9,7 +9,7 @@ import pytest
 
 from siloflow.case_file import load_case
 from siloflow.engine import LiggghtsEngine
-from siloflow.engine.liggghts.tables import FLOW_COLUMNS, read_ave_time
+from siloflow.engine.tables import FLOW_COLUMNS, read_ave_time
 from siloflow.errors import EngineRunError, SetupError
 
 

@@ -269,7 +269,7 @@ def test_liggghts_wall_forces_become_the_long_table_and_back(tmp_path):
     """LIGGGHTS' wide ave/time table -> the engine-neutral long table -> the wide table post
     uses: the same numbers, in the plan's wall order, the counting disc left out."""
     from postprocess.wall_pressure import wide_forces
-    from siloflow.engine.liggghts.tables import neutral_wall_forces, wall_force_columns
+    from siloflow.engine.tables import neutral_wall_forces, wall_force_columns
     from siloflow.case_file import load_case as load
 
     plan = derive(load(ROOT / "tests" / "data" / "small_silo.yaml"))

@@ -42,14 +42,14 @@ def test_mobilise_lowers_the_floor_and_settles_again(quick_dict):
     d = 2 * plan.particle_radius
     assert m.drop == pytest.approx(0.1 * d) and m.speed * m.steps * plan.dt == pytest.approx(m.drop, rel=1e-12)
     assert m.meshes == ["bottom", "plate"]
-    text = render_deck_text(plan, case)
+    text = render_deck_text(plan)
     assert text.count("move/mesh mesh bottom linear 0.0 0.0 -") == 1 and "move/mesh mesh plate linear 0.0 0.0 -" in text
     assert text.index("SILOFLOW_STAGE mobilise") < text.index("SILOFLOW_STAGE resettle") < text.index("write_restart")
     assert {"mobilise", "resettle"} <= set(plan.planned_steps())
-    resumed = render_deck_text(plan, case, resume=True)          # the restart holds the lowered floor
+    resumed = render_deck_text(plan, resume=True)          # the restart holds the lowered floor
     assert "mobilise" not in resumed.split("stage 3")[1] and "SILOFLOW_STAGE mobilise" not in resumed
     _, plain = variant(quick_dict)
-    assert "move/mesh mesh bottom" not in render_deck_text(plain, case_from_dict(quick_dict))
+    assert "move/mesh mesh bottom" not in render_deck_text(plain)
 
 
 def test_mobilise_needs_a_flat_floor_and_a_small_drop(quick_dict):

@@ -133,7 +133,7 @@ def _derive_and_render(case):
         assert math.isfinite(value), where
     for where, value in numbers_in(json.loads(plan.to_json()), "plan.json"):
         assert math.isfinite(value), where
-    return plan, render_deck_text(plan, case)
+    return plan, render_deck_text(plan)
 
 
 SCALED_BASES = {name: yaml.safe_load((ROOT / name).read_text()) for name in [

@@ -97,7 +97,7 @@ def test_resume_finishes_an_interrupted_run_like_an_uninterrupted_one(tmp_path, 
     discharge stage), then ``siloflow run --resume``: the run completes, its tables run on
     without a gap, and it discharges the same mass as the uninterrupted small run (within the
     run-to-run noise of a chaotic flow: 15 %)."""
-    from siloflow.engine.liggghts.tables import FLOW_COLUMNS, read_ave_time
+    from siloflow.engine.tables import FLOW_COLUMNS, read_ave_time
 
     folder = tmp_path / "run"
     proc = subprocess.Popen([sys.executable, "-m", "siloflow.cli", "run", str(SMALL), "-o", str(folder), "--no-post"],

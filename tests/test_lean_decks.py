@@ -17,7 +17,7 @@ def deck(quick_dict, results, **outputs):
                        "results": results, **outputs}
     case = case_from_dict(data)
     plan = derive(case)
-    return plan, render_deck_text(plan, case)
+    return plan, render_deck_text(plan)
 
 
 def commands(text: str) -> set[str]:

@@ -12,7 +12,7 @@ from postprocess.discharge import steady_flow_rate
 from postprocess.wall_pressure import band_mean, band_pressures, sector_pressure
 from siloflow.case_file import case_from_dict
 from siloflow.derived import derive
-from siloflow.engine.liggghts.tables import wall_force_columns
+from siloflow.engine.tables import wall_force_columns
 from siloflow.geometry import silo_meshes, write_stl
 
 

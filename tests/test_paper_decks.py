@@ -25,7 +25,7 @@ def series(k1: float, k2: float) -> float:
 def test_paper_deck_renders(path):
     case = load_case(path)
     d = derive(case)
-    text = render_deck_text(d, case)
+    text = render_deck_text(d)
     assert "run" in text and d.fill.count == case.fill.count
     assert "scale" in path.read_text().splitlines()[0].lower()      # the scale is stated up front
 
@@ -84,5 +84,5 @@ def test_paper_b_decks_carry_its_numbers(name):
         assert case.fill.count == 393216 and m.particle.youngs_modulus == 1.2e11
         assert case.geometry.orifice_radius == pytest.approx(12 / 64)
         d = derive(case)
-        text = render_deck_text(d, case)
+        text = render_deck_text(d)
         assert "hard_particles   yes" in text

@@ -13,7 +13,7 @@ from siloflow.case_file import load_case
 from siloflow.derived import derive
 from siloflow.engine import LiggghtsEngine
 from siloflow.engine.liggghts.encoding import encode
-from siloflow.engine.liggghts.tables import FLOW_COLUMNS, read_ave_time
+from siloflow.engine.tables import FLOW_COLUMNS, read_ave_time
 from siloflow.run_folder import RunFolder
 
 from conftest import ROOT, hooke_materials

@@ -63,7 +63,7 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
     d = derive(case)
     enc = encode(d)
     assert enc.face_type == enc.wall_type + 1 == 3 and enc.n_types == 3
-    text = render_deck_text(d, case)
+    text = render_deck_text(d)
     assert "create_box      3 domain" in text
     assert "face_s00.stl type 3" in text and "band00_s00.stl type 2" in text
     mu = case.materials.particle_particle.friction, case.materials.particle_wall.friction
@@ -76,7 +76,7 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
     data["engine"]["ranks"] = 1
     case = case_from_dict(data)
     d = derive(case)
-    text = render_deck_text(d, case)
+    text = render_deck_text(d)
     assert "fflag on off on tflag off on off" in text and "orientation template" in text
     assert "region          insertion block" in text and "all_in no" in text
     assert d.fill.region.yhi == pytest.approx(0.5 * 0.0022 - 0.001)
@@ -87,7 +87,7 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
                                  "dust_dust": pair, "dust_particle": pair, "dust_wall": pair}
     case = case_from_dict(data)
     d = derive(case)
-    text = render_deck_text(d, case)
+    text = render_deck_text(d)
     lines = text.splitlines()
     first = {key: next(k for k, line in enumerate(lines) if line.startswith(key))
              for key in ("fix             ins_dust", "fix             ins all", "region          insertion_dust")}
@@ -151,7 +151,7 @@ def test_slab_run_keeps_grains_in_the_slab_and_senses_both_walls(slab_run):
     assert p[0] > p[1]                                                  # pressure grows with depth
     # horizontal force balance of the resting bed: what pushes the left wall pushes the right
     # (and hopper) back; frictionless faces take no x force
-    from siloflow.engine.liggghts.tables import read_ave_time, wall_force_columns
+    from siloflow.engine.tables import read_ave_time, wall_force_columns
     walls = RunFolder(folder).plan.walls
     forces = read_ave_time(folder / LIGGGHTS_TABLES[1], wall_force_columns(walls))   # wall_forces.txt
     still = forces[(forces.step > record.stage_steps["static"]) & (forces.step <= record.stage_steps["open"])]

@@ -6,26 +6,9 @@ in :data:`siloflow.engines.ENGINES`.
 """
 from __future__ import annotations
 
-from importlib import import_module
-
 from ..engines import ENGINES
-from ..errors import SetupError
 from .base import Engine, LaunchProfile, RunRecord
-
-
-def engine_class(name: str) -> type[Engine]:
-    """The ``Engine`` subclass called ``name`` (``SetupError`` if there is none)."""
-    try:
-        module, cls = ENGINES[name].split(":")
-    except KeyError:
-        raise SetupError(f"unknown engine {name!r}; known: {', '.join(ENGINES)}") from None
-    return getattr(import_module(module), cls)
-
-
-def get_engine(name: str, **profile) -> Engine:
-    """The engine called ``name``, configured for this machine by ``profile`` (executable, mpirun,
-    env, or a ``LaunchProfile`` as ``profile=``)."""
-    return engine_class(name)(**profile)
+from .registry import engine_class, get_engine
 
 
 def __getattr__(name):

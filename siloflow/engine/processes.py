@@ -1,13 +1,19 @@
 """What every engine run does with its folder and its processes: read the plan, record a failure,
-tie an engine's process to siloflow's life, and stop its process group."""
+tie an engine's process to siloflow's life, stream its output into its screen file while watching
+the disk, and stop its process group."""
 from __future__ import annotations
 
 import os
 import signal
 import subprocess
+import time
+from collections import deque
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Optional
 
-from ..errors import ReadError, SetupError
+from ..atomic_files import os_error
+from ..errors import EngineRunError, ReadError, SetupError
 from ..plan import RunPlan
 from ..run_folder import RunFolder, read_status, write_status
 
@@ -17,6 +23,14 @@ FILL_LOSS_LIMIT = 0.01
 #: a time-step fraction above which a bed may never come to rest (measured on the accuracy bench's case, hooke,
 #: e = 0.88: at 0.3 of the critical time every bed settled, at 0.5 most kept jittering above KE/PE 1e-4)
 RESTLESS_FRACTION = 0.3
+#: free bytes below which the disk counts as full during a run (the engine's writes fail silently)
+DISK_RESERVE = 1 << 20
+#: how often a streamed run checks the disk, s
+DISK_CHECK_SECONDS = 2.0
+DISK_FIX = ("free space on that disk (or choose a run folder on another one) and run again; "
+            "'siloflow run' estimates a run's output before it starts unless --allow-large-output is given")
+#: lines of an engine's output kept for its failure message
+TAIL_LINES = 25
 
 
 def not_settled(ke_pe: float, plan: RunPlan) -> tuple[str, str, str]:
@@ -78,3 +92,74 @@ def stop(proc: subprocess.Popen, grace: float = 10.0) -> None:
             return
         except subprocess.TimeoutExpired:
             continue
+
+
+def disk_full(folder: Path) -> str:
+    """A description of the disk's state if it is (nearly) full, else ''."""
+    try:
+        fs = os.statvfs(folder)
+    except OSError:
+        return ""
+    # root may write into the blocks reserved for it, others only into the available ones
+    free = (fs.f_bfree if os.geteuid() == 0 else fs.f_bavail) * fs.f_frsize
+    return f"{free} bytes free" if free < DISK_RESERVE else ""
+
+
+@dataclass
+class Streamed:
+    """How a streamed engine process ended: its exit code, its last output lines, and the disk's
+    state when it was stopped for a full disk ('' otherwise)."""
+
+    returncode: int
+    tail: list[str]
+    disk_full: str = ""
+
+
+def _utf8(raw: bytes) -> str:
+    return raw.decode("utf-8", "replace")
+
+
+def stream(command: list[str], folder: Path, screen: str, on_line: Callable[[str], bool],
+           env: Optional[dict] = None, append: bool = False, decode: Callable[[bytes], str] = _utf8,
+           interrupted: Callable[[], dict] = dict) -> Streamed:
+    """Run ``command`` in ``folder`` (its own process group, stopped when siloflow dies), mark the
+    folder running, copy its output into the file ``screen`` and hand each line (``decode``d) to
+    ``on_line``, which returns True to stop the engine (a fatal line). The engine is stopped when the
+    disk fills. A screen that cannot be written is an ``EngineRunError`` (status failed); Ctrl-C or
+    SIGTERM stops the engine, marks the folder interrupted (with ``interrupted()``'s fields) and
+    re-raises."""
+    folder = Path(folder)
+    tail: deque[str] = deque(maxlen=TAIL_LINES)
+    proc = subprocess.Popen(command, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            stdin=subprocess.DEVNULL, env=env, start_new_session=True, preexec_fn=die_with_parent)
+    write_status(folder, "running", command=command, engine_pid=proc.pid)     # siloflow's own pid: added there
+    full = ""
+    try:
+        flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | (os.O_APPEND if append else os.O_TRUNC)
+        with open(os.open(folder / screen, flags, 0o644), "wb") as out:
+            checked = time.monotonic()
+            for raw in proc.stdout:
+                out.write(raw)
+                line = decode(raw)
+                tail.append(line.rstrip())
+                if on_line(line):                # nothing good comes of running on
+                    stop(proc)
+                    break
+                if time.monotonic() - checked > DISK_CHECK_SECONDS:
+                    checked = time.monotonic()
+                    full = disk_full(folder)
+                    if full:                     # the engine's writes fail silently: stop it
+                        stop(proc)
+                        break
+        returncode = proc.wait()
+    except OSError as exc:                       # the screen could not be written: the disk is full
+        stop(proc)
+        message = str(os_error(exc, f"the engine's output in {folder}"))
+        write_status(folder, "failed", reason=message)
+        raise EngineRunError(message, command=command, returncode=proc.returncode, folder=folder,
+                             fix=DISK_FIX, log_tail="\n".join(tail)) from None
+    except BaseException:  # Ctrl-C or SIGTERM turned into an exception: stop the whole group
+        stop(proc)
+        write_status(folder, "interrupted", **interrupted())
+        raise
+    return Streamed(returncode, list(tail), full)

@@ -43,7 +43,6 @@ import jinja2
 import numpy as np
 
 from ...atomic_files import write_text
-from ...case import Case
 from ...deck import DeckError, _num, _safe_name, check_commands, template_environment
 from ...geometry import write_stl
 from ...plan import FACES, WALL, RunPlan
@@ -394,7 +393,7 @@ def render_deck_text(plan: RunPlan) -> str:
     return text
 
 
-def write_deck(plan: RunPlan, case: Case, folder: Path) -> None:
+def write_deck(plan: RunPlan, folder: Path) -> None:
     """Write the LAMMPS deck of ``plan`` into the run folder ``folder`` being rendered: the deck,
     the walls' STL meshes, the output folders, the dump layout."""
     folder = Path(folder)

