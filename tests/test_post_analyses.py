@@ -13,7 +13,8 @@ from postprocess.coordination import Coordination, coordination, local_pairs, ov
 from postprocess.dumps import Frame
 from postprocess.flow_rate import (FreeSurface, beverloo, fit_beverloo, rate_series, steady_window,
                                    surface_flow_rate)
-from postprocess.force_chains import chain_segments, force_chain_figure
+from postprocess.force_chains import chain_segments
+from postprocess.report.figures import force_chain_figure
 from postprocess.janssen import compare_with_measurement, fit_janssen, pressure_error_w
 from postprocess.overlap_volume import (circle_circle_overlap, sphere_cylinder_overlap, sphere_sphere_overlap,
                                         sphere_volume)
