@@ -116,7 +116,7 @@ def figure(table: pd.DataFrame, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from postprocess.figures import save_figure
+    from postprocess.report.figures import save_figure
     fig, ax = plt.subplots(figsize=(7.5, 0.45 * len(table) + 2.0))
     y = np.arange(len(table))
     ax.axvspan(1 / FACTOR, FACTOR, color="0.9", label=f"within a factor of {FACTOR:g}")

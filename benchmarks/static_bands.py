@@ -28,7 +28,7 @@ from pathlib import Path
 import pandas as pd
 from scipy import stats
 
-from postprocess.figures import plt, save_figure
+from postprocess.report.figures import plt, save_figure
 from siloflow import accuracy_bench as ab, bench_stats
 from siloflow.atomic_files import write_text
 from siloflow.run_table import read_rows

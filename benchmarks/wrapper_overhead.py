@@ -15,7 +15,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from postprocess.first_results import analyse  # noqa: E402
+from postprocess.report import post_process as analyse  # noqa: E402
 from siloflow.case_file import load_case  # noqa: E402
 from siloflow.engine import LiggghtsEngine  # noqa: E402
 

@@ -2,9 +2,11 @@
 
     analysis = Porosity(regions=...)
     analysis.run(frames, contacts=None)     # _prepare(); _single_frame(f, c) per frame; _conclude()
-    analysis.table                          # tidy pandas DataFrame, one row per frame (and region/...)
-    analysis.save(folder)                   # <name>.csv, <name>.parquet and <name>.png, atomically
-    analysis.products()                     # the same files in memory, for a report layer: Products
+    analysis.results.table                  # tidy pandas DataFrame, one row per frame (and region/...)
+
+An analysis computes: its output is data in :attr:`FrameAnalysis.results` (numbers, arrays,
+DataFrames), and it writes no file and draws no figure. The report layer (``postprocess.report``)
+writes tables and figures from results: ``report.files.write_analysis(analysis, folder)``.
 
 ``frames`` is any iterable of :class:`postprocess.dumps.Frame` (a dump path is read with
 :func:`postprocess.dumps.read_frames`); ``contacts`` optionally gives the matching dump local
@@ -13,62 +15,26 @@ frames (paired by timestep), so the analyses run on any LIGGGHTS/LAMMPS output.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterable, Iterator, NamedTuple
+from typing import Iterable, Iterator
 
 import pandas as pd
 
-from siloflow.atomic_files import atomic_path, write_text
 from siloflow.errors import ReadError
 
 from .dumps import Frame, read_frames
-from .figures import plt, save_figure
 
 
-class Products(NamedTuple):
-    """What an analysis hands a report layer (``postprocess.report``) to write, in writing order:
-    ``tables`` {file name (``.csv``, ``.parquet``): pandas DataFrame, written without its index},
-    ``figures`` {file name (``.png``): matplotlib Figure}."""
-    tables: dict
-    figures: dict
+class Results(dict):
+    """An analysis' output (MDAnalysis' ``Results``): a dict whose keys are also attributes."""
 
-    def add(self, other: "Products") -> "Products":
-        """Add ``other``'s files (a name already here is replaced); returns self."""
-        self.tables.update(other.tables)
-        self.figures.update(other.figures)
-        return self
-
-    def close(self) -> None:
-        """Close the figures unwritten (a failed analysis' own, which pyplot would keep open)."""
-        for fig in self.figures.values():
-            plt.close(fig)
-
-    def write(self, folder) -> list[Path]:
-        """Write the tables (``.csv``, ``.parquet``; without the index) and the figures (PNG) into
-        ``folder`` (made if missing), each atomically; the figures are closed, written or not.
-        Returns the paths written."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        written = []
+    def __getattr__(self, key):
         try:
-            for fname, table in self.tables.items():
-                path = folder / fname
-                if path.suffix == ".csv":
-                    write_text(path, table.to_csv(index=False))
-                elif path.suffix == ".parquet":
-                    try:
-                        with atomic_path(path) as tmp:
-                            table.to_parquet(tmp, index=False)
-                    except ImportError:  # pyarrow is a dependency; a missing one only loses the Parquet copy
-                        continue
-                else:
-                    raise ValueError(f"{fname}: a table is written as .csv or .parquet")
-                written.append(path)
-            for fname, fig in self.figures.items():
-                save_figure(fig, folder / fname)
-                written.append(folder / fname)
-        finally:
-            self.close()
-        return written
+            return self[key]
+        except KeyError:
+            raise AttributeError(key) from None
+
+    def __setattr__(self, key, value):
+        self[key] = value
 
 
 def _as_frames(source) -> Iterable[Frame] | None:
@@ -110,16 +76,25 @@ def paired(frames: Iterable[Frame], contacts: Iterable[Frame] | None) -> Iterato
 
 class FrameAnalysis:
     """Base class: subclasses set ``name`` and implement ``_single_frame`` (returning a list of
-    row dicts or None); ``_prepare``/``_conclude`` are optional. ``needs_contacts`` analyses
-    refuse to run without contact frames unless they can derive contacts themselves."""
+    row dicts or None); ``_prepare``/``_conclude`` are optional and put what they compute in
+    :attr:`results`. ``needs_contacts`` analyses refuse to run without contact frames unless they
+    can derive contacts themselves.
+
+    After :meth:`run`: ``results.table`` (the rows as a DataFrame, a ``step`` column first) and
+    ``n_frames`` (frames analysed)."""
 
     name = "analysis"
     needs_contacts = False
 
     def __init__(self):
         self.rows: list[dict] = []
-        self.table = pd.DataFrame()
+        self.results = Results(table=pd.DataFrame())
         self.n_frames = 0
+
+    @property
+    def table(self) -> pd.DataFrame:
+        """``results.table``."""
+        return self.results.table
 
     def run(self, frames, contacts=None, start: int = 0, stop: int | None = None, step: int = 1):
         frames = _as_frames(frames)
@@ -128,6 +103,7 @@ class FrameAnalysis:
             raise ReadError(f"{self.name} needs contact (dump local) frames")
         self.rows = []
         self.n_frames = 0
+        self.results = Results(table=pd.DataFrame())
         self._prepare()
         for k, (frame, cframe) in enumerate(paired(frames, contacts)):
             if k < start or (stop is not None and k >= stop) or (k - start) % step:
@@ -139,7 +115,7 @@ class FrameAnalysis:
                     self.rows.append({"step": frame.timestep, **row})
         if self.n_frames == 0:
             raise ReadError(f"{self.name}: no frames to analyse")
-        self.table = pd.DataFrame(self.rows)
+        self.results.table = pd.DataFrame(self.rows)
         self._conclude()
         return self
 
@@ -151,19 +127,3 @@ class FrameAnalysis:
 
     def _conclude(self) -> None:
         pass
-
-    def plot(self):
-        """The analysis' figure (a matplotlib Figure); None if it has none."""
-        return None
-
-    def products(self, figure: bool = True) -> Products:
-        """What :meth:`save` writes, in memory, for a report layer to write: ``<name>.csv`` and
-        ``<name>.parquet`` (:attr:`table`), ``<name>.png`` (:meth:`plot`; none without ``figure``,
-        for an empty table or for an analysis without a figure)."""
-        fig = self.plot() if figure and not self.table.empty else None
-        return Products({f"{self.name}.csv": self.table, f"{self.name}.parquet": self.table},
-                        {} if fig is None else {f"{self.name}.png": fig})
-
-    def save(self, folder, figure: bool = True) -> list[Path]:
-        """Write ``<name>.csv`` (and ``.parquet``) and the figure into ``folder`` (:meth:`products`)."""
-        return self.products(figure).write(folder)

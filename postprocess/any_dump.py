@@ -1,21 +1,20 @@
 """Analyses of dump files written by any LIGGGHTS/LAMMPS run (not only siloflow's):
 per-frame counts and energies, porosity in measurement spheres, coordination number (from
-a contact dump local, else from overlaps) and the force-chain figure of the last frame."""
+a contact dump local, else from overlaps) and the force chains of the last frame
+(:func:`analyse_dump_files`: :class:`DumpResults`, data only). The report layer
+(``postprocess.report.dumps.analyse_any``) writes them."""
 from __future__ import annotations
 
-from pathlib import Path
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from siloflow.atomic_files import write_json, write_text
-from siloflow.errors import ReadError, SetupError
-from siloflow.run_folder import SUMMARY_NAME
+from siloflow.errors import ReadError
 
 from .analysis_base import FrameAnalysis
 from .coordination import Coordination
-from .dumps import dump_files, last_frame, read_frames
-from .figures import line_plot
-from .force_chains import force_chain_figure
+from .dumps import last_frame, read_frames
+from .force_chains import ForceChains, force_chains
 from .porosity import MeasureRegion, Porosity
 
 
@@ -43,9 +42,6 @@ class FrameSummary(FrameAnalysis):
         if "mass" in frame.data:
             row["mass"] = float(frame.column("mass").sum())
         return [row]
-
-    def plot(self):
-        return line_plot(self.table, x="step", y="particles", xlabel="timestep", ylabel="particles")
 
 
 _MUST_BE_FINITE = ("x", "y", "z", "xu", "yu", "zu", "xs", "ys", "zs", "xsu", "ysu", "zsu", "vx", "vy", "vz")
@@ -88,27 +84,21 @@ def default_sphere(frame) -> MeasureRegion:
     return MeasureRegion("sphere_1", "sphere", tuple(float(c) for c in np.median(pos, axis=0)), radius)
 
 
-def _results_folder(out: Path, create: bool) -> None:
-    """Check (and with ``create``, make) the results folder ``out``: SetupError if a file is in
-    the way or it cannot be made."""
-    for p in (out, *out.parents):
-        if p.exists() and not p.is_dir():
-            what = "is" if p == out else f"(in the results folder's path {out}) is"
-            raise SetupError(f"{p} {what} a file, not a folder; give a results folder with -o")
-        if p.exists():
-            break
-    if create:
-        try:
-            out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise SetupError(f"cannot create the results folder {out}: {exc.strerror or exc}") from None
+@dataclass
+class DumpResults:
+    """What :func:`analyse_dump_files` computed: ``summary`` (summary.json's content), the frame
+    analyses run (``analyses``: their results and figures) and the last frame's force chains
+    (``force_chains``, None without contact forces)."""
+
+    summary: dict
+    analyses: list = field(default_factory=list)
+    force_chains: ForceChains | None = None
 
 
-def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, every: int = 1) -> dict:
-    """Analyse the dumps ``source`` (file, glob or folder); write tables, figures and summary.json to ``out``."""
-    out = Path(out)
-    files = dump_files(source)
-    _results_folder(out, create=False)     # before the (long) read
+def analyse_dump_files(files, contacts=None, contact_columns=None, spheres=None, every: int = 1) -> DumpResults:
+    """Analyse the dump files ``files`` (``dumps.dump_files``' list) and, optionally, the contact
+    dumps ``contacts`` (with their ``contact_columns``): per-frame counts, porosity in ``spheres``
+    (default: :func:`default_sphere`), coordination, the last frame's force chains."""
 
     def contact_frames(steps=None):
         """Contact frames streamed from disk (None without contact dumps)."""
@@ -118,12 +108,12 @@ def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, 
         return _checked_frames(read_frames(files, every=every))
 
     last = checked(last_frame(files))      # reads and checks every frame
-    _results_folder(out, create=True)
     summary: dict = {"source": [str(f) for f in files][:3] + (["..."] if len(files) > 3 else []),
                      "files": len(files)}
+    results = DumpResults(summary)
 
     frames = FrameSummary().run(frames_of(), contact_frames())
-    frames.save(out)
+    results.analyses.append(frames)
     summary["frames"] = frames.n_frames
     summary["last_step"] = int(last.timestep)
     summary["particles_last"] = int(last.n)
@@ -137,7 +127,7 @@ def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, 
                 summary["porosity_skipped"] = str(exc)
         if regions:
             por = Porosity(regions).run(frames_of())
-            por.save(out)
+            results.analyses.append(por)
             final = por.table[por.table.step == por.table.step.max()]
             summary["porosity_last"] = dict(zip(final.region, final.porosity.astype(float)))
             if "bulk_density" in final:      # the dump has a mass column
@@ -145,7 +135,7 @@ def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, 
             summary["regions"] = [{"name": r.name, "shape": r.shape, "center": list(r.center), "radius": r.radius}
                                   for r in regions]
         coord = Coordination().run(frames_of(), contact_frames())
-        coord.save(out)
+        results.analyses.append(coord)
         table = coord.table[coord.table.species == "all"]
         row = table[table.step == table.step.max()].iloc[0]
         summary["coordination_last"] = {"step": int(row.step), "z_mean": float(row.z_mean),
@@ -155,11 +145,8 @@ def analyse_any(source, out, contacts=None, contact_columns=None, spheres=None, 
     if contacts:
         match = list(contact_frames([last.timestep]))
         if match and any(c in match[0].data for c in ("fnx", "fx")):
-            force_chain_figure(last, match[0], out / "force_chains_last.png")
-    write_json(out / SUMMARY_NAME, summary)
-    write_text(out / "README.txt", "siloflow post on dump files: frames.csv (counts, energy), porosity.csv "
-               f"(exact overlap volumes in measurement spheres), coordination.csv, {SUMMARY_NAME}\n")
-    return summary
+            results.force_chains = force_chains(last, match[0])
+    return results
 
 
 def parse_sphere(text: str, k: int) -> MeasureRegion:

@@ -1,5 +1,5 @@
 """Paper B's analyses on axisymmetric coarse-grained fields (an xarray Dataset from
-:class:`postprocess.coarse_grain.CoarseGraining` on an (r, z) grid), and its figures.
+:class:`postprocess.coarse_grain.CoarseGraining` on an (r, z) grid).
 
 * outlet profiles phi(r), v_z(r) at the outlet height, normalised by their centre values,
   against r/R, with the Janda et al. (2012) form v_z(r)/v_z(0) = sqrt(1 - (r/R)^2);
@@ -8,10 +8,10 @@
   kinetic-pressure maximum above the outlet;
 * kinetic pressure by particle size: partial kinetic pressures, their cumulative sum over sizes
   larger than r', and the partial kinetic pressure per partial solid fraction.
+
+Their figures are drawn by the report layer (``postprocess.report.cg``).
 """
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -105,63 +105,3 @@ def species_kinetic_table(ds, z_outlet: float, height: float | None = None) -> p
     return pd.DataFrame({"radius": sizes, "height": h, "kinetic_pressure": pk, "solid_fraction": phi_a,
                          "cumulative_kinetic_pressure_larger_or_equal": cumulative,
                          "kinetic_per_solid_fraction_relative": ratio})
-
-
-def cg_figures(ds, folder, z_outlet: float, outlet_radius: float) -> list[Path]:
-    """Maps of solid fraction and v_z (paper B Figs. 3-4), outlet profiles (Figs. 5-6), axial
-    pressure profiles (Figs. 8-10) and kinetic pressure by size (Figs. 11-12)."""
-    from .figures import plt, save_figure
-
-    folder = Path(folder)
-    written = []
-    r, z = ds.r.values, ds.z.values
-    fig, axes = plt.subplots(1, 2, figsize=(9, 6), sharey=True)
-    field = ds.solid_fraction if "solid_fraction" in ds else ds.rho
-    for ax, data, title in ((axes[0], field.values, field.name), (axes[1], ds.velocity.sel(component="z").values, "v_z (m/s)")):
-        extent = [-r[-1], r[-1], z[0], z[-1]]
-        full = np.concatenate([data[:, ::-1], data], axis=1)
-        im = ax.imshow(full, origin="lower", extent=extent, aspect="equal", cmap="viridis")
-        fig.colorbar(im, ax=ax, shrink=0.8)
-        ax.set(title=title, xlabel="r (m)")
-    axes[0].set_ylabel("z (m)")
-    fig.tight_layout()
-    save_figure(fig, folder / "cg_maps.png")
-    written.append(folder / "cg_maps.png")
-
-    prof = outlet_profiles(ds, z_outlet, outlet_radius)
-    fig, ax = plt.subplots(figsize=(6, 4.2))
-    ax.plot(prof.r_over_R, prof.phi_over_phi0, "o-", label="phi / phi(0)")
-    ax.plot(prof.r_over_R, prof.vz_over_vz0, "s-", label="v_z / v_z(0)")
-    ax.plot(prof.r_over_R, prof.janda, "k--", label="sqrt(1 - (r/R)^2)")
-    ax.set(xlabel="r / R", ylabel="normalised", title=f"outlet profiles at z = {prof.z.iloc[0]:.4g} m")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    save_figure(fig, folder / "cg_outlet_profiles.png")
-    written.append(folder / "cg_outlet_profiles.png")
-
-    axial = axial_profiles(ds, z_outlet)
-    fig, ax = plt.subplots(figsize=(6, 4.2))
-    if "contact_pressure" in axial:
-        ax.plot(axial.height / outlet_radius, axial.contact_pressure, label="contact pressure")
-    ax.plot(axial.height / outlet_radius, axial.kinetic_pressure, label="kinetic pressure")
-    ax.set_yscale("symlog", linthresh=1e-3)
-    ax.set(xlabel="z / R (above the outlet)", ylabel="pressure on the axis (Pa)", title="axial pressure profiles")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    save_figure(fig, folder / "cg_axial_pressure.png")
-    written.append(folder / "cg_axial_pressure.png")
-
-    if "kinetic_pressure_species" in ds:
-        table = species_kinetic_table(ds, z_outlet)
-        fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
-        a1.plot(table.radius * 1000, table.cumulative_kinetic_pressure_larger_or_equal, "o-")
-        a1.set(xlabel="particle radius r' (mm)", ylabel="sum of p_k over r >= r' (Pa)",
-               title=f"cumulative kinetic pressure at h_c = {table.height.iloc[0]:.3g} m")
-        a2.plot(table.radius * 1000, table.kinetic_per_solid_fraction_relative, "s-")
-        a2.axhline(1.0, color="k", lw=0.8)
-        a2.set(xlabel="particle radius (mm)", ylabel="(p_k^a / phi^a) / (p_k / phi)",
-               title="kinetic pressure per solid fraction, by size")
-        fig.tight_layout()
-        save_figure(fig, folder / "cg_kinetic_by_size.png")
-        written.append(folder / "cg_kinetic_by_size.png")
-    return written

@@ -1,19 +1,20 @@
 """``siloflow cg``: coarse-grain a run folder's dumps (steady window, geometry from the case)
-or any LIGGGHTS/LAMMPS dumps (grid given on the command line); write fields.nc (NetCDF),
-paper B's profiles as CSV, a summary and figures."""
+or any LIGGGHTS/LAMMPS dumps (grid given on the command line) into fields and paper B's
+profiles and numbers (:func:`analyse_cg`: :class:`CgResults`, data only); the report layer
+(``postprocess.report.cg``) writes fields.nc (NetCDF), the profiles as CSV, a summary and figures."""
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from siloflow.atomic_files import write_json, write_text
 from siloflow.errors import ReadError
 from siloflow.run_folder import CG_SUMMARY_NAME, RunFolder
 
-from .cg_analyses import axial_profiles, cg_figures, janda_fit, kinetic_peak_height, outlet_profiles, species_kinetic_table
+from .cg_analyses import axial_profiles, janda_fit, kinetic_peak_height, outlet_profiles, species_kinetic_table
 from .cg_kernels import make_kernel
 from .cg_grids import AxisymmetricGrid, CartesianGrid
 from .coarse_grain import CoarseGraining
@@ -72,11 +73,26 @@ def setup_from_run(folder) -> CgSetup:
                    clump_mass=layout.clump_mass)
 
 
-def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: float = 2.0, unit: str = "radius",
-           nr: int = 100, nz: int = 300, species: str | None = "radius", per_frame: bool = False,
-           grid_kind: str = "rz", every: int = 1, method: str = "exact", refine: int = 2) -> dict:
-    """Coarse-grain the frames in the window; write fields.nc, profiles, summary and figures to ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
+@dataclass
+class CgResults:
+    """A coarse-graining's results, computed and not yet written: ``dataset`` (the time-averaged
+    fields, an xarray Dataset: fields.nc), ``summary`` (cg_summary.json, without its list of
+    figures), ``tables`` ({file name: DataFrame}: the outlet, axial and species profiles of an
+    (r, z) grid), and for its figures (drawn for an (r, z) grid only, ``figures``) the outlet's
+    height ``z_outlet`` and radius ``outlet_radius`` (m)."""
+
+    dataset: Any
+    summary: dict
+    z_outlet: float
+    outlet_radius: float
+    figures: bool
+    tables: dict = field(default_factory=dict)
+
+
+def analyse_cg(setup: CgSetup, kernel_name: str = "gaussian", width: float = 2.0, unit: str = "radius",
+               nr: int = 100, nz: int = 300, species: str | None = "radius", per_frame: bool = False,
+               grid_kind: str = "rz", every: int = 1, method: str = "exact", refine: int = 2) -> CgResults:
+    """Coarse-grain the frames in the window: the fields, paper B's profiles and numbers."""
 
     def in_window(frames):
         for f in frames:
@@ -106,9 +122,6 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
                         clump_mass=setup.clump_mass).run(
         in_window(read_frames(setup.atoms, every=every)), contacts, walls)
     ds = cg.dataset()
-    tmp = out / ".fields.nc.tmp"
-    ds.to_netcdf(tmp)
-    tmp.replace(out / "fields.nc")
     summary = {"frames": len(cg.steps), "steps": [cg.steps[0], cg.steps[-1]], "grid": grid_kind,
                "contacts": setup.contacts is not None, "wall_contacts": setup.wall_contacts is not None,
                "outlet_radius_m": setup.outlet_radius,
@@ -116,11 +129,11 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
                                                                        grid_kind == "rz" and method == "lattice" else {}),
                "z_outlet_m": setup.z_outlet, **kernel.describe(),
                **({"note": setup.note} if setup.note and not species else {})}
+    results = CgResults(ds, summary, setup.z_outlet, setup.outlet_radius, figures=grid_kind == "rz")
     if grid_kind == "rz":
         prof = outlet_profiles(ds, setup.z_outlet, setup.outlet_radius)
-        write_text(out / "outlet_profiles.csv", prof.to_csv(index=False))
         axial = axial_profiles(ds, setup.z_outlet)
-        write_text(out / "axial_profiles.csv", axial.to_csv(index=False))
+        results.tables.update({"outlet_profiles.csv": prof, "axial_profiles.csv": axial})
         summary["v_z_centre_outlet"] = float(prof.v_z.iloc[0])
         summary["solid_fraction_centre_outlet"] = float(prof.solid_fraction.iloc[0])
         try:
@@ -129,11 +142,8 @@ def run_cg(setup: CgSetup, out: Path, kernel_name: str = "gaussian", width: floa
             summary["janda_fit"] = {"error": str(exc)}
         summary["kinetic_peak_height_m"] = kinetic_peak_height(axial, setup.z_outlet)
         if species and "kinetic_pressure_species" in ds:
-            table = species_kinetic_table(ds, setup.z_outlet)
-            write_text(out / "species_kinetic.csv", table.to_csv(index=False))
-        summary["figures"] = [p.name for p in cg_figures(ds, out, setup.z_outlet, setup.outlet_radius)]
-    write_json(out / CG_SUMMARY_NAME, summary)
-    return summary
+            results.tables["species_kinetic.csv"] = species_kinetic_table(ds, setup.z_outlet)
+    return results
 
 
 def scaling_across_runs(folders) -> dict:

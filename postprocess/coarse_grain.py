@@ -122,17 +122,17 @@ class CoarseGraining(FrameAnalysis):
 
         cg = CoarseGraining(grid, gaussian(w), particle_density=7520, species="radius")
         cg.run(read_frames(dumps), contacts=read_frames(local, columns=...))
-        ds = cg.dataset()          # xarray.Dataset; ds.to_netcdf("fields.nc")
-        cg.save(folder)            # coarse_graining.csv/.parquet (cg.table) and fields.nc
+        ds = cg.dataset()          # xarray.Dataset of the fields
+        postprocess.report.files.write_coarse_graining(cg, folder)   # coarse_graining.csv/.parquet, fields.nc
 
     Frames need positions, velocities, radius, and mass (or ``particle_density`` (kg/m3) to
     compute it from the radius). Memory: one frame, plus the grid sums (times frames if
     per_frame).
 
-    After :meth:`run`: ``sum`` (the kernel sums over all frames, as :func:`coarse_grain_frame`
-    returns them), ``frames`` (each frame's sums, per_frame runs), ``steps`` (the timesteps
-    used), ``classes`` (species labels), ``class_density`` (kg/m3 per species class, from the
-    first frame with a mass column) and ``table``: one row per frame with ``step``,
+    After :meth:`run`, in :attr:`results` (and as attributes): ``sum`` (the kernel sums over all
+    frames, as :func:`coarse_grain_frame` returns them), ``frames`` (each frame's sums, per_frame
+    runs), ``steps`` (the timesteps used), ``classes`` (species labels), ``class_density`` (kg/m3
+    per species class, from the first frame with a mass column) and ``table``: one row per frame with ``step``,
     ``particles`` (sources: clumps count once), ``contacts`` (pair and wall contacts used) and
     ``mass`` (kg). :meth:`fields` and :meth:`dataset` give the fields.
     """
@@ -213,15 +213,9 @@ class CoarseGraining(FrameAnalysis):
         walls = self._walls.at(frame.timestep) if self._walls is not None else None
         return [self.add_frame(frame, contacts, walls)]
 
-    def save(self, folder, figure: bool = True) -> list[Path]:
-        """Write ``coarse_graining.csv`` and ``.parquet`` (:attr:`table`) and ``fields.nc`` (the
-        time-averaged :meth:`dataset`, NetCDF) into ``folder``, each atomically."""
-        written = super().save(folder, figure)
-        path = Path(folder) / "fields.nc"
-        tmp = path.with_name(f".{path.name}.tmp")
-        self.dataset().to_netcdf(tmp)
-        tmp.replace(path)
-        return written + [path]
+    def _conclude(self) -> None:
+        self.results.update(sum=self.sum, frames=self.frames, steps=self.steps, classes=self.classes,
+                            class_density=self.class_density)
 
     def fields(self, k: int | None = None) -> dict:
         """Time-averaged fields, or those of frame ``k`` (per_frame runs)."""

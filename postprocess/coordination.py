@@ -19,7 +19,6 @@ from scipy.spatial import cKDTree
 from siloflow.errors import ReadError
 
 from .analysis_base import FrameAnalysis
-from .figures import line_plot
 
 
 def overlap_pairs(positions: np.ndarray, radii: np.ndarray, tolerance: float = 0.0):
@@ -169,7 +168,3 @@ class Coordination(FrameAnalysis):
                              "z_mech": float("nan"), "rattlers_0": int((z[m] == 0).sum()),
                              "rattlers_1": int((z[m] == 1).sum())})
         return rows
-
-    def plot(self):
-        return line_plot(self.table[self.table.species == "all"], x="step", y=["z_mean", "z_mech"],
-                         xlabel="timestep", ylabel="coordination number")

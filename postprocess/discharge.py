@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import pandas as pd
@@ -66,14 +66,17 @@ def straight_line_fit(time, values) -> LineFit:
 
 @dataclass
 class FlowRate:
-    """Steady mass flow rate: a straight-line fit of discharged mass vs time in the steady window.
+    """A rate fitted by a straight line over a window: the one rate type of postprocess.
 
-    rate: the fit's slope, kg/s; stderr: its standard error by batch means of the window's
-    sample-to-sample rates (the samples are autocorrelated; this is the error that matches the
-    spread of seeds, ``benchmarks/results/coverage``), kg/s, NaN when the window holds too few
-    samples for batches (``batches`` 0); fit_stderr: the straight line's own standard error,
-    which takes the samples as independent and understates the error several times, kg/s;
-    t_start, t_end: window, s; r2: coefficient of determination.
+    rate: the fit's slope (kg/s for a mass in kg; ``flow_rate.linear_rate``: units of its values
+    per s); stderr: its standard error, same units; t_start, t_end: the window, s; n_samples.
+    The steady mass flow rate (:func:`steady_flow_rate`) also measures r2 (coefficient of
+    determination), fit_stderr (the straight line's own standard error, which takes the samples
+    as independent and understates the error several times) and batches (the batch means its
+    stderr comes from: the samples are autocorrelated, and this is the error that matches the
+    spread of seeds, ``benchmarks/results/coverage``; 0 and a NaN stderr when the window holds
+    too few samples for batches). A rate that does not measure one of these leaves it None, and
+    :meth:`record` leaves it out.
     """
 
     rate: float
@@ -81,9 +84,13 @@ class FlowRate:
     t_start: float
     t_end: float
     n_samples: int
-    r2: float
-    fit_stderr: float = float("nan")
-    batches: int = 0
+    r2: float | None = None
+    fit_stderr: float | None = None
+    batches: int | None = None
+
+    def record(self) -> dict:
+        """The rate as summary.json states it: its fields, those left None omitted."""
+        return {k: v for k, v in asdict(self).items() if v is not None}
 
 
 def steady_flow_rate(time, mass, t_open: float, skip: float = 0.2, min_remaining: float = 0.2,
@@ -105,7 +112,7 @@ def steady_flow_rate(time, mass, t_open: float, skip: float = 0.2, min_remaining
         keep &= np.asarray(mass_in_silo, float) >= min_remaining * initial_mass
     t, m = time[keep], mass[keep]
     if len(t) < 5:
-        return FlowRate(float("nan"), float("nan"), start, t_end_data, int(len(t)), float("nan"))
+        return FlowRate(float("nan"), float("nan"), start, t_end_data, int(len(t)), float("nan"), float("nan"), 0)
     fit = straight_line_fit(t, m)
     # the straight line's stderr treats the samples' residuals as independent; they are not (a run's
     # rate fluctuates over many samples), so the batch means of the sample-to-sample rates say more

@@ -1,7 +1,8 @@
 """Frame analyses of a siloflow run folder's dumps: bulk solid fraction, coordination number,
 force chains, free surface and Wr vs Wf, and the band-true Janssen fit of the settled
 wall-pressure profile. Called by :func:`postprocess.first_results.analyse` when the run wrote dumps;
-its tables and figures are returned (``analysis_base.Products``) for the report layer to write.
+its tables and what its figures show are added to the run's ``run_results.RunResults`` (data
+only), which the report layer writes.
 
 Every derived number that can be unresolved carries ``resolved`` and ``reason`` beside it: Wr
 (the surface must descend :data:`MIN_SURFACE_DESCENT` grain diameters over its fit window), a
@@ -20,13 +21,14 @@ import pandas as pd
 
 from siloflow.errors import ReadError
 
-from .analysis_base import Products
 from .coordination import Coordination
 from .dumps import Frame, read_frames
-from .flow_rate import FreeSurface, LinearRate, rate_series, surface_flow_rate
-from .force_chains import force_chain_plot
+from .discharge import FlowRate
+from .flow_rate import FreeSurface, rate_series, surface_flow_rate
+from .force_chains import force_chains
 from .janssen import fit_janssen_bands
 from .porosity import MeasureRegion, Porosity
+from .run_results import RunResults
 
 
 #: Wr is resolved when the free surface descends at least this many grain diameters over its fit window
@@ -35,7 +37,7 @@ MIN_SURFACE_DESCENT = 3.0
 MIN_STEADY_SAMPLES = 10
 
 
-def surface_rate_resolution(wr: LinearRate, area: float, bulk_density: float, d: float,
+def surface_rate_resolution(wr: FlowRate, area: float, bulk_density: float, d: float,
                             min_diameters: float = MIN_SURFACE_DESCENT) -> dict:
     """Whether Wr (``wr``, kg/s, from ``flow_rate.surface_flow_rate``) is resolved: the free
     surface must descend at least ``min_diameters`` grain diameters ``d`` (m) over the fit window.
@@ -114,9 +116,9 @@ def case_regions(analysis) -> list[MeasureRegion]:
             for r in analysis.porosity_regions]
 
 
-def case_regions_porosity(analysis, atoms_files, settled: Frame, products: Products) -> dict:
+def case_regions_porosity(analysis, atoms_files, settled: Frame, results: RunResults) -> dict:
     """Porosity in the case's regions over all frames (porosity_regions.csv and its figure, added to
-    ``products``); the settled values."""
+    ``results``); the settled values."""
     a = analysis
     conversion = None
     if a.relative_density is not None:
@@ -124,15 +126,15 @@ def case_regions_porosity(analysis, atoms_files, settled: Frame, products: Produ
     analysis = Porosity(case_regions(a), conversion)
     analysis.name = "porosity_regions"
     analysis.run(read_frames(atoms_files))
-    products.add(analysis.products())
+    results.add_analysis(analysis)
     at = analysis.table[analysis.table.step == settled.timestep].set_index("region")
     cols = [c for c in ("porosity", "porosity_3d") if c in at]
     return {name: {c: float(at.loc[name, c]) for c in cols} for name in at.index}
 
 
-def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_rate, products: Products) -> dict:
-    """Run the frame analyses of a run folder; add their tables and figures to ``products``; return
-    their summary."""
+def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_rate, results: RunResults) -> dict:
+    """Run the frame analyses of a run folder; add their tables, and what their figures show, to
+    ``results``; return their summary."""
     atoms_files = run.run.dump_files("particles")
     contact_files = run.run.dump_files("contacts")
     if atoms_files is None:
@@ -154,7 +156,7 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
     # free surface over all frames; its table also says which frames exist
     surface = FreeSurface(radius=R, z_min=g.hopper_height, timestep=dt,
                           thickness=g.thickness if planar else None).run(read_frames(atoms_files))
-    products.add(surface.products())
+    results.add_analysis(surface)
     steps = surface.table.step
     if not (steps <= open_step).any():
         raise ReadError(f"{run.folder}: no particle dump at or before the outlet opened (step {open_step})")
@@ -177,7 +179,7 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
         except ValueError as exc:      # a type the run's species do not list: the grain density only
             summary["bulk_density_note"] = f"{exc}; bulk density = particle density x solid fraction"
             por = Porosity(regions).run([settled])
-        products.add(por.products(figure=False))
+        results.add_analysis(por, figure=False)
         at = por.table.set_index("region")
         phi_bulk, phi_section = (float(at.loc[k, "solid_fraction"]) for k in ("bulk_core", "cross_section"))
         if "bulk_density" in at:      # species of different densities (dust): measured mass per volume
@@ -189,7 +191,7 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
         summary["cross_section_solid_fraction"] = phi_section
         summary["cross_section_bulk_density_kg_m3"] = rho_section
     if plan.analysis.porosity_regions:
-        summary["porosity_regions"] = case_regions_porosity(plan.analysis, atoms_files, settled, products)
+        summary["porosity_regions"] = case_regions_porosity(plan.analysis, atoms_files, settled, results)
 
     # coordination number in the core, every contact frame
     def core(frame: Frame) -> np.ndarray:
@@ -200,7 +202,7 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
                 & (p[:, 2] < top - 2 * d))
 
     def settled_coordination(coord) -> None:
-        products.add(coord.products())
+        results.add_analysis(coord)
         row = coord.table[(coord.table.step == settled.timestep) & (coord.table.species == "all")]
         if not row.empty:
             summary["coordination_settled"] = {k: float(row[k].iloc[0]) for k in ("z_mean", "z_mech")}
@@ -221,7 +223,7 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
                 if f is not None and f.timestep in with_contacts]
         chains = {c.timestep: c for c in contact_frames([f.timestep for f, _ in figs])} if figs else {}
         for frame, name in figs:
-            products.figures[name] = force_chain_plot(frame, chains[frame.timestep], axis=1, center=0.0, thickness=d)
+            results.force_chains[name] = force_chains(frame, chains[frame.timestep], axis=1, center=0.0, thickness=d)
 
     if regions is None:
         return summary
@@ -231,7 +233,7 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
     st = surface.table
     in_window = (st.time >= flow_rate.t_start) & (st.time <= flow_rate.t_end) & (st.surface_height > g.hopper_height + 3 * d)
     wr = surface_flow_rate(st.time[in_window], st.surface_height[in_window], area, rho_section)
-    summary["flow_rate_surface"] = {**asdict(wr), **surface_rate_resolution(wr, area, rho_section, d)}
+    summary["flow_rate_surface"] = {**wr.record(), **surface_rate_resolution(wr, area, rho_section, d)}
     ratio = wr.rate / flow_rate.rate if flow_rate.rate else float("nan")
     summary["flow_rate_surface_over_outlet"] = ratio     # resolved as flow_rate_surface is
     summary["flow_rate_surface_over_outlet_stderr"] = abs(ratio) * float(np.hypot(
@@ -241,7 +243,7 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
     wr_t = -rate_series(st.time, st.surface_height) * area * rho_section
     flows = pd.merge_asof(flows.sort_values("time"), pd.DataFrame({"time": st.time, "Wr_kg_s": wr_t}).sort_values("time"),
                           on="time", direction="nearest", tolerance=0.5 * dt * run.sample_steps)
-    products.tables["flow_rates.csv"] = flows
+    results.tables["flow_rates.csv"] = flows
 
     summary["janssen_static"] = janssen_static(plan, bands_table, h_settled, rho_section)
     return summary

@@ -21,7 +21,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 from scipy.optimize import brentq
+
+from siloflow.design_loads import janssen_pressure
 
 #: a bed mobilises its wall friction "fully" above this share of Janssen's full-friction product
 FULL_MOBILISATION = 0.8
@@ -29,6 +32,34 @@ FULL_MOBILISATION = 0.8
 CONTINUUM_GRAINS = 30
 #: a DEM pressure agrees with EN's when it lies within this many standard errors
 AGREE_SIGMAS = 2.0
+
+#: the columns of :func:`compare_with_dem`
+COMPARISON_COLUMNS = ("band", "z_mid", "depth", "en_p_hf", "en_p_he", "dem_static", "dem_max_dynamic",
+                      "static_over_p_hf", "max_dynamic_over_p_he", "dem_discharge_factor", "en_C_h")
+
+
+def compare_with_dem(loads, bands: pd.DataFrame) -> pd.DataFrame:
+    """Per band: EN p_hf and p_he at the band centre z_mid (Pa), the DEM's static and maximum
+    dynamic pressure, their ratios (DEM static / p_hf, DEM max dynamic / p_he; NaN where EN gives
+    no pressure, above the fill or below the wall's foot), and the DEM's discharge factor (max
+    dynamic / static) next to EN's C_h."""
+    z = np.asarray(bands["z_mid"], float)
+    static = np.asarray(bands["static_pressure"], float)
+    dynamic = np.asarray(bands["max_dynamic_pressure"], float)
+    p_hf, p_he = loads.at("p_hf", z), loads.at("p_he", z)
+    outside = (z < loads.transition) | (z > loads.surface)
+    p_hf, p_he = np.where(outside, np.nan, p_hf), np.where(outside, np.nan, p_he)
+
+    def ratio(a, b):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(np.isfinite(b) & (b > 0), a / b, np.nan)
+
+    band = bands["band"].to_numpy() if "band" in bands else np.arange(len(z))
+    return pd.DataFrame({"band": band, "z_mid": z, "depth": loads.surface - z, "en_p_hf": p_hf, "en_p_he": p_he,
+                         "dem_static": static, "dem_max_dynamic": dynamic,
+                         "static_over_p_hf": ratio(static, p_hf), "max_dynamic_over_p_he": ratio(dynamic, p_he),
+                         "dem_discharge_factor": ratio(dynamic, static), "en_C_h": loads.C_h},
+                        columns=list(COMPARISON_COLUMNS))
 
 
 def janssen_wall_share(height: float, diameter: float, mu_k: float) -> float:
@@ -47,13 +78,6 @@ def mobilised_product(share: float, height: float, diameter: float) -> float:
     if not (0.0 < share < 1.0) or height <= 0:
         return float("nan")
     return brentq(lambda mk: janssen_wall_share(height, diameter, mk) - share, 1e-9, 1e6, xtol=1e-12)
-
-
-def janssen_pressure(depth, gamma: float, diameter: float, mu: float, K: float):
-    """Janssen's wall pressure (Pa) at ``depth`` (m) below the surface of a cylinder of
-    ``diameter`` (m): gamma D / (4 mu) (1 - exp(-4 mu K depth / D)), gamma in N/m3."""
-    depth = np.maximum(np.asarray(depth, float), 0.0)
-    return gamma * diameter / (4.0 * mu) * (1.0 - np.exp(-4.0 * mu * K * depth / diameter))
 
 
 def bed_state(force_balance: dict | None, wall_normal_N: float | None, janssen: dict | None, height: float,
@@ -98,7 +122,7 @@ def static_verdict(dem: float, se: float, p_hf: float, depth: float, diameter: f
     causes = []
     mu_eff, K_eff, mu_en, K_en = state.get("mu_eff"), state.get("K_eff"), state["mu_en"], state["K_en"]
     if mu_eff is not None and K_eff is not None:
-        own = float(janssen_pressure(depth, gamma, diameter, mu_eff, K_eff))
+        own = float(janssen_pressure(depth, gamma, K_eff, mu_eff, diameter / 4.0))
         if (diff > 0 and mu_eff < FULL_MOBILISATION * mu_en) or (diff < 0 and mu_eff > mu_en / FULL_MOBILISATION):
             causes.append(f"the wall mobilises mu_eff = {mu_eff:.2g} ({mu_eff / mu_en:.2f} of EN's mu = {mu_en:.2g}): "
                           "Janssen's pressure levels off at gamma D / (4 mu), so it stands "
@@ -137,7 +161,7 @@ def dynamic_verdict(dem_max: float, p_he: float) -> str:
 
 def band_verdicts(compared, static_stderr, state: dict, diameter: float, gamma: float,
                   grains_across: float) -> list[dict]:
-    """A verdict per row of ``design_figure.compare_with_dem``'s table (``static_stderr``: the
+    """A verdict per row of :func:`compare_with_dem`'s table (``static_stderr``: the
     bands' static standard errors, Pa, in its order): static and dynamic, with the causes."""
     rows = []
     for row, se in zip(compared.itertuples(index=False), np.asarray(static_stderr, float)):

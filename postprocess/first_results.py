@@ -1,7 +1,9 @@
 """First results of a run folder: discharge curve and flow rate, band pressures (static and
 dynamic), force balance of the settled bed, EN 1991-4 beside the bands, and the frame analyses
-of its dumps (``dump_results``). :func:`analyse` computes them and hands the summary, tables and
-figures to the report layer (``postprocess.report``), which writes results/.
+of its dumps (``dump_results``). :func:`analyse_run` computes them into a
+:class:`postprocess.run_results.RunResults` (data only: it writes nothing and draws nothing); the
+report layer (``postprocess.report.write_run``, or ``postprocess.report.post_process`` for both
+steps) writes results/.
 
 Reads only what the run left, through ``siloflow.run_folder.RunFolder`` (its plan, record and
 the engine-neutral flow and wall-force tables), so it runs on any finished siloflow run folder,
@@ -11,8 +13,6 @@ from __future__ import annotations
 
 import math
 
-from dataclasses import asdict
-
 import numpy as np
 import pandas as pd
 
@@ -20,16 +20,13 @@ from siloflow.design_loads import bulk_solid, design_loads
 from siloflow.errors import ReadError
 from siloflow.run_folder import RESULT_TABLES, RunFolder
 
-from .analysis_base import Products
 from .batch_means import batch_means_stderr
-from .design_figure import compare_with_dem, design_plot
 from .discharge import clog, discharge_table, steady_flow_rate
 from .dump_results import MIN_STEADY_SAMPLES, analyse_dumps, steady_resolution
-from .en_verdicts import band_verdicts, bed_state
-from .figures import first_results_plot
+from .en_verdicts import band_verdicts, bed_state, compare_with_dem
 from .flow_rate import rate_series, steady_window
 from .janssen import compare_with_measurement
-from .report import write_report
+from .run_results import RunResults
 from .wall_pressure import band_mean, band_pressures, vertical_load, wide_forces
 
 
@@ -127,13 +124,13 @@ def band_statistics(bands: pd.DataFrame, dynamic_mask, static_mask, sector_means
     return pd.DataFrame.from_dict(rows, orient="index", columns=BAND_STATISTICS).rename_axis("band")
 
 
-def analyse(folder, measured_pressure=None) -> dict:
-    """Compute the results of a run folder; return the summary. The report layer
-    (:func:`postprocess.report.write_report`) writes it to results/ with the tables, the figures
-    and the reports.
+def analyse_run(folder, measured_pressure=None) -> RunResults:
+    """Compute the results of a run folder: its summary, tables and what its figures show
+    (:class:`RunResults`); nothing is written. The report layer
+    (:func:`postprocess.report.write_run`) writes them to results/ with the figures and reports.
 
     ``measured_pressure``: optional CSV (``time`` s since opening, ``band_<k>`` Pa) compared
-    band by band with the run (paper A's Table 3 and Eq. 34), written to pressure_comparison.csv.
+    band by band with the run (paper A's Table 3 and Eq. 34), as pressure_comparison.csv.
     """
     run = RunOutputs(folder)
     g = run.plan.gravity
@@ -211,7 +208,7 @@ def analyse(folder, measured_pressure=None) -> dict:
         "time_open_s": t_open,
         "force_balance": balance,
         "results_asked": run.plan.outputs.results,
-        "flow_rate": asdict(rate),
+        "flow_rate": rate.record(),
         "clogged": clogged,
         "steady_window_detected": steady,
         "discharged_mass_kg": float(dis.outlet_mass.iloc[-1]),
@@ -225,29 +222,24 @@ def analyse(folder, measured_pressure=None) -> dict:
         **({"fill_cache": run.record.fill_cache} if run.record.fill_cache else {}),
         "engine_warnings": run.record.warnings,
     }
-    # the tables and figures for the report layer to write
-    products = Products({RESULT_TABLES["flow"]: dis}, {})
+    # the tables, and what the figures show, for the report layer to write
+    results = RunResults(run.folder, run.run.results, summary, {RESULT_TABLES["flow"]: dis},
+                         discharge=dis, bands=bands, band_table=table, t_open=t_open)
     if bands is not None:
-        products.tables.update({RESULT_TABLES["wall_pressure"]: bands,
-                                RESULT_TABLES["wall_pressure_sectors"]: sectors.assign(time=sectors.step * run.dt),
-                                RESULT_TABLES["bands"]: table, "wall_pressure_sectors.parquet": sectors})
-    try:
-        products.figures["first_results.png"] = first_results_plot(bands, dis, table, t_open)
-        summary["frame_analyses"] = analyse_dumps(run, table, dis, rate, products)
-        summary["design_loads"] = en1991_comparison(run, table, summary, products)
-        if measured_pressure is not None:
-            summary["pressure_comparison"] = measured_comparison(folder, measured_pressure, bands, t_open, products)
-    except BaseException:
-        products.close()        # the figures drawn so far
-        raise
-    write_report(run.run.results, run.folder.name, summary, products)
-    return summary
+        results.tables.update({RESULT_TABLES["wall_pressure"]: bands,
+                               RESULT_TABLES["wall_pressure_sectors"]: sectors.assign(time=sectors.step * run.dt),
+                               RESULT_TABLES["bands"]: table, "wall_pressure_sectors.parquet": sectors})
+    summary["frame_analyses"] = analyse_dumps(run, table, dis, rate, results)
+    summary["design_loads"] = en1991_comparison(run, table, summary, results)
+    if measured_pressure is not None:
+        summary["pressure_comparison"] = measured_comparison(folder, measured_pressure, bands, t_open, results)
+    return results
 
 
 def measured_comparison(folder, measured_pressure, bands: pd.DataFrame | None, t_open: float,
-                        products: Products) -> list[dict]:
+                        results: RunResults) -> list[dict]:
     """The run's band pressures against measured ones (``measured_pressure``, a CSV): the
-    summary's records; the table added to ``products`` (pressure_comparison.csv)."""
+    summary's records; the table added to ``results`` (pressure_comparison.csv)."""
     if bands is None:
         raise ReadError(f"{folder} has no wall-pressure sensors to compare with {measured_pressure} "
                         "(its outputs.results does not ask for wall_pressure)")
@@ -259,14 +251,14 @@ def measured_comparison(folder, measured_pressure, bands: pd.DataFrame | None, t
         comparison = compare_with_measurement(bands, measured, t_open)
     except ValueError as exc:
         raise ReadError(f"{measured_pressure}: {exc}") from None
-    products.tables["pressure_comparison.csv"] = comparison
+    results.tables["pressure_comparison.csv"] = comparison
     return comparison.to_dict(orient="records")
 
 
-def en1991_comparison(run: RunOutputs, table: pd.DataFrame, summary: dict, products: Products) -> dict:
+def en1991_comparison(run: RunOutputs, table: pd.DataFrame, summary: dict, results: RunResults) -> dict:
     """EN 1991-4's filling and discharge wall pressures for the run's silo beside its bands: the
-    summary's ``design_loads``; ``design_vs_dem.csv`` and ``design_loads.png`` added to
-    ``products`` when computed. The solid is the case's ``design`` section, or else the simulated one: unit weight from the bed's measured bulk density (the case's packing
+    summary's ``design_loads``; ``design_vs_dem.csv`` and the loads (``results.design``, the
+    figure design_loads.png) added to ``results`` when computed. The solid is the case's ``design`` section, or else the simulated one: unit weight from the bed's measured bulk density (the case's packing
     fraction without dumps), K = 1.1 (1 - sin phi) with tan phi the grains' friction (the
     standard's K_m from phi_im), mu the grains' wall friction, phi_r = phi. Fill height: the
     settled surface if measured, else the plan's estimate."""
@@ -294,8 +286,8 @@ def en1991_comparison(run: RunOutputs, table: pd.DataFrame, summary: dict, produ
     compared = compared.assign(static_verdict=[v["static_verdict"] for v in verdicts],
                                static_causes=["; ".join(v["static_causes"]) for v in verdicts],
                                dynamic_verdict=[v["dynamic_verdict"] for v in verdicts])
-    products.tables["design_vs_dem.csv"] = compared
-    products.figures["design_loads.png"] = design_plot(loads, table)
+    results.tables["design_vs_dem.csv"] = compared
+    results.design = loads
     return {"computed": True, "solid": what, "classification": loads.classification, "C_h": loads.C_h,
             "C_w": loads.C_w, "fill_height_m": surface, "notes": list(loads.notes), "bed_state": state,
             "bands": compared.to_dict(orient="records")}

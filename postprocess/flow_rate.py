@@ -19,8 +19,7 @@ from siloflow.run_folder import RunFolder
 from siloflow.errors import ReadError
 
 from .analysis_base import FrameAnalysis
-from .discharge import straight_line_fit
-from .figures import line_plot
+from .discharge import FlowRate, straight_line_fit
 
 
 def rate_series(time, cumulative, window: int = 5) -> np.ndarray:
@@ -57,26 +56,17 @@ def steady_window(rate, tolerance: float = 0.15) -> tuple[int, int]:
     return best
 
 
-@dataclass
-class LinearRate:
-    """Slope of a straight-line fit (units/s) with its standard error, over [t_start, t_end] s."""
-
-    rate: float
-    stderr: float
-    t_start: float
-    t_end: float
-    n_samples: int
-
-
-def linear_rate(time, values) -> LinearRate:
+def linear_rate(time, values) -> FlowRate:
     """Slope (units of ``values`` per s) of ``values`` against ``time`` (s) and its standard
-    error, by ``discharge.straight_line_fit``; all NaN but n_samples if fewer than 3 samples."""
+    error, by ``discharge.straight_line_fit``, as a :class:`discharge.FlowRate` (rate, stderr,
+    window, n_samples; no r2, fit_stderr or batches); all NaN but n_samples if fewer than 3
+    samples."""
     t = np.asarray(time, float)
     v = np.asarray(values, float)
     if len(t) < 3:
-        return LinearRate(float("nan"), float("nan"), float("nan"), float("nan"), len(t))
+        return FlowRate(float("nan"), float("nan"), float("nan"), float("nan"), len(t))
     fit = straight_line_fit(t, v)
-    return LinearRate(fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples)
+    return FlowRate(fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples)
 
 
 class FreeSurface(FrameAnalysis):
@@ -151,16 +141,13 @@ class FreeSurface(FrameAnalysis):
             row["surface_spread"] = float(np.max(heights) - np.min(heights))
         return [row]
 
-    def plot(self):
-        return line_plot(self.table, x="time", y="surface_height", xlabel="time (s)", ylabel="free-surface height (m)")
 
-
-def surface_flow_rate(time, height, area: float, bulk_density: float) -> LinearRate:
+def surface_flow_rate(time, height, area: float, bulk_density: float) -> FlowRate:
     """Wr (kg/s) from a straight-line fit of the free-surface height: -dh/dt A rho_bulk, with
     ``area`` (m2) the cross-section and ``bulk_density`` (kg/m3) the bed's mass per volume."""
     fit = linear_rate(time, height)
     scale = area * bulk_density
-    return LinearRate(-fit.rate * scale, fit.stderr * scale, fit.t_start, fit.t_end, fit.n_samples)
+    return FlowRate(-fit.rate * scale, fit.stderr * scale, fit.t_start, fit.t_end, fit.n_samples)
 
 
 def beverloo(D0, d, C: float, k: float, rho_b, g: float = 9.81):

@@ -1,18 +1,16 @@
-"""Force-chain figure (paper A, Fig. 14): the contact network of one frame in a slice, each
-contact drawn as the segment between the two grain centres, line width proportional to the
-normal force."""
+"""Force chains (paper A, Fig. 14): the contact network of one frame in a slice, each contact
+the segment between the two grain centres, with its normal force; the report layer draws it
+(``postprocess.report.figures.force_chain_plot``: line width proportional to the force)."""
 from __future__ import annotations
 
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
-from matplotlib.collections import LineCollection
 
 from siloflow.errors import ReadError
 
 from .coordination import normal_force, rows_of
 from .dumps import Frame
-from .figures import plt, save_figure
 
 
 def chain_segments(atoms: Frame, contacts: Frame, axis: int = 1, center: float | None = None,
@@ -46,31 +44,23 @@ def chain_segments(atoms: Frame, contacts: Frame, axis: int = 1, center: float |
     return seg, fn[keep], (center, thickness)
 
 
-def force_chain_plot(atoms: Frame, contacts: Frame, axis: int = 1, center: float | None = None,
-                     thickness: float | None = None, max_width: float = 3.0):
-    """The contact network of a slice (:func:`chain_segments`), line width = max_width * Fn / max Fn;
-    returns the Figure."""
+@dataclass
+class ForceChains:
+    """The contact network of one frame's slice (:func:`force_chains`): ``segments`` (k, 2, 2), m,
+    in the slice plane; ``forces`` (k,) normal forces, N; the slice (``axis``: 0, 1, 2 for x, y, z;
+    ``center`` and ``thickness``, m) and the frame's ``step``. The report draws it
+    (``postprocess.report.figures.force_chain_plot``)."""
+
+    step: int
+    axis: int
+    segments: np.ndarray
+    forces: np.ndarray
+    center: float
+    thickness: float
+
+
+def force_chains(atoms: Frame, contacts: Frame, axis: int = 1, center: float | None = None,
+                 thickness: float | None = None) -> ForceChains:
+    """The contact network of a slice (:func:`chain_segments`) of ``atoms``' frame."""
     seg, fn, (center, thickness) = chain_segments(atoms, contacts, axis, center, thickness)
-    fig, ax = plt.subplots(figsize=(5.5, 8))
-    if len(fn):
-        widths = max_width * fn / max(float(fn.max()), 1e-300)
-        lines = LineCollection(seg * 1000, linewidths=widths, colors="k", capstyle="round")
-        ax.add_collection(lines)
-        ax.autoscale()
-    names = "xyz"
-    plane = [names[k] for k in range(3) if k != axis]
-    ax.set_aspect("equal")
-    ax.set(xlabel=f"{plane[0]} (mm)", ylabel=f"{plane[1]} (mm)",
-           title=f"force chains, step {atoms.timestep}: {len(fn)} contacts in |{names[axis]} - "
-                 f"{center * 1000:.1f} mm| <= {thickness * 500:.1f} mm\nline width ~ normal force "
-                 f"(max {fn.max() if len(fn) else 0:.3g} N)")
-    ax.title.set_fontsize(8)
-    fig.tight_layout()
-    return fig
-
-
-def force_chain_figure(atoms: Frame, contacts: Frame, path, axis: int = 1, center: float | None = None,
-                       thickness: float | None = None, max_width: float = 3.0) -> Path:
-    """:func:`force_chain_plot` written to ``path`` (PNG); returns the path."""
-    save_figure(force_chain_plot(atoms, contacts, axis, center, thickness, max_width), path)
-    return Path(path)
+    return ForceChains(int(atoms.timestep), axis, seg, fn, center, thickness)

@@ -42,6 +42,8 @@ import pandas as pd
 from scipy import stats
 from scipy.optimize import curve_fit, least_squares
 
+from siloflow.design_loads import janssen_pressure
+
 #: bounds of the band-true fit's parameters (lower ends: open, approximated by LOWER)
 K_MAX, MU_MAX, LOWER = 3.0, 2.0, 1e-6
 #: K of a poured granular bed lies in this range; outside it a fit is flagged
@@ -50,12 +52,6 @@ K_PLAUSIBLE = (0.2, 1.0)
 MIN_BANDS = 3
 #: a parameter whose 95 % interval's half-width exceeds this fraction of its value is not resolved
 MAX_RELATIVE_HALF_WIDTH = 0.5
-
-
-def janssen_pressure(depth, rho_b: float, g: float, D: float, mu_w: float, K: float):
-    """Horizontal wall pressure (Pa) at ``depth`` (m) below the surface (0 above it)."""
-    depth = np.maximum(np.asarray(depth, float), 0.0)
-    return rho_b * g * D / (4.0 * mu_w) * (1.0 - np.exp(-4.0 * mu_w * K * depth / D))
 
 
 def _ramp(x):
@@ -323,7 +319,8 @@ class JanssenFit:
 
 
 def fit_janssen(depth, pressure, rho_b: float, D: float, g: float = 9.81) -> JanssenFit:
-    """Least-squares fit of :func:`janssen_pressure` to pressures (Pa) at points ``depth`` (m).
+    """Least-squares fit of Janssen's law (``siloflow.design_loads.janssen_pressure``, gamma =
+    rho_b g, A/U = D/4) to pressures (Pa) at points ``depth`` (m).
 
     The older point fit: a band is taken as a point at its centre, so a band cut by the free
     surface or the floor corner distorts it. Use :func:`fit_janssen_bands` for sensor bands."""
@@ -337,7 +334,7 @@ def fit_janssen(depth, pressure, rho_b: float, D: float, g: float = 9.81) -> Jan
     k0 = max(slope / (rho_b * g), 0.05)
 
     def model(z, K, mu_w):
-        return janssen_pressure(z, rho_b, g, D, mu_w, K)
+        return janssen_pressure(z, rho_b * g, K, mu_w, D / 4.0)
 
     best = None
     for mu0 in (0.1, 0.3, 0.6, 1.0):

@@ -28,7 +28,6 @@ from scipy.spatial import cKDTree
 from siloflow.clumps import union_area, union_volume
 
 from .analysis_base import FrameAnalysis
-from .figures import line_plot
 from .overlap_volume import solid_area_in_circle, solid_volume_in_cylinder, solid_volume_in_sphere
 
 #: 2 / sqrt(pi sqrt 3) and sqrt 2 / sqrt(pi sqrt 3), the constants of paper A's Eq. 37
@@ -264,7 +263,4 @@ class Porosity(FrameAnalysis):
 
     def _conclude(self):
         cols = [c for c in ("solid_fraction", "porosity", "bulk_density") if c in self.table]
-        self.summary = self.table.groupby("region")[cols].mean()
-
-    def plot(self):
-        return line_plot(self.table, x="step", y="porosity", hue="region", xlabel="timestep", ylabel="porosity")
+        self.results.summary = self.table.groupby("region")[cols].mean()

@@ -414,5 +414,5 @@ def pareto_figure(table: pd.DataFrame, path, tolerances: dict | None = None, hig
         x0, top, width = right + 0.01, 0.97, 2.2 / fig.get_figwidth()
     for c, text in enumerate(keys):
         fig.text(x0 + c * width, top, text, va="top", ha="left", fontsize=6.5, family="monospace")
-    from postprocess.figures import save_figure
+    from postprocess.report.figures import save_figure
     save_figure(fig, path)

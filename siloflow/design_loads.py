@@ -223,15 +223,29 @@ def classify(aspect_ratio: float, flat_bottom: bool = True) -> str:
 
 
 # --------------------------------------------------------------------------- vertical walls
-def janssen_filling(depth, gamma: float, K: float, mu: float, a_over_u: float):
-    """Slender silo filling (§5.2.1.1, (5.1)-(5.7)) at ``depth`` below the equivalent surface:
-    z_o = A/(K mu U) (5.5), p_ho = gamma K z_o (5.4), Y_J = 1 - exp(-z/z_o) (5.6);
-    p_hf = p_ho Y_J (5.1), p_wf = mu p_ho Y_J (5.2), p_vf = p_ho Y_J / K (5.3),
-    n_zSk = mu p_ho (z - z_o Y_J) (5.7, N/m). Returns (p_hf, p_wf, p_vf, n_zSk)."""
+def _janssen_terms(depth, gamma: float, K: float, mu: float, a_over_u: float):
+    """Janssen's law's parts at ``depth`` (m, clipped at 0): (z, z_o, p_ho, Y_J) with
+    z_o = A/(K mu U) (5.5), p_ho = gamma K z_o (5.4), Y_J = 1 - exp(-z/z_o) (5.6)."""
     z = np.maximum(np.asarray(depth, float), 0.0)
     z_o = a_over_u / (K * mu)
-    p_ho = gamma * K * z_o
-    y = -np.expm1(-z / z_o)
+    return z, z_o, gamma * K * z_o, -np.expm1(-z / z_o)
+
+
+def janssen_pressure(depth, gamma: float, K: float, mu: float, a_over_u: float):
+    """Janssen's horizontal wall pressure (Pa) at ``depth`` (m) below the surface, 0 above it:
+    p_ho Y_J = gamma K z_o (1 - exp(-z/z_o)), z_o = A/(K mu U) (EN 1991-4 (5.1), (5.4)-(5.6)),
+    with ``gamma`` the unit weight (N/m3), K the lateral pressure ratio, ``mu`` the wall friction
+    and ``a_over_u`` = A/U (m; D/4 for a cylinder of diameter D). It levels off at gamma A/(mu U).
+    The one statement of the law: EN's filling pressure and postprocess' fits use it."""
+    _, _, p_ho, y = _janssen_terms(depth, gamma, K, mu, a_over_u)
+    return p_ho * y
+
+
+def janssen_filling(depth, gamma: float, K: float, mu: float, a_over_u: float):
+    """Slender silo filling (§5.2.1.1, (5.1)-(5.7)) at ``depth`` below the equivalent surface:
+    p_hf = p_ho Y_J (5.1, :func:`janssen_pressure`), p_wf = mu p_ho Y_J (5.2), p_vf = p_ho Y_J / K (5.3),
+    n_zSk = mu p_ho (z - z_o Y_J) (5.7, N/m). Returns (p_hf, p_wf, p_vf, n_zSk)."""
+    z, z_o, p_ho, y = _janssen_terms(depth, gamma, K, mu, a_over_u)
     return p_ho * y, mu * p_ho * y, p_ho * y / K, mu * p_ho * (z - z_o * y)
 
 

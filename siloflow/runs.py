@@ -93,8 +93,8 @@ class Run:
     def _results(self) -> Path:
         self._finished()
         if not self.run_folder.summary_file.is_file():
-            from postprocess.first_results import analyse
-            analyse(self.folder)
+            from postprocess.report import post_process
+            post_process(self.folder)
         return self.run_folder.results
 
     @cached_property
@@ -242,13 +242,13 @@ def prepare_resume(folder, executable: Optional[str] = None) -> PreparedRun:
 
 
 def post_process(folder, measured_pressure=None) -> dict:
-    """The first results of a finished run folder (``postprocess.first_results.analyse``: tables,
+    """The first results of a finished run folder (``postprocess.report.post_process``: tables,
     figures, reports in results/), recorded in its manifest as siloflow's; returns the summary."""
-    from postprocess.first_results import analyse
+    from postprocess.report import post_process as write_results
     from .run_folder import record_products
     since = time.time()
     try:
-        return analyse(folder, measured_pressure)
+        return write_results(folder, measured_pressure)
     finally:                # what post wrote is siloflow's: --force may replace it later
         record_products(folder, RunFolder(folder).results, since)
 

@@ -235,5 +235,5 @@ def envelope_figure(df, edges: list[dict], path: Path) -> None:
     ax.set_title("stability envelope (bar: largest safe time step)")
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
-    from postprocess.figures import save_figure
+    from postprocess.report.figures import save_figure
     save_figure(fig, path, dpi=120)

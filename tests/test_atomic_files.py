@@ -9,7 +9,7 @@ import pytest
 matplotlib.use("Agg")
 from matplotlib.figure import Figure  # noqa: E402
 
-from postprocess.figures import save_figure  # noqa: E402
+from postprocess.report.figures import save_figure  # noqa: E402
 from siloflow.atomic_files import atomic_path, write_text  # noqa: E402
 from siloflow.run_folder import _TEMP  # noqa: E402
 

@@ -292,7 +292,8 @@ def test_coarse_graining_is_a_frame_analysis_that_runs_twice_alike_and_saves(tmp
     assert cg.steps == [0, 100, 200, 300]
     xr.testing.assert_identical(first, second)
     assert cg.run(frames, start=1, step=2).steps == [100, 300]
-    written = cg.save(tmp_path)
+    from postprocess.report.files import write_coarse_graining
+    written = write_coarse_graining(cg, tmp_path)
     assert {p.name for p in written} == {"coarse_graining.csv", "coarse_graining.parquet", "fields.nc"}
     with xr.open_dataset(tmp_path / "fields.nc") as back:
         np.testing.assert_allclose(back.rho.values, cg.dataset().rho.values)
@@ -320,8 +321,9 @@ def synthetic_rz_dataset():
 
 
 def test_paper_b_analyses_on_known_fields(tmp_path):
-    from postprocess.cg_analyses import (axial_profiles, cg_figures, janda_fit, kinetic_peak_height, outlet_profiles,
+    from postprocess.cg_analyses import (axial_profiles, janda_fit, kinetic_peak_height, outlet_profiles,
                                          power_law_fit, species_kinetic_table)
+    from postprocess.report.cg import cg_figures
     ds, R = synthetic_rz_dataset()
     prof = outlet_profiles(ds, 0.0, R)
     fit = janda_fit(prof)

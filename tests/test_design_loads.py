@@ -18,7 +18,8 @@ from siloflow.case_file import case_from_dict
 from siloflow.cli import app
 from siloflow.design_loads import (MATERIALS, bulk_solid, classify, design_loads, hopper_is_steep)
 from siloflow.plan import Silo
-from postprocess.design_figure import compare_with_dem, design_figure
+from postprocess.en_verdicts import compare_with_dem
+from postprocess.report.figures import design_figure
 
 from conftest import QUICK
 

@@ -352,7 +352,7 @@ def test_post_on_broken_dumps_prints_a_message_not_a_traceback(tmp_path):
 def test_post_into_an_existing_file_is_a_setup_error_and_leaves_it_alone(tmp_path):
     from typer.testing import CliRunner
 
-    from postprocess.any_dump import analyse_any
+    from postprocess.report.dumps import analyse_any
     from siloflow.cli import app
     from siloflow.errors import SetupError
 

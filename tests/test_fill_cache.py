@@ -315,7 +315,7 @@ def test_a_cached_fill_gives_the_same_bed_and_a_lean_early_stopped_discharge(sma
     from siloflow.case_file import case_from_dict as from_dict
     from siloflow.engine import get_engine
     from siloflow.fill_cache import run_with_cache
-    from postprocess.first_results import analyse
+    from postprocess.report import post_process as analyse
     from conftest import SMALL
 
     case, folder, record, summary = small_run

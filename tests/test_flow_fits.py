@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from postprocess.discharge import FlowRate, LineFit, steady_flow_rate, straight_line_fit
-from postprocess.flow_rate import LinearRate, linear_rate, surface_flow_rate
+from postprocess.flow_rate import linear_rate, surface_flow_rate
 
 REL = 1e-12
 
@@ -161,8 +161,9 @@ def test_linear_rate_and_surface_rate_are_the_line_fit():
     t, h = noisy_line(11, n=50)
     fit = straight_line_fit(t, h)
     lr = linear_rate(t, h)
-    assert isinstance(lr, LinearRate)
-    assert astuple(lr) == (fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples)
+    assert isinstance(lr, FlowRate)
+    assert astuple(lr) == (fit.slope, fit.stderr, fit.t_start, fit.t_end, fit.n_samples, None, None, None)
+    assert list(lr.record()) == ["rate", "stderr", "t_start", "t_end", "n_samples"]   # summary.json's keys
     wr = surface_flow_rate(t, h, area=0.02, bulk_density=1500.0)               # kg/s
     assert wr.rate == pytest.approx(-fit.slope * 30.0, rel=1e-15) and wr.stderr == pytest.approx(fit.stderr * 30.0, rel=1e-15)
 

@@ -16,10 +16,11 @@ from scipy.signal import lfilter
 from postprocess.dump_results import (MIN_STEADY_SAMPLES, band_extents, steady_resolution,
                                       surface_rate_resolution)
 from postprocess.first_results import BAND_STATISTICS, band_statistics, batch_means_stderr, pressure_window
-from postprocess.flow_rate import LinearRate, surface_flow_rate
+from postprocess.discharge import FlowRate
+from postprocess.flow_rate import surface_flow_rate
 from postprocess.janssen import (band_hydrostatic_pressure, band_janssen_pressure, fit_janssen_bands,
                                  janssen_depth_integral)
-from postprocess.report import janssen_lines, report_text
+from postprocess.report import janssen_lines, post_process, report_text
 
 RHO, G = 1500.0, 9.81
 
@@ -319,7 +320,7 @@ def test_wr_is_not_resolved_when_the_surface_moved_less_than_three_grain_diamete
     fast = surface_flow_rate(t, 0.17 - 0.015 * (t - 1.0) + noise, area, RHO)
     r = surface_rate_resolution(fast, area, RHO, d)
     assert r["resolved"] and r["reason"] == "" and r["surface_descent_m"] == pytest.approx(0.012, rel=0.02)
-    r = surface_rate_resolution(LinearRate(float("nan"), float("nan"), float("nan"), float("nan"), 2), area, RHO, d)
+    r = surface_rate_resolution(FlowRate(float("nan"), float("nan"), float("nan"), float("nan"), 2), area, RHO, d)
     assert not r["resolved"] and "only 2 free-surface sample(s)" in r["reason"]
 
 
@@ -330,8 +331,8 @@ def test_report_says_not_resolved_with_the_reason_and_never_saturated():
     z0 = np.arange(6) * 0.05
     p = band_janssen_pressure(z0, z0 + 0.05, h, RHO, G, D, 0.1, 1.3)
     j = asdict(fit_janssen_bands(z0, z0 + 0.05, p, h, RHO, D, 0.5, G, floor=0.0))
-    wr = {**asdict(LinearRate(0.004, 1e-4, 1.0, 1.8, 41)),
-          **surface_rate_resolution(LinearRate(0.004, 1e-4, 1.0, 1.8, 41), math.pi * 0.015 ** 2, RHO, 0.003)}
+    wr = {**asdict(FlowRate(0.004, 1e-4, 1.0, 1.8, 41)),
+          **surface_rate_resolution(FlowRate(0.004, 1e-4, 1.0, 1.8, 41), math.pi * 0.015 ** 2, RHO, 0.003)}
     summary = {"particles_inserted": 5000, "initial_mass_kg": 0.07, "settled_ke_pe": 1e-6, "time_open_s": 0.5,
                "force_balance": None, "discharged_mass_kg": 0.02, "mass_in_silo_end_kg": 0.05,
                "flow_rate": {"rate": 0.02, "stderr": 1e-4, "t_start": 0.7, "t_end": 1.5, "r2": 0.999},
@@ -416,7 +417,7 @@ def test_analyse_writes_the_pressure_statistics_and_resolution(tmp_path, monkeyp
     import postprocess.first_results as fr
     run = FakeRun(tmp_path)
     monkeypatch.setattr(fr, "RunOutputs", lambda folder: run)
-    summary = fr.analyse(run.folder)
+    summary = post_process(run.folder)
     steady = summary["steady_window_detected"]
     assert steady["resolved"] and steady["n_samples"] >= 10
     stats = summary["pressure_statistics"]

@@ -31,7 +31,7 @@ def run_case(path, tmp_path_factory, name: str, post: bool = False):
     folder = tmp_path_factory.mktemp(name) / "run"
     record = LiggghtsEngine().run(case, folder)
     if post:
-        from postprocess.first_results import analyse
+        from postprocess.report import post_process as analyse
         analyse(folder)
     return case, folder, record
 
@@ -112,7 +112,7 @@ def test_frictionless_fill_packs_denser_then_friction_is_restored(small_run, tmp
     Compared with the same case poured with friction (the shared small run)."""
     import yaml
 
-    from postprocess.first_results import analyse
+    from postprocess.report import post_process as analyse
     from siloflow.case_file import case_from_dict
     from conftest import SMALL
 
@@ -142,7 +142,7 @@ def test_hooke_contact_law_runs_per_size_pair(tmp_path):
     polydisperse case: it runs, every grain is inserted and settles, the bed's weight is carried."""
     import yaml
 
-    from postprocess.first_results import analyse
+    from postprocess.report import post_process as analyse
     from siloflow.case_file import case_from_dict
 
     data = yaml.safe_load(POLY.read_text())

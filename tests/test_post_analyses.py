@@ -13,7 +13,8 @@ from postprocess.coordination import Coordination, coordination, local_pairs, ov
 from postprocess.dumps import Frame
 from postprocess.flow_rate import (FreeSurface, beverloo, fit_beverloo, rate_series, steady_window,
                                    surface_flow_rate)
-from postprocess.force_chains import chain_segments, force_chain_figure
+from postprocess.force_chains import chain_segments
+from postprocess.report.figures import force_chain_figure
 from postprocess.janssen import compare_with_measurement, fit_janssen, pressure_error_w
 from postprocess.overlap_volume import (circle_circle_overlap, sphere_cylinder_overlap, sphere_sphere_overlap,
                                         sphere_volume)
@@ -424,3 +425,36 @@ def test_beverloo_command_fits_across_run_folders(tmp_path, quick_dict):
     assert len(table) == 5 and (api_fit.C, api_fit.k) == pytest.approx((fit["C"], fit["k"]), rel=1e-12)
     result = CliRunner().invoke(app, ["beverloo", folders[0], str(tmp_path)])
     assert result.exit_code == 1 and "summary.json" in result.output
+
+
+def test_analyses_write_no_files(tmp_path, monkeypatch):
+    """An analysis computes: run on a dump in a folder made read-only (and the working directory),
+    its output is in ``results`` and no file appears anywhere under that folder (root ignores the
+    mode, so the listing is compared too). Only the report layer writes."""
+    import os
+
+    from postprocess.any_dump import FrameSummary
+    from postprocess.dumps import read_frames
+    from postprocess.flow_rate import FreeSurface
+    from test_dumps import dump_text, random_frame
+
+    rng = np.random.default_rng(4)
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    dump = folder / "atoms.dump"
+    dump.write_text(dump_text([(0, random_frame(rng, 400)), (100, random_frame(rng, 400))]))
+    before = sorted(p.relative_to(folder) for p in folder.rglob("*"))
+    folder.chmod(0o555)
+    monkeypatch.chdir(folder)
+    try:
+        analyses = [FrameSummary(), Porosity([MeasureRegion("s", "sphere", (0.5, 0.5, 0.5), 0.3)]),
+                    Coordination(), FreeSurface(radius=0.5, x0=0.5, y0=0.5)]
+        for a in analyses:
+            a.run(read_frames(dump))
+            assert not a.results.table.empty and a.table is a.results.table
+            assert not any(hasattr(a, attr) for attr in ("save", "plot", "products"))
+        assert set(analyses[1].results.summary.columns) >= {"solid_fraction", "porosity"}
+    finally:
+        folder.chmod(0o755)
+    assert sorted(p.relative_to(folder) for p in folder.rglob("*")) == before
+    assert os.listdir(folder) == ["atoms.dump"]

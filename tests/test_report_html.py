@@ -27,8 +27,8 @@ import pandas as pd
 import pytest
 
 import postprocess.first_results as fr
-from postprocess.analysis_base import Products
-from postprocess.figures import plt
+from postprocess.report import post_process
+from postprocess.report.figures import plt
 from postprocess.report import CONTENT_SECURITY_POLICY, flow_rate_line, report_blocks, write_report
 from test_janssen_fit import FakeRun
 
@@ -44,7 +44,7 @@ def fake_report(tmp_path_factory):
     run = FakeRun(tmp_path_factory.mktemp("report"))
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(fr, "RunOutputs", lambda folder: run)
-        summary = fr.analyse(run.folder)
+        summary = post_process(run.folder)
     return summary, run.run.results
 
 
@@ -135,7 +135,7 @@ def test_static_pressures_state_the_beds_mobilisation_once_per_table(fake_report
     md = (fake_report[1] / "report.md").read_text()
     assert "mobilises" not in md                        # a slab: no EN comparison, no force balance of a cylinder
     note = "the bed mobilises mu_eff = 0.14 on the wall, 0.27 of mu_w = 0.5 (fill protocol: rain)"
-    write_report(tmp_path, "run", with_en(summary), Products({}, {}))
+    write_report(tmp_path, "run", with_en(summary), {}, {})
     md = (tmp_path / "report.md").read_text()
     assert md.count(note) == 2, md
     assert f"+/- its batch-means standard error; {note}. Dynamic:" in md
@@ -156,7 +156,7 @@ def test_every_text_is_escaped(fake_report, tmp_path):
     fig, ax = plt.subplots()
     ax.plot([0, 1], [0, 1])
     name = "<img src=x onerror=alert(1)> & co"
-    write_report(tmp_path, name, summary, Products({"bands.csv": table}, {"fig.png": fig}))
+    write_report(tmp_path, name, summary, {"bands.csv": table}, {"fig.png": fig})
     page = (tmp_path / "report.html").read_text()
     assert "<b>" not in page and "<i>" not in page and "<img src=x" not in page and "onerror=alert(1)>" not in page
     assert page.count("&lt;b&gt;x&lt;/b&gt;") >= 3                 # band table, EN table, bands.csv

@@ -117,7 +117,7 @@ def test_slab_input_is_refused_naming_the_field(path, value, field):
 # ---------------------------------------------------------------- a real run
 @pytest.fixture(scope="module")
 def slab_run(tmp_path_factory):
-    from postprocess.first_results import analyse
+    from postprocess.report import post_process as analyse
     from siloflow.engine import LiggghtsEngine
 
     case = load_case(SLAB)

@@ -114,7 +114,7 @@ def test_an_insert_that_is_a_fifo_is_refused_not_read(tmp_path):
 @pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS not installed (make install-engine); "
                     "CI installs it, so CI never skips this")
 def test_insert_carries_load_in_a_real_run(tmp_path):
-    from postprocess.first_results import analyse
+    from postprocess.report import post_process as analyse
     from siloflow.engine import LiggghtsEngine
 
     write_user_stl(tmp_path / "b.stl", baffle(), Mode.BINARY)

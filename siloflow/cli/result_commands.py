@@ -30,7 +30,8 @@ def post(source: str = typer.Argument(..., help="a finished run folder, or dump 
     if path.is_dir() and RunFolder(path).is_run_folder():
         _post(path, measured)
         return
-    from postprocess.any_dump import analyse_any, parse_sphere
+    from postprocess.any_dump import parse_sphere
+    from postprocess.report.dumps import analyse_any
 
     from ..engine.liggghts.tables import local_columns
     try:
@@ -76,7 +77,8 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
        particle_density: Optional[float] = typer.Option(None, help="kg/m3 when the dump has no mass column"),
        steps: Optional[str] = typer.Option(None, help="time window FIRST:LAST in timesteps (dump source)")) -> None:
     """Coarse-grain particles and contacts into continuum fields (paper B): fields.nc, profiles, figures."""
-    from postprocess.cg_run import CgSetup, run_cg, setup_from_run
+    from postprocess.cg_run import CgSetup, setup_from_run
+    from postprocess.report.cg import run_cg
 
     from ..engine.liggghts.tables import local_columns
     from ..run_folder import record_products
@@ -177,7 +179,8 @@ def design(case_file: Path = typer.Argument(..., help="YAML case file (its desig
     """EN 1991-4 design loads of the case's silo filled to its bed height: filling, discharge, patch, hopper."""
     import numpy as np
 
-    from postprocess.design_figure import compare_with_dem, design_figure
+    from postprocess.en_verdicts import compare_with_dem
+    from postprocess.report.figures import design_figure
 
     from ..answers import design as design_of
     from ..atomic_files import write_text

@@ -1,52 +1,19 @@
-"""The report layer of a run: writes what the analyses computed under ``results/``.
+"""The report's text: its blocks (a title, bullet lists, paragraphs and tables of strings) from a
+run's summary (:func:`report_blocks`), rendered as Markdown (report.md, :func:`markdown`) and, by
+``report.html_page``, as HTML; and the lines ``siloflow run``/``post`` print (:func:`console_lines`).
 
-The analyses (:func:`postprocess.first_results.analyse` and the modules it calls) return their
-results: the summary (a dict, ``summary.json``) and their tables and figures
-(:class:`postprocess.analysis_base.Products`: pandas DataFrames and matplotlib Figures by file
-name). :func:`write_report` writes them all, atomically (``siloflow.atomic_files``): the tables
-(CSV, Parquet), the figures (PNG), ``summary.json``, ``report.md`` and ``report.html``.
-
-Both reports are rendered from one list of blocks (:func:`report_blocks`: a title, bullet
-lists, paragraphs and tables of strings), so report.html states every number of report.md as
-the same string. report.html is self-contained: its figures are embedded as base64 PNG, its
-style is inline, a Content-Security-Policy forbids every request but ``data:`` images, and it
-holds no script, no link and no external URL; every text is escaped (``html.escape``).
+One list of blocks feeds both reports, so report.html states every number of report.md as the
+same string.
 """
 from __future__ import annotations
 
-import base64
-import html
 import math
 from pathlib import Path
 from typing import NamedTuple
 
-import pandas as pd
-
-from siloflow.atomic_files import write_json, write_text
 from siloflow.run_folder import SUMMARY_NAME
 
-from .analysis_base import Products
-from .numbers import mass_rate, pressure
-
-#: the report files written beside the tables and figures
-REPORT_MD, REPORT_HTML = "report.md", "report.html"
-#: report.html allows nothing but data: images and its own inline style
-CONTENT_SECURITY_POLICY = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
-#: report.html shows a table of at most this many rows whole, a longer one as per-column statistics
-HTML_TABLE_ROWS = 200
-
-STYLE = """
-body { font-family: system-ui, sans-serif; max-width: 1200px; margin: 1.5em auto; padding: 0 1em; color: #222; }
-h1 { font-size: 1.5em; } h2 { font-size: 1.25em; margin-top: 2em; border-bottom: 1px solid #ccc; }
-h3 { font-size: 1em; margin-top: 1.5em; }
-table { border-collapse: collapse; margin: 0.5em 0 1em; font-size: 0.85em; }
-th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: right; vertical-align: top; }
-th { background: #f0f0f0; } td:first-child, th:first-child { text-align: left; }
-figure { margin: 1em 0; } img { max-width: 100%; height: auto; border: 1px solid #ddd; }
-figcaption { font-size: 0.85em; color: #555; } .note { color: #555; font-size: 0.9em; }
-.wide { overflow-x: auto; }
-"""
-
+from ..numbers import mass_rate, pressure
 
 # ---------------------------------------------------------------- the blocks of a report
 
@@ -84,41 +51,6 @@ def markdown(blocks) -> str:
                               *(f"| {' | '.join(row)} |" for row in b.rows)])
         return b.text
     return "\n\n".join(md(b) for b in blocks) + "\n"
-
-
-def _esc(text) -> str:
-    """Text for an HTML text node (``&``, ``<``, ``>`` escaped; quotes kept, as report.md has them)."""
-    return html.escape(str(text), quote=False)
-
-
-def _html_items(b: Items) -> str:
-    """A nested <ul> of Markdown bullets ``- `` and ``  - ``."""
-    items: list[tuple[str, list[str]]] = []
-    for line in b.lines:
-        if line.startswith("  - ") and items:
-            items[-1][1].append(line[4:])
-        else:
-            items.append((line[2:] if line.startswith("- ") else line, []))
-    lis = "".join(f"<li>{_esc(text)}" + (f"<ul>{''.join(f'<li>{_esc(s)}</li>' for s in subs)}</ul>" if subs else "")
-                  + "</li>\n" for text, subs in items)
-    return (f"<p>{_esc(b.lead)}</p>\n" if b.lead else "") + f"<ul>\n{lis}</ul>"
-
-
-def html_blocks(blocks) -> str:
-    """The blocks as HTML, every text escaped."""
-    out = []
-    for b in blocks:
-        if isinstance(b, Title):
-            out.append(f"<h1>{_esc(b.text)}</h1>")
-        elif isinstance(b, Items):
-            out.append(_html_items(b))
-        elif isinstance(b, Table):
-            head = "".join(f"<th>{_esc(h)}</th>" for h in b.header)
-            body = "".join("<tr>" + "".join(f"<td>{_esc(c)}</td>" for c in row) + "</tr>\n" for row in b.rows)
-            out.append(f"<table>\n<thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody>\n</table>")
-        else:
-            out.append(f"<p>{_esc(b.text)}</p>")
-    return "\n".join(out)
 
 
 # ---------------------------------------------------------------- the report's lines
@@ -448,48 +380,3 @@ def report_blocks(summary: dict, name: str) -> list:
 def report_text(summary: dict, run) -> str:
     """A short human-readable report of a run's results (Markdown); ``run.folder`` names it."""
     return markdown(report_blocks(summary, Path(run.folder).name))
-
-
-# ---------------------------------------------------------------- report.html
-
-def _html_table(name: str, table: pd.DataFrame) -> str:
-    """One written table: whole up to :data:`HTML_TABLE_ROWS` rows, else its per-column statistics."""
-    head = f"<h3>{_esc(name)}</h3>\n"
-    if len(table) <= HTML_TABLE_ROWS:
-        return head + f'<div class="wide">{table.to_html(index=False, border=0, na_rep="nan", escape=True)}</div>'
-    return (head + f'<p class="note">{len(table)} rows x {len(table.columns)} columns; per-column statistics:</p>\n'
-            f'<div class="wide">{table.describe().to_html(border=0, na_rep="nan", escape=True)}</div>')
-
-
-def report_html(blocks, name: str, tables: dict, figures: dict) -> str:
-    """report.html: the report's blocks, every figure (``figures``: file name -> PNG bytes)
-    embedded as a base64 ``data:`` URL, and every CSV table (``tables``: file name -> DataFrame)."""
-    figs = "\n".join(
-        f'<figure><img src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}" '
-        f'alt="{html.escape(fname, quote=True)}"><figcaption>{_esc(fname)}</figcaption></figure>'
-        for fname, png in figures.items())
-    csvs = "\n".join(_html_table(fname, t) for fname, t in tables.items() if fname.endswith(".csv"))
-    return (
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-        f"<meta http-equiv=\"Content-Security-Policy\" content=\"{CONTENT_SECURITY_POLICY}\">\n"
-        f"<title>{_esc(f'Run report: {name}')}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n"
-        f"{html_blocks(blocks)}\n"
-        + (f"<h2>Figures</h2>\n{figs}\n" if figs else "")
-        + (f"<h2>Tables</h2>\n<p class=\"note\">The tables written beside this report (results/).</p>\n{csvs}\n"
-           if csvs else "")
-        + "</body>\n</html>\n")
-
-
-# ---------------------------------------------------------------- writing
-
-def write_report(out, name: str, summary: dict, products: Products) -> None:
-    """Write a run's results into the folder ``out`` (made if missing): the tables and figures of
-    ``products`` (:meth:`Products.write`), ``summary`` as summary.json (NaN as null), report.md
-    and report.html (:func:`report_blocks`; the figures' PNG as written). ``name``: the run's."""
-    out = Path(out)
-    products.write(out)
-    write_json(out / SUMMARY_NAME, summary)
-    blocks = report_blocks(summary, name)
-    write_text(out / REPORT_MD, markdown(blocks))
-    pngs = {fname: (out / fname).read_bytes() for fname in products.figures}
-    write_text(out / REPORT_HTML, report_html(blocks, name, products.tables, pngs))
