@@ -34,6 +34,8 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_runs import run_case  # noqa: E402
+
+from siloflow.answers import run_case  # noqa: E402
 from siloflow.case_file import case_from_dict  # noqa: E402
 from siloflow.run_folder import RunFolder, case_differences  # noqa: E402
 from siloflow.runs import post_process  # noqa: E402
@@ -58,7 +60,7 @@ def complete(folder: Path) -> bool:
 def check_same_case(folder: Path, data: dict) -> None:
     """Refuse to reuse a finished run of another case (the case file changed since it ran): the
     validated cases compared in every section the case file sets (``run_folder.case_differences``)."""
-    changed = [path for path, _ in case_differences(case_from_dict(data), RunFolder(folder).case, list(data))]
+    changed = [path for path, _ in case_differences(case_from_dict(data), run_case(RunFolder(folder)), list(data))]
     if changed:
         raise SystemExit(f"{folder} ran another case ({', '.join(changed[:5])} differ): give another --work, "
                          f"or remove the old runs")
@@ -116,6 +118,7 @@ def figure(table: pd.DataFrame, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     from postprocess.report.figures import save_figure
     fig, ax = plt.subplots(figsize=(7.5, 0.45 * len(table) + 2.0))
     y = np.arange(len(table))

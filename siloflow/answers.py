@@ -35,6 +35,17 @@ class DesignResult:
         return self.case.design is None
 
 
+def run_case(run: RunFolder) -> Case:
+    """The validated case a run folder was rendered from (its ``case.yaml``); ``ReadError``."""
+    if not run.case_file.is_file():
+        raise ReadError(f"{run.path} is not a siloflow run folder (no {run.case_file.name})")
+    try:
+        return load_case(run.case_file)
+    except CaseError as exc:
+        raise ReadError(f"{run.case_file} is not a valid case (edited, or written by another siloflow "
+                        f"version):\n{exc}") from None
+
+
 def design(case, run_folder: Optional[Path] = None, top: str = "flat") -> DesignResult:
     """EN 1991-4 loads (filling, discharge, patch, hopper) of ``case``'s silo filled to its bed
     height; ``case`` is a ``Case`` or a case-file path. ``run_folder``: a finished, post-processed
@@ -42,6 +53,7 @@ def design(case, run_folder: Optional[Path] = None, top: str = "flat") -> Design
     pressures come with the result. ``top``: ``flat`` (h_o = 0) or ``heap`` (a cone at the angle of
     repose)."""
     import pandas as pd
+
     from .derived import derive
     from .design_loads import CASE_FIELDS, bulk_solid, design_loads
     source = "the case" if isinstance(case, Case) else str(case)
@@ -54,7 +66,7 @@ def design(case, run_folder: Optional[Path] = None, top: str = "flat") -> Design
     bands = None
     if run_folder is not None:
         run = RunFolder(run_folder)
-        differs = case_differences(case, run.case, CASE_FIELDS)
+        differs = case_differences(case, run_case(run), CASE_FIELDS)
         if differs:
             raise SetupError(f"--run {run_folder} is a run of another case: its {run.case_file.name} "
                              f"differs from {source} in what the design loads and its band pressures depend on:\n"

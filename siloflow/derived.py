@@ -7,12 +7,34 @@ unit-tested and written to ``plan.json`` beside the deck. All values SI.
 from __future__ import annotations
 
 import math
-from ._version import __version__
+
 from . import contact_physics as cp
+from ._version import __version__
 from .case import Case, HopperGeometry, PlanarGeometry
 from .errors import CaseError, SetupError
-from .plan import (FACES, WALL, Discharge, EngineChoice, Fill, Guard, Profile, InsertionRegion, Material, Opening, Outlet,
-                   Outputs, PairParameters, RunPlan, Sensors, Settle, Silo, Species, SteadyStop, TimeStep, Wall)
+from .plan import (
+    FACES,
+    WALL,
+    Discharge,
+    EngineChoice,
+    Fill,
+    Guard,
+    InsertionRegion,
+    Material,
+    Opening,
+    Outlet,
+    Outputs,
+    PairParameters,
+    Profile,
+    RunPlan,
+    Sensors,
+    Settle,
+    Silo,
+    Species,
+    SteadyStop,
+    TimeStep,
+    Wall,
+)
 from .species import INSERTION_SPEED, species_of
 
 #: planned steps above which a run needs an explicit override (``--allow-long``): LIGGGHTS takes
@@ -455,7 +477,8 @@ def derive(case: Case) -> RunPlan:
     silo = Silo(kind=g.kind, half_width=g.half_width, height=g.height, hopper_height=g.hopper_height,
                 outlet_radius=g.outlet_radius, radius=None if planar else g.radius,
                 width=g.width if planar else None, thickness=g.thickness if planar else None,
-                face_friction=g.face_friction if planar else None)
+                face_friction=g.face_friction if planar else None,
+                mesh_segments=None if planar else g.mesh_segments)
     materials = {"particle": Material(youngs_modulus=_modulus_of(case, "particle")[0],
                                       poisson_ratio=_modulus_of(case, "particle")[1]),
                  "wall": Material(youngs_modulus=_modulus_of(case, None)[0], poisson_ratio=_modulus_of(case, None)[1])}
@@ -498,8 +521,7 @@ def derive(case: Case) -> RunPlan:
         particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass,
         analysis=case.analysis, design=case.design, run_length_fields=run_length_fields(case, source, settings["profile"]),
     )
-    from .geometry import silo_meshes
-    meshes = silo_meshes(case, plan.outlet.z, plan.outlet.radius, sensors=needs["wall_pressure"])
+    meshes = wall_meshes(case, plan, sensors=needs["wall_pressure"])
     walls = [Wall(**m.info()) for m in meshes]
     if f.mobilise is not None or f.protocol != "rain":
         plan = plan.model_copy(update={"fill": plan.fill.model_copy(update={
@@ -515,6 +537,61 @@ def derive(case: Case) -> RunPlan:
                            sectors=plan.sensors.sectors)})
     plan._meshes = meshes
     return plan
+
+
+def wall_meshes(case: Case, plan: RunPlan, sensors: bool) -> list:
+    """The walls' meshes (``siloflow.geometry.WallMesh``) of the plan's silo, sensor bands as the
+    case's ``sensors`` asks (side walls merged into one without ``sensors``), then the case's
+    user walls, the counting mesh last. A wall that cannot be triangulated well, or a user mesh
+    that cannot be used, is a ``CaseError`` naming the case fields to change."""
+    from .geometry import (
+        MeshError,
+        MeshQualityError,
+        band_boundaries,
+        silo_meshes,
+        user_wall,
+    )
+    s = case.sensors
+    bounds = band_boundaries(case.geometry.height, s.bands, s.heights)
+    try:
+        meshes = silo_meshes(plan.geometry, bounds, plan.sensors.sectors, plan.outlet.z, plan.outlet.radius, sensors)
+    except MeshQualityError as exc:
+        fields = shaping_fields(case, exc.role, exc.kind)
+        raise CaseError([(fields[0], f"the wall mesh '{exc.wall}' cannot be triangulated for LIGGGHTS: "
+                          f"{exc.reason}; change {' or '.join(fields)}")], case.name) from None
+    problems, inserts = [], []
+    for k, ins in enumerate(case.inserts):
+        try:
+            inserts.append(user_wall(ins.mesh_name, ins.file, ins.scale, plan.geometry))
+        except MeshError as exc:
+            problems.append((f"inserts[{k}].file", str(exc)))
+    if problems:
+        raise CaseError(problems, case.name)
+    return meshes[:-1] + inserts + meshes[-1:]
+
+
+def shaping_fields(case: Case, role: str, kind: str = "angle") -> list[str]:
+    """The case fields that shape a wall of ``role``, the likeliest culprit first (for ``kind``
+    'edge', a too short edge: the outlet's size, which sets the hopper's shortest sides)."""
+    g = case.geometry
+    sensors = "sensors.heights" if case.sensors.heights is not None else "sensors.bands"
+    if kind == "edge" and role in ("hopper", "cone", "bottom", "plate", "outlet"):
+        if isinstance(g, PlanarGeometry):
+            return ["geometry.outlet_width", "geometry.width", "geometry.half_angle_deg", "geometry.thickness"]
+        orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
+        return [orifice, "geometry.mesh_segments", "geometry.radius"]
+    if isinstance(g, PlanarGeometry):
+        return {"band": [sensors, "geometry.height", "geometry.thickness"],
+                "wall": [sensors, "geometry.height", "geometry.thickness"],
+                "hopper": ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width", "geometry.thickness"],
+                "face": ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width", "geometry.height"],
+                }.get(role, ["geometry.outlet_width", "geometry.thickness"])
+    orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
+    return {"band": [sensors, "geometry.height", "geometry.mesh_segments", "sensors.sectors"],
+            "wall": [sensors, "geometry.height", "geometry.mesh_segments"],
+            "cone": ["geometry.half_angle_deg", orifice, "geometry.radius", "geometry.mesh_segments"],
+            "bottom": [orifice, "geometry.radius", "geometry.mesh_segments"],
+            }.get(role, [orifice, "geometry.mesh_segments"])
 
 
 def own_overlap(species: Species) -> float:

@@ -203,6 +203,7 @@ class Silo(Frozen):
     width: Optional[float] = None
     thickness: Optional[float] = None
     face_friction: Optional[float] = None
+    mesh_segments: Optional[int] = None   # facets around a cylinder's circumference
 
     @property
     def top(self) -> float:

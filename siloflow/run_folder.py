@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Optional
 
 from .atomic_files import os_error, write_json, write_text
+from .engines import ENGINE_FILES
 from .errors import ReadError, SetupError
 
 # ------------------------------------------------------------------ file names
@@ -60,23 +61,16 @@ OLD_PLAN_NAME = "derived.json"
 #: what ``siloflow post`` writes under results/ (besides the summary), read back by ``siloflow.runs``
 RESULT_TABLES = {"flow": "discharge.csv", "wall_pressure": "wall_pressure.csv",
                  "wall_pressure_sectors": "wall_pressure_sectors.csv", "bands": "bands.csv"}
-#: LIGGGHTS' deck, logs and screens, and the resumed run's (siloflow.engine.liggghts)
-LIGGGHTS_FILES = {"deck": "in.liggghts", "resume_deck": "in.resume.liggghts", "log": "log.liggghts",
-                  "resume_log": "log.resume.liggghts", "screen": "screen.txt", "resume_screen": "screen.resume.txt"}
-#: LIGGGHTS' own tables (fix ave/time), from which the engine-neutral ones are made
-LIGGGHTS_TABLES = ("output/flow.txt", "output/wall_forces.txt")
-
-#: files siloflow (or the engine, running siloflow's deck) writes at the top of a run folder
-#: besides the manifest's: status and records, the engine's logs and screens, the resumed deck
-#: LAMMPS' logs and the MPI ranks' screen (siloflow.engine.lammps)
-LAMMPS_FILES = {"log": "log.lammps", "resume_log": "log.lammps.resume", "screen": "screen.lammps.txt"}
-TOP_LEVEL_FILES = frozenset({MANIFEST_NAME, STATUS_NAME, RECORD_NAME} | set(LIGGGHTS_FILES.values())
-                            | set(LAMMPS_FILES.values()) - {"in.liggghts"})
-#: the engine's outputs as the deck names them (template in.liggghts.j2), relative to the folder
-ENGINE_OUTPUTS = re.compile(r"output/(flow|wall_forces)\.txt(\.before_resume)?|output/(flow|wall_forces)\.csv"
-                            r"|output/dumps/(dump|contacts|wall_contacts)\.\d+\.txt"
-                            r"|output/vtk/particles_\d+\.vtk|output/restart/settled\.restart|output/lammps_state\.json|output/insertion\.data"
-                            r"|restart_forced_liggghts_\d+\.data")    # LIGGGHTS' own on SIGTERM (left by older siloflow)
+#: files siloflow writes at the top of a run folder besides the manifest's (status and records),
+#: and the engines' decks, logs and screens (each engine's, siloflow.engines.ENGINE_FILES)
+TOP_LEVEL_FILES = frozenset({MANIFEST_NAME, STATUS_NAME, RECORD_NAME}
+                            | {name for files in ENGINE_FILES.values() for name in files.names.values()})
+#: the engine-neutral outputs the decks name, relative to the folder, then each engine's own
+ENGINE_OUTPUTS = re.compile("|".join(
+    [r"output/(flow|wall_forces)\.csv|output/dumps/(dump|contacts|wall_contacts)\.\d+\.txt"
+     r"|output/restart/settled\.restart"]
+    + [re.escape(t) for files in ENGINE_FILES.values() for t in files.tables]
+    + [files.outputs for files in ENGINE_FILES.values() if files.outputs]))
 #: an atomic write cut short: ``.{name}.{8 random characters}.tmp`` (tempfile.mkstemp)
 _TEMP = re.compile(r"(?P<dir>(?:.*/)?)\.(?P<name>[^/]+)\.[A-Za-z0-9_]{8}\.tmp")
 #: folders siloflow makes in a run folder (results/ may hold sub-folders, e.g. results/cg)
@@ -391,9 +385,8 @@ def read_status(folder: Path) -> dict:
 
 
 #: what an engine run (or its post-processing) leaves in a run folder, which ``render`` never writes
-RUN_EVIDENCE = (RECORD_NAME, FLOW_TABLE, WALL_FORCES_TABLE, *LIGGGHTS_TABLES, "output/lammps_state.json",
-                LIGGGHTS_FILES["log"], LIGGGHTS_FILES["screen"], *LAMMPS_FILES.values(), RESTART_FILE,
-                f"{RESULTS}/{SUMMARY_NAME}")
+RUN_EVIDENCE = (RECORD_NAME, FLOW_TABLE, WALL_FORCES_TABLE, RESTART_FILE, f"{RESULTS}/{SUMMARY_NAME}",
+                *(name for files in ENGINE_FILES.values() for name in files.ran))
 
 
 def run_state(folder: Path) -> dict:
@@ -552,19 +545,6 @@ class RunFolder:
             raise ReadError(f"{self.path} is not a siloflow run folder (no readable {PLAN_NAME}: "
                             f"{exc.strerror or exc})") from None
         return RunPlan.from_json(text, str(self.plan_file))
-
-    @cached_property
-    def case(self):
-        """The validated case the folder was rendered from (its ``case.yaml``); ``ReadError``."""
-        from .case_file import load_case
-        from .errors import CaseError
-        if not self.case_file.is_file():
-            raise ReadError(f"{self.path} is not a siloflow run folder (no {CASE_NAME})")
-        try:
-            return load_case(self.case_file)
-        except CaseError as exc:
-            raise ReadError(f"{self.case_file} is not a valid case (edited, or written by another siloflow "
-                            f"version):\n{exc}") from None
 
     def write_plan(self, plan) -> None:
         write_text(self.plan_file, plan.to_json())

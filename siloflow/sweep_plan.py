@@ -35,8 +35,6 @@ YAML12_FLOAT = re.compile(r"[-+]?(\.[0-9]+|[0-9]+(\.[0-9]*)?)([eE][-+]?[0-9]+)?"
 MAX_NAME_LENGTH = 64
 #: progress(stage, done, total) while a sweep is prepared or written: "planning", "writing"
 StageProgress = Callable[[str, int, int], None]
-#: the case sections that shape the walls' meshes (with the counting disc, siloflow.geometry.silo_meshes)
-MESH_SECTIONS = {"geometry", "sensors", "inserts", "particles"}
 
 
 @dataclass(frozen=True)
@@ -236,17 +234,17 @@ def sweep_engine(variants: list[Variant], need_binary: bool = True):
 def _shared_meshes():
     """Within the block, ``derive`` computes the walls of each distinct silo once: it takes
     ``siloflow.geometry.silo_meshes`` when called, here memoised by what shapes the walls (the
-    case's :data:`MESH_SECTIONS`, the counting disc and whether the side walls are sensors).
-    Most of a plan's time is its meshes, the same for every variant of a silo."""
+    plan's silo, the band boundaries and sectors, the counting disc and whether the side walls
+    are sensors). Most of a plan's time is its meshes, the same for every variant of a silo."""
     from . import geometry as meshes
     original = meshes.silo_meshes
     memo: dict[str, list] = {}
 
-    def shared(case, outlet_z, outlet_radius, sensors=True):
-        key = json.dumps([case.model_dump(mode="json", include=MESH_SECTIONS), outlet_z, outlet_radius, sensors],
-                         sort_keys=True, default=str)
+    def shared(silo, band_bounds, sectors, outlet_z, outlet_radius, sensors=True):
+        key = json.dumps([silo.model_dump(mode="json"), list(band_bounds), sectors, outlet_z, outlet_radius, sensors],
+                         sort_keys=True)
         if key not in memo:
-            memo[key] = original(case, outlet_z, outlet_radius, sensors)
+            memo[key] = original(silo, band_bounds, sectors, outlet_z, outlet_radius, sensors)
         return list(memo[key])
 
     meshes.silo_meshes = shared

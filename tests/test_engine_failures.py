@@ -110,7 +110,7 @@ def test_run_refused_when_the_output_would_not_fit(tmp_path, monkeypatch):
     fake = tmp_path / "liggghts"
     fake.write_text("#!/bin/sh\nexit 0\n")
     fake.chmod(0o755)
-    result = CliRunner().invoke(app, ["run", str(SMALL), "-o", str(tmp_path / "run"), "--liggghts", str(fake)])
+    result = CliRunner().invoke(app, ["run", str(SMALL), "-o", str(tmp_path / "run"), "--engine-executable", str(fake)])
     assert result.exit_code == 1
     assert "free" in result.output and "dump_interval" in result.output
     assert not (tmp_path / "run").exists()

@@ -13,11 +13,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from siloflow import run_folder as rf
 from siloflow.case_file import case_from_dict, load_case
 from siloflow.derived import derive
+from siloflow.engines import ENGINE_FILES
 from siloflow.errors import ReadError
 from siloflow.plan import RunPlan
-from siloflow import run_folder as rf
 from siloflow.run_folder import RunFolder
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,7 +96,7 @@ def test_postprocess_never_derives_nor_reads_the_case():
     """No module of postprocess/ imports the case (schema or loader) or derives a plan, and
     none spells a run-folder file name: they read runs through RunFolder and the dump reader."""
     names = {v for k, v in vars(rf).items() if k.isupper() and isinstance(v, str) and k.endswith(("_NAME", "_TABLE", "DUMPS", "FILE"))}
-    names |= set(rf.LIGGGHTS_FILES.values()) | set(rf.LIGGGHTS_TABLES) | {"derived.json", "output/"}
+    names |= {n for f in ENGINE_FILES.values() for n in (*f.names.values(), *f.tables)} | {"derived.json", "output/"}
     assert {"case.yaml", "plan.json", "status.json", "run_record.json", "output/flow.csv", "dump.*.txt"} <= names
     for path in sorted((ROOT / "postprocess").glob("*.py")):
         tree = ast.parse(path.read_text())
@@ -240,6 +241,72 @@ def test_low_layers_import_no_later_step():
         assert not later, f"{low} imports (through a chain) {later}"
 
 
+def _reach(graph, modules) -> set[str]:
+    """Every module ``modules`` import, directly or through a chain (inside functions too)."""
+    reached, todo = set(), list(modules)
+    while todo:
+        for target in graph[todo.pop()]:
+            if target not in reached:
+                reached.add(target)
+                todo.append(target)
+    return reached
+
+
+def _within(module: str, packages) -> bool:
+    return any(module == p or module.startswith(p + ".") for p in packages)
+
+
+#: the readers of dump files: they read any dump, ours or not, and import nothing of siloflow's
+#: but its errors
+READERS = ("postprocess.dumps",)
+#: what analyses and the report may import of siloflow: readers' errors, atomic writes, the run
+#: folder (and the plan it holds), the engine names, and pure formulas (EN 1991-4, clump shapes)
+POST_MAY_IMPORT = ("siloflow.errors", "siloflow.atomic_files", "siloflow.run_folder", "siloflow.plan",
+                   "siloflow.engines", "siloflow.design_loads", "siloflow.clumps")
+#: the steps before the run folder, which post-processing never reaches
+BEFORE_THE_RUN_FOLDER = ("siloflow.derived", "siloflow.profiles", "siloflow.geometry", "siloflow.deck",
+                         "siloflow.engine", "siloflow.runs", "siloflow.fill_cache", "siloflow.cli", "siloflow.sweep",
+                         "siloflow.case_file")
+
+
+def test_layers_readers_post_geometry_and_the_run_folder():
+    """Issue 37's layers, counting imports inside functions: readers import nothing of ours but
+    errors; analyses and the report import only readers, the run folder and pure formulas, and
+    reach no step before the run folder; geometry takes the plan's silo, never the case; the run
+    folder reaches no engine, deck or analysis."""
+    graph, _ = import_graph()
+    for reader in READERS:
+        ours = {m for m in _reach(graph, [reader]) if not _within(m, READERS)}
+        assert ours <= {"siloflow.errors"}, f"{reader} imports {sorted(ours)}"
+    post = [m for m in graph if _within(m, ("postprocess",))]
+    direct = {t for m in post for t in graph[m] if not _within(t, ("postprocess",))}
+    assert direct <= set(POST_MAY_IMPORT), sorted(direct - set(POST_MAY_IMPORT))
+    early = sorted(m for m in _reach(graph, post) if _within(m, BEFORE_THE_RUN_FOLDER))
+    assert not early, f"postprocess reaches {early}"
+    geometry = [m for m in graph if _within(m, ("siloflow.geometry",))]
+    assert not {t for m in geometry for t in graph[m] if _within(t, ("siloflow.case", "siloflow.case_file"))}
+    late = sorted(m for m in _reach(graph, ["siloflow.run_folder"])
+                  if _within(m, ("siloflow.engine", "siloflow.deck", "siloflow.derived", "postprocess", "siloflow.cli",
+                                 "siloflow.case_file")))
+    assert not late, f"the run folder reaches {late}"
+
+
+def test_the_run_folder_spells_no_engine_file_name():
+    """Each engine declares its files (siloflow.engines.ENGINE_FILES); the run folder spells none
+    of them, yet counts every one as siloflow's (``--force`` may replace it) and as evidence of a
+    run, and an unknown file beside them as foreign."""
+    names = {n for f in ENGINE_FILES.values() for n in (*f.names.values(), *f.tables)}
+    tree = ast.parse((ROOT / "siloflow" / "run_folder.py").read_text())
+    spelled = {n for node in ast.walk(tree) if isinstance(node, ast.Constant) and isinstance(node.value, str)
+               for n in names | {"liggghts", "lammps"} if n in node.value.lower()}
+    assert not spelled, f"run_folder.py spells {sorted(spelled)}"
+    for f in ENGINE_FILES.values():
+        assert all(rf._fixed_name(n) for n in (*f.names.values(), *f.tables) if "deck" not in n)
+        assert set(f.ran) <= set(rf.RUN_EVIDENCE)
+    assert rf._fixed_name("output/vtk/particles_120.vtk") and rf._fixed_name("output/lammps_state.json")
+    assert not rf._fixed_name("log.other_engine") and not rf._fixed_name("output/vtk/notes.txt")
+
+
 # ---------------------------------------------------------------- the tables
 def _flow(n=7):
     step = np.arange(n, dtype=np.int64) * 10
@@ -269,8 +336,8 @@ def test_liggghts_wall_forces_become_the_long_table_and_back(tmp_path):
     """LIGGGHTS' wide ave/time table -> the engine-neutral long table -> the wide table post
     uses: the same numbers, in the plan's wall order, the counting disc left out."""
     from postprocess.wall_pressure import wide_forces
-    from siloflow.engine.tables import neutral_wall_forces, wall_force_columns
     from siloflow.case_file import load_case as load
+    from siloflow.engine.tables import neutral_wall_forces, wall_force_columns
 
     plan = derive(load(ROOT / "tests" / "data" / "small_silo.yaml"))
     cols = wall_force_columns(plan.walls)

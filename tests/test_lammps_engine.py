@@ -351,3 +351,34 @@ def test_resume_of_a_bad_state_is_a_message_not_a_traceback(tmp_path):
     assert resume_state(good)["restart_step"] == 1200         # the driver's own state passes
     (good / "output" / "lammps_state.json").unlink()
     assert resume_state(good) == {}                           # none: the resume starts afresh
+
+
+def test_an_engine_executable_is_refused_for_lammps_naming_the_option():
+    """LAMMPS runs through its Python module: a binary given for it is a mistake, not ignored."""
+    with pytest.raises(SetupError, match="--engine-executable"):
+        get_engine("lammps", executable="/usr/bin/lmp")
+    assert get_engine("liggghts", executable="/opt/liggghts").profile.executable == "/opt/liggghts"
+
+
+@pytest.mark.parametrize("env, where", [({}, "here"), ({"OMP_NUM_THREADS": "1"}, "ranks")])
+def test_one_rank_runs_in_process_unless_the_profile_adds_environment(tmp_path, monkeypatch, quick_dict, env,
+                                                                     where):
+    """A launch profile's environment cannot reach a LAMMPS loaded in siloflow's own process, so a
+    one-rank run with one goes through the worker process (as several ranks do), which gets it."""
+    import siloflow.engine.processes as processes
+    import siloflow.engine.lammps.engine as lammps_engine
+    engine = get_engine("lammps", env=env)
+    plan = derive(case_from_dict({**quick_dict, "engine": {"name": "lammps"}}))
+    called = []
+    monkeypatch.setattr(engine, "_run_here", lambda *a: called.append("here") or "")
+    monkeypatch.setattr(engine, "_run_ranks", lambda f, ranks, *a: called.append("ranks") or (["mpirun"], 0, "", False))
+    monkeypatch.setattr(lammps_engine, "_read_state", lambda folder: {})
+    monkeypatch.setattr(lammps_engine, "_log_tail", lambda folder: [])
+    engine.launch(tmp_path, plan, None, resume=False)
+    assert called == [where]
+    if env:
+        seen = {}
+        monkeypatch.setattr(processes, "stream", lambda cmd, folder, screen, on_line, env=None, **kw:
+                            seen.update(env or {}) or type("R", (), {"returncode": 0, "tail": [], "disk_full": False}))
+        type(engine)._run_ranks(engine, tmp_path, 1, None, False)
+        assert seen.get("OMP_NUM_THREADS") == "1"

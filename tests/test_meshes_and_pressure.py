@@ -11,9 +11,9 @@ from stl import mesh as stl_mesh
 from postprocess.discharge import steady_flow_rate
 from postprocess.wall_pressure import band_mean, band_pressures, sector_pressure
 from siloflow.case_file import case_from_dict
-from siloflow.derived import derive
+from siloflow.derived import derive, wall_meshes
 from siloflow.engine.tables import wall_force_columns
-from siloflow.geometry import silo_meshes, write_stl
+from siloflow.geometry import write_stl
 
 
 def _plan(quick_dict):
@@ -24,7 +24,7 @@ def _plan(quick_dict):
 def _walls(quick_dict):
     """The case and its wall meshes (triangles), made for the plan's counting disc."""
     case, d = _plan(quick_dict)
-    return case, silo_meshes(case, d.outlet.z, d.outlet.radius)
+    return case, wall_meshes(case, d, sensors=True)
 
 
 def _vector_area(tris):

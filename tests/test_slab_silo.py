@@ -8,17 +8,16 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import ROOT, set_path
 
 from postprocess.dumps import read_frames
 from siloflow.case_file import case_from_dict, load_case
-from siloflow.derived import bed_volume, derive
+from siloflow.derived import bed_volume, derive, wall_meshes
 from siloflow.engine.liggghts.deck import render_deck_text
 from siloflow.engine.liggghts.encoding import encode
+from siloflow.engines import ENGINE_FILES
 from siloflow.errors import CaseError
-from siloflow.geometry import silo_meshes
-from siloflow.run_folder import LIGGGHTS_TABLES, RunFolder
-
-from conftest import ROOT, set_path
+from siloflow.run_folder import RunFolder
 
 SLAB = ROOT / "tests" / "data" / "slab_silo.yaml"
 
@@ -36,7 +35,7 @@ def test_slab_meshes_close_the_silo_and_sense_both_side_walls():
     case = load_case(SLAB)
     g = case.geometry
     d = derive(case)
-    walls = {w.name: w for w in silo_meshes(case, d.outlet.z, d.outlet.radius)}
+    walls = {w.name: w for w in wall_meshes(case, d, sensors=True)}
     bands = [w for w in walls.values() if w.role == "band"]
     assert len(bands) == 2 * case.sensors.bands                       # every section on both sides
     for w in bands:
@@ -153,7 +152,7 @@ def test_slab_run_keeps_grains_in_the_slab_and_senses_both_walls(slab_run):
     # (and hopper) back; frictionless faces take no x force
     from siloflow.engine.tables import read_ave_time, wall_force_columns
     walls = RunFolder(folder).plan.walls
-    forces = read_ave_time(folder / LIGGGHTS_TABLES[1], wall_force_columns(walls))   # wall_forces.txt
+    forces = read_ave_time(folder / ENGINE_FILES["liggghts"].tables[1], wall_force_columns(walls))   # wall_forces.txt
     still = forces[(forces.step > record.stage_steps["static"]) & (forces.step <= record.stage_steps["open"])]
     fx = still[[c for c in still if c.endswith("_fx")]]
     load = fx.abs().sum(axis=1)                      # every wall's horizontal load, hopper and plate too
@@ -171,8 +170,9 @@ def test_slab_run_keeps_grains_in_the_slab_and_senses_both_walls(slab_run):
 def test_slab_coarse_graining_gives_the_beds_own_solid_fraction(slab_run, tmp_path):
     """siloflow cg on a slab run: fields averaged through the thickness. In the flowing bed's
     middle the solid fraction is the bed's (the 3D kernel sampled at y = 0 gave about 0.3 of it)."""
-    from typer.testing import CliRunner
     import xarray as xr
+    from typer.testing import CliRunner
+
     from siloflow.cli import app
     case, folder, record, summary = slab_run
     out = tmp_path / "cg"
@@ -205,8 +205,9 @@ def test_central_fill_pours_from_a_narrow_region(deck, quick_dict):
 
 
 def test_free_surface_of_a_slab_with_a_sloped_heap_tracks_its_volume():
-    from postprocess.flow_rate import FreeSurface
     from test_post_analyses import frame_of
+
+    from postprocess.flow_rate import FreeSurface
 
     rng = np.random.default_rng(11)
     a, t, r, n = 0.1, 0.003, 0.001, 30000

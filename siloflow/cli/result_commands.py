@@ -31,9 +31,8 @@ def post(source: str = typer.Argument(..., help="a finished run folder, or dump 
         _post(path, measured)
         return
     from postprocess.any_dump import parse_sphere
+    from postprocess.dumps import local_columns
     from postprocess.report.dumps import analyse_any
-
-    from ..engine.liggghts.tables import local_columns
     try:
         columns = local_columns(contact_keywords.split(",")) if contact_keywords else None
         regions = [parse_sphere(s, k + 1) for k, s in enumerate(sphere)] or None
@@ -78,9 +77,9 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
        steps: Optional[str] = typer.Option(None, help="time window FIRST:LAST in timesteps (dump source)")) -> None:
     """Coarse-grain particles and contacts into continuum fields (paper B): fields.nc, profiles, figures."""
     from postprocess.cg_run import CgSetup, setup_from_run
+    from postprocess.dumps import local_columns
     from postprocess.report.cg import run_cg
 
-    from ..engine.liggghts.tables import local_columns
     from ..run_folder import record_products
     path = Path(source)
     try:

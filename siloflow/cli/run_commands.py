@@ -39,8 +39,10 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
                                               "(from its settled bed's restart file if it got that far)"),
         force: bool = typer.Option(False, "--force", help=FORCE_HELP),
         allow_long: bool = typer.Option(False, help=ALLOW_LONG_HELP),
-        liggghts: Optional[str] = typer.Option(None, "--liggghts", envvar="SILOFLOW_LIGGGHTS",
-                                               help="LIGGGHTS binary (default: liggghts on PATH)"),
+        executable: Optional[str] = typer.Option(None, "--engine-executable", "--liggghts",
+                                                 help="the engine's binary, for engines that run one (LIGGGHTS; "
+                                                 "default: $SILOFLOW_LIGGGHTS, else liggghts on PATH); "
+                                                 "--liggghts is its older name"),
         post_process: bool = typer.Option(True, "--post/--no-post", help="compute first results"),
         allow_large_output: bool = typer.Option(False, help="run even if the estimated output exceeds the free disk"),
         cache: Optional[Path] = typer.Option(None, "--cache", envvar="SILOFLOW_CACHE",
@@ -57,7 +59,7 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         if profile is not None:
             _fail(SiloflowError("--resume DIR takes no --profile: a run resumes with the profile it started with"))
         try:
-            prepared = prepare_resume(resume, executable=liggghts)
+            prepared = prepare_resume(resume, executable=executable)
         except SiloflowError as exc:
             _fail(exc)
         signal.signal(signal.SIGTERM, _interrupt)
@@ -68,7 +70,7 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         _fail(SiloflowError("give a case file and -o/--output (or --resume DIR)"))
     try:
         prepared = prepare_run(case_file, output, force=force, allow_long=allow_long,
-                               allow_large_output=allow_large_output, profile=profile, executable=liggghts)
+                               allow_large_output=allow_large_output, profile=profile, executable=executable)
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)

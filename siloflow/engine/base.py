@@ -20,7 +20,14 @@ from typing import Callable, Optional
 
 from ..case import Case
 from ..errors import EngineRunError, SetupError
-from ..run_folder import RECORD_NAME, RunFolder, RunRecord, check_plain_tree, run_state, write_status
+from ..run_folder import (
+    RECORD_NAME,
+    RunFolder,
+    RunRecord,
+    check_plain_tree,
+    run_state,
+    write_status,
+)
 from .processes import DISK_FIX, FILL_LOSS_LIMIT, disk_full, not_settled, read_plan
 from .tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 
@@ -99,6 +106,8 @@ class Engine(ABC):
     title: str = "the engine"
     default_executable: str = ""
     executable_variable: str = ""
+    #: whether the engine runs a binary (an ``executable`` to give); an engine in a Python module refuses one
+    runs_binary: bool = True
     #: the deck the engine runs, and the one a resumed run runs (relative to the run folder)
     deck_name: str = ""
     resume_deck_name: str = ""
@@ -112,6 +121,9 @@ class Engine(ABC):
 
     def __init__(self, executable: Optional[str] = None, mpirun: str = "mpirun", env: Optional[dict] = None,
                  profile: Optional[LaunchProfile] = None):
+        if executable is not None and not self.runs_binary:
+            raise SetupError(f"{self.title} runs through its Python module, not a binary: an engine executable "
+                             f"({executable!r}, --engine-executable) does not apply; leave it out")
         profile = profile or LaunchProfile(executable, mpirun, dict(env or {}))
         if profile.executable is None:
             profile = LaunchProfile(os.environ.get(self.executable_variable) or self.default_executable,

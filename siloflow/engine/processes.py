@@ -17,7 +17,6 @@ from ..errors import EngineRunError, ReadError, SetupError
 from ..plan import RunPlan
 from ..run_folder import RunFolder, read_status, write_status
 
-
 #: atoms that may leave the box during the fill (recorded) before the run counts as failed
 FILL_LOSS_LIMIT = 0.01
 #: a time-step fraction above which a bed may never come to rest (measured on the accuracy bench's case, hooke,

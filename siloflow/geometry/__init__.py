@@ -47,7 +47,6 @@ from .silo_walls import (  # noqa: F401
     check_wall,
     cylinder_meshes,
     merge_side_walls,
-    shaping_fields,
     silo_meshes,
     slab_meshes,
 )
@@ -62,12 +61,12 @@ from .user_meshes import (  # noqa: F401
     MAX_USER_MESH_BYTES,
     MeshError,
     check_inside,
-    insert_meshes,
     read_user_mesh,
+    user_wall,
 )
 from .wall_mesh import (  # noqa: F401
     WallMesh,
     write_stl,
 )
 
-__all__ = ['GRADING', 'LIGGGHTS_CURVATURE_DEG', 'LIGGGHTS_MIN_MESH_EXTENT', 'LIGGGHTS_PRECISION', 'LIGGGHTS_SKEWED_DEG', 'MAX_FACET_ASPECT', 'MAX_MESH_TRIANGLES', 'MAX_USER_MESH_BYTES', 'MIN_ANGLE_DEG', 'MIN_EDGE', 'MIN_RING_POINTS', 'MeshError', 'MeshQuality', 'MeshQualityError', 'REFINE_ANGLE_DEG', 'ROW_ASPECT', 'WallMesh', 'as_written', 'aspect_ratios', 'band_boundaries', 'check_inside', 'check_wall', 'cylinder_meshes', 'disc', 'graded_disc', 'insert_meshes', 'merge_side_walls', 'mesh_quality', 'min_angles', 'read_user_mesh', 'rectangle', 'revolution_rows', 'shaping_fields', 'silo_meshes', 'slab_meshes', 'surface_of_revolution', 'triangle_angles', 'write_stl']
+__all__ = ['GRADING', 'LIGGGHTS_CURVATURE_DEG', 'LIGGGHTS_MIN_MESH_EXTENT', 'LIGGGHTS_PRECISION', 'LIGGGHTS_SKEWED_DEG', 'MAX_FACET_ASPECT', 'MAX_MESH_TRIANGLES', 'MAX_USER_MESH_BYTES', 'MIN_ANGLE_DEG', 'MIN_EDGE', 'MIN_RING_POINTS', 'MeshError', 'MeshQuality', 'MeshQualityError', 'REFINE_ANGLE_DEG', 'ROW_ASPECT', 'WallMesh', 'as_written', 'aspect_ratios', 'band_boundaries', 'check_inside', 'check_wall', 'cylinder_meshes', 'disc', 'graded_disc', 'merge_side_walls', 'mesh_quality', 'min_angles', 'read_user_mesh', 'rectangle', 'revolution_rows', 'silo_meshes', 'slab_meshes', 'surface_of_revolution', 'triangle_angles', 'user_wall', 'write_stl']

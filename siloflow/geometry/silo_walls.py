@@ -2,11 +2,11 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
-from ..case import Case, CylinderGeometry, HopperGeometry, PlanarGeometry
-from ..errors import CaseError
+from ..plan import Silo
 from .quality import (
     LIGGGHTS_MIN_MESH_EXTENT,
     LIGGGHTS_PRECISION,
@@ -31,45 +31,41 @@ from .triangulation import (
     revolution_rows,
     surface_of_revolution,
 )
-from .user_meshes import insert_meshes
 from .wall_mesh import WallMesh
 
 
-def band_boundaries(case: Case) -> list[float]:
-    """Band boundaries in m above the cylinder's base (the top of the hopper, if any)."""
-    s = case.sensors
-    if s.heights is not None:
-        return list(s.heights)
-    h = case.geometry.height
-    return [h * i / s.bands for i in range(s.bands + 1)]
+def band_boundaries(height: float, bands: int, heights: Sequence[float] | None = None) -> list[float]:
+    """Band boundaries in m above the side wall's base (the top of the hopper, if any): the given
+    ``heights``, else ``bands`` equal bands over the side wall's ``height`` (m)."""
+    if heights is not None:
+        return list(heights)
+    return [height * i / bands for i in range(bands + 1)]
 
 
-def silo_meshes(case: Case, outlet_z: float, outlet_radius: float, sensors: bool = True) -> list[WallMesh]:
-    """All meshes of a silo (cylinder, hopper or slab) and its inserts, in the order the deck lists them.
+def silo_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outlet_z: float, outlet_radius: float,
+                sensors: bool = True) -> list[WallMesh]:
+    """The generated meshes of a silo (cylinder, hopper or slab, the run plan's ``geometry``), in the
+    order the deck lists them, the counting mesh last.
 
-    ``outlet_z``, ``outlet_radius``: position and size of the counting disc below the orifice.
-    Without ``sensors`` the side walls' pieces (bands and the rest) are one mesh ``wall`` of the
-    same facets: no result reads their pressure. Every generated wall is checked
-    (:func:`check_wall`); one that cannot be triangulated well is refused with a ``CaseError``
-    naming the geometry fields that shape it.
+    ``band_bounds``: the sensor bands' boundaries (m above the side wall's base,
+    :func:`band_boundaries`); ``sectors``: sectors per band of a cylinder; ``outlet_z``,
+    ``outlet_radius``: position and size of the counting disc below the orifice (m). Without
+    ``sensors`` the side walls' pieces (bands and the rest) are one mesh ``wall`` of the same
+    facets: no result reads their pressure. Every wall is checked (:func:`check_wall`); one that
+    cannot be triangulated well raises ``MeshQualityError`` naming the wall, its role and the kind
+    of defect (the plan's maker names the case fields that shape it).
     """
-    g = case.geometry
-    try:
-        if isinstance(g, PlanarGeometry):
-            meshes = slab_meshes(case, outlet_z, outlet_radius)
-        elif isinstance(g, (CylinderGeometry, HopperGeometry)):
-            meshes = cylinder_meshes(case, outlet_z, outlet_radius)
-        else:
-            raise NotImplementedError(f"no meshes for geometry kind {g.kind!r}")
-        if not sensors:
-            meshes = merge_side_walls(meshes)
-        for w in meshes:
-            check_wall(w)
-    except MeshQualityError as exc:
-        fields = shaping_fields(case, exc.role, exc.kind)
-        raise CaseError([(fields[0], f"the wall mesh '{exc.wall}' cannot be triangulated for LIGGGHTS: "
-                          f"{exc.reason}; change {' or '.join(fields)}")], case.name) from None
-    return meshes[:-1] + insert_meshes(case) + meshes[-1:]          # the counting mesh stays last
+    if silo.kind == "planar":
+        meshes = slab_meshes(silo, band_bounds, outlet_z, outlet_radius)
+    elif silo.kind in ("cylinder", "hopper"):
+        meshes = cylinder_meshes(silo, band_bounds, sectors, outlet_z, outlet_radius)
+    else:
+        raise NotImplementedError(f"no meshes for a silo of kind {silo.kind!r}")
+    if not sensors:
+        meshes = merge_side_walls(meshes)
+    for w in meshes:
+        check_wall(w)
+    return meshes
 
 
 def merge_side_walls(meshes: list[WallMesh]) -> list[WallMesh]:
@@ -100,30 +96,6 @@ def check_wall(wall: WallMesh) -> None:
                                wall.name, wall.role, "edge")
 
 
-def shaping_fields(case: Case, role: str, kind: str = "angle") -> list[str]:
-    """The case fields that shape a wall of ``role``, the likeliest culprit first (for ``kind``
-    'edge', a too short edge: the outlet's size, which sets the hopper's shortest sides)."""
-    g = case.geometry
-    sensors = "sensors.heights" if case.sensors.heights is not None else "sensors.bands"
-    if kind == "edge" and role in ("hopper", "cone", "bottom", "plate", "outlet"):
-        if isinstance(g, PlanarGeometry):
-            return ["geometry.outlet_width", "geometry.width", "geometry.half_angle_deg", "geometry.thickness"]
-        orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
-        return [orifice, "geometry.mesh_segments", "geometry.radius"]
-    if isinstance(g, PlanarGeometry):
-        return {"band": [sensors, "geometry.height", "geometry.thickness"],
-                "wall": [sensors, "geometry.height", "geometry.thickness"],
-                "hopper": ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width", "geometry.thickness"],
-                "face": ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width", "geometry.height"],
-                }.get(role, ["geometry.outlet_width", "geometry.thickness"])
-    orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
-    return {"band": [sensors, "geometry.height", "geometry.mesh_segments", "sensors.sectors"],
-            "wall": [sensors, "geometry.height", "geometry.mesh_segments"],
-            "cone": ["geometry.half_angle_deg", orifice, "geometry.radius", "geometry.mesh_segments"],
-            "bottom": [orifice, "geometry.radius", "geometry.mesh_segments"],
-            }.get(role, [orifice, "geometry.mesh_segments"])
-
-
 def _wall(name: str, role: str, build, **kw) -> WallMesh:
     """``WallMesh(name, role, build(), **kw)``, with a triangulation failure named after the wall."""
     try:
@@ -141,13 +113,13 @@ def _structured_or_graded(count: int, structured, graded) -> np.ndarray:
     return graded()
 
 
-def cylinder_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[WallMesh]:
+def cylinder_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outlet_z: float,
+                    outlet_radius: float) -> list[WallMesh]:
     """Meshes of a cylindrical silo or hopper (see :func:`silo_meshes`)."""
-    g = case.geometry
+    g = silo
     R = g.radius
     base = g.hopper_height
     n_seg = g.mesh_segments
-    sectors = case.sensors.sectors
     per_sector = max(1, math.ceil(n_seg / sectors))
     n_ring = per_sector * sectors
     h_facet = 2 * math.pi * R / n_ring
@@ -192,7 +164,7 @@ def cylinder_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[W
         meshes.append(_wall(name, role, lambda: cylinder_tris(z_lo, z_hi, th0, th1, n_th), z0=z_lo, z1=z_hi,
                             theta0=th0, theta1=th1, radius=R, **sensor, **kw))
 
-    bounds = band_boundaries(case)
+    bounds = list(band_bounds)
     if bounds[0] > 0:
         cylinder_piece("wall_below", "wall", base, base + bounds[0], 0.0, 2 * math.pi, n_ring)
     for b, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
@@ -211,7 +183,7 @@ def cylinder_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[W
                                      lambda: graded_disc(inner, radius, z, n_ring))
 
     r_out = g.outlet_radius
-    if isinstance(g, HopperGeometry):
+    if g.kind == "hopper":
         slant = math.hypot(R - r_out, base)
         n_ax = max(1, math.ceil(slant / h_facet))
         meshes.append(_wall("cone", "cone", lambda: _structured_or_graded(
@@ -222,12 +194,12 @@ def cylinder_meshes(case: Case, outlet_z: float, outlet_radius: float) -> list[W
     meshes.append(_wall("plate", "plate", lambda: disc_tris(r_out, 0.0)))
     meshes.append(_wall("outlet", "outlet", lambda: disc_tris(outlet_radius, outlet_z)))
     return meshes
-def slab_meshes(case: Case, outlet_z: float, outlet_half: float) -> list[WallMesh]:
+def slab_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outlet_half: float) -> list[WallMesh]:
     """Meshes of a quasi-2D slab silo (x across, y through the slab, z up; z = 0 the outlet):
     side walls cut into sensor sections (sector 0 at x = -width/2, sector 1 at +width/2),
     the wedge hopper, the front and back faces (role ``face``), the plate and the counting
     rectangle ``outlet_half`` wide at ``outlet_z`` (m)."""
-    g = case.geometry
+    g = silo
     a, b, hh, top = g.half_width, 0.5 * g.thickness, g.hopper_height, g.hopper_height + g.height
     w0 = g.outlet_radius
     # faces: few large facets (every grain touches the faces: their facet count is what costs);
@@ -244,7 +216,7 @@ def slab_meshes(case: Case, outlet_z: float, outlet_half: float) -> list[WallMes
             (x, -b, z_lo), (0.0, 2 * b, 0.0), (0.0, 0.0, z_hi - z_lo), 1, _divisions(z_hi - z_lo, long)),
             z0=z_lo, z1=z_hi, sector=side, **sensor, **kw))
 
-    bounds = band_boundaries(case)
+    bounds = list(band_bounds)
     for side in (0, 1):
         if bounds[0] > 0:
             side_piece(f"wall_below_s{side:02d}", "wall", side, hh, hh + bounds[0])

@@ -7,8 +7,7 @@ from pathlib import Path
 import numpy as np
 from stl import mesh as stl_mesh
 
-from ..case import Case, PlanarGeometry
-from ..errors import CaseError
+from ..plan import Silo
 from .quality import LIGGGHTS_CURVATURE_DEG, as_written, min_angles
 from .wall_mesh import WallMesh
 
@@ -53,36 +52,27 @@ def read_user_mesh(path, scale: float = 1.0) -> np.ndarray:
     return tris
 
 
-def check_inside(case: Case, tris: np.ndarray) -> None:
-    """Refuse a mesh that reaches outside the silo (LIGGGHTS needs walls inside its box)."""
-    g = case.geometry
+def check_inside(silo: Silo, tris: np.ndarray) -> None:
+    """Refuse a mesh that reaches outside the silo (the run plan's ``geometry``): LIGGGHTS needs walls
+    inside its box. Raises ``MeshError``."""
+    g = silo
     p = tris.reshape(-1, 3)
-    top = g.hopper_height + g.height
-    if isinstance(g, PlanarGeometry):
-        inside = (np.abs(p[:, 0]) <= g.half_width) & (np.abs(p[:, 1]) <= 0.5 * g.thickness)
+    if g.kind == "planar":
+        inside = (np.abs(p[:, 0]) <= g.half_width) & (np.abs(p[:, 1]) <= g.half_depth)
     else:
         inside = np.hypot(p[:, 0], p[:, 1]) <= g.radius
-    inside &= (p[:, 2] >= 0.0) & (p[:, 2] <= top)
+    inside &= (p[:, 2] >= 0.0) & (p[:, 2] <= g.top)
     if not inside.all():
         lo, hi = p.min(axis=0), p.max(axis=0)
         raise MeshError(f"the mesh reaches outside the silo (it spans x {lo[0]:.4g}..{hi[0]:.4g}, y "
                         f"{lo[1]:.4g}..{hi[1]:.4g}, z {lo[2]:.4g}..{hi[2]:.4g} m; check 'scale')")
 
 
-def insert_meshes(case: Case) -> list[WallMesh]:
-    """The case's user walls, read from their files (relative paths from the working folder) and
-    checked (:func:`read_user_mesh`, :func:`check_inside`). Raises ``CaseError`` naming each
-    insert whose file cannot be used."""
-    problems, meshes = [], []
-    for k, ins in enumerate(case.inserts):
-        try:
-            tris = read_user_mesh(ins.file, ins.scale)
-            check_inside(case, tris)
-        except MeshError as exc:
-            problems.append((f"inserts[{k}].file", str(exc)))
-            continue
-        # as the run folder's STL copy holds it (float32): a render from the copy is the same
-        meshes.append(WallMesh(ins.mesh_name, "insert", as_written(tris)))
-    if problems:
-        raise CaseError(problems, case.name)
-    return meshes
+def user_wall(name: str, path, scale: float, silo: Silo) -> WallMesh:
+    """The user's wall ``name`` (role ``insert``) from the STL file ``path`` (relative paths from the
+    working folder) times ``scale``, checked (:func:`read_user_mesh`, :func:`check_inside`) and as
+    the run folder's STL copy holds it (float32), so that a render from the copy is the same.
+    Raises ``MeshError`` saying what is wrong."""
+    tris = read_user_mesh(path, scale)
+    check_inside(silo, tris)
+    return WallMesh(name, "insert", as_written(tris))

@@ -44,14 +44,15 @@ import numpy as np
 
 from ...atomic_files import write_text
 from ...deck import DeckError, _num, _safe_name, check_commands, template_environment
+from ...engines import ENGINE_FILES
 from ...geometry import write_stl
 from ...plan import FACES, WALL, RunPlan
-from ...run_folder import LAMMPS_FILES, RESTART_FILE, DumpLayout, RunFolder
+from ...run_folder import RESTART_FILE, DumpLayout, RunFolder
 from .contact_law import pair_coeff_args, wall_args
 
 DECK_NAME = "in.lammps"
-LOG_NAME = LAMMPS_FILES["log"]
-RESUME_LOG_NAME = LAMMPS_FILES["resume_log"]
+LOG_NAME = ENGINE_FILES["lammps"].names["log"]
+RESUME_LOG_NAME = ENGINE_FILES["lammps"].names["resume_log"]
 
 #: The only commands a siloflow LAMMPS deck may contain (no shell, python, include, ...).
 ALLOWED_COMMANDS = frozenset("""

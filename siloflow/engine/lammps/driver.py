@@ -32,7 +32,13 @@ from ...fill_placement import FILL_OVERTIME, fill_batches, fill_order, fill_step
 from ...guard import RunGuard
 from ...plan import RunPlan
 from ..tables import FLOW_COLUMNS, wall_force_columns
-from .deck import BODY_QUANTITIES, deck_context, floor_commands, mobilise_jumps, wall_kind
+from .deck import (
+    BODY_QUANTITIES,
+    deck_context,
+    floor_commands,
+    mobilise_jumps,
+    wall_kind,
+)
 
 STATE_NAME = "output/lammps_state.json"
 #: the stages a run from the settled bed's restart file runs again

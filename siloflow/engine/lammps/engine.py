@@ -12,9 +12,10 @@ from typing import Optional
 
 from ...case import Case
 from ...deck import DeckError, check_deck_file
+from ...engines import ENGINE_FILES
 from ...errors import ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
-from ...run_folder import LAMMPS_FILES, RESTART_FILE, write_status
+from ...run_folder import RESTART_FILE, write_status
 from ..base import Engine, Finished, Launched, ProgressCallback
 from . import deck as lammps_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, RESUME_LOG_NAME
@@ -32,6 +33,7 @@ class LammpsEngine(Engine):
     title = "LAMMPS"
     default_executable = "lammps"          # the module, not a binary: the name is informative only
     executable_variable = "SILOFLOW_LAMMPS"
+    runs_binary = False
     deck_name = resume_deck_name = DECK_NAME   # one deck: the driver runs its sections
     log_name = LOG_NAME
     flow_table, wall_forces_table = FLOW_FILE, WALL_FORCES_FILE
@@ -90,12 +92,13 @@ class LammpsEngine(Engine):
     # ------------------------------------------------------------------ run
     def launch(self, folder: Path, plan: RunPlan, progress: Optional[ProgressCallback], resume: bool) -> Launched:
         """Run the driver: in this process on one rank, through MPI's launcher and :mod:`.worker` on
-        several; the record's fields come from the driver's state file."""
+        several, or on one whose launch profile adds environment variables (they cannot reach a
+        LAMMPS loaded in this process); the record's fields come from the driver's state file."""
         folder = folder.absolute()       # the in-process run works in the folder (chdir)
         if resume:
             resume_state(folder)        # before LAMMPS starts: a bad state is a message, not a traceback
         ranks = plan.engine.ranks
-        if ranks == 1:
+        if ranks == 1 and not self.profile.env:       # the profile's environment needs a process of its own
             command = ["(in-process)", "lammps", "-log", RESUME_LOG_NAME if resume else LOG_NAME]
             write_status(folder, "running", command=command)
             error = self._run_here(folder, plan, progress, resume)
@@ -160,10 +163,10 @@ class LammpsEngine(Engine):
                 error = error or line[len(ERROR):]
             return False
 
-        run = self.stream(command, folder, LAMMPS_FILES["screen"], on_line, env=mpi_environment(), append=True)
+        run = self.stream(command, folder, ENGINE_FILES["lammps"].names["screen"], on_line, env=mpi_environment(), append=True)
         if run.returncode != 0 and not error:
             error = (f"the MPI run ended with code {run.returncode} without a LAMMPS error (see "
-                     f"{LAMMPS_FILES['screen']}): " + " | ".join(run.tail[-5:]))
+                     f"{ENGINE_FILES['lammps'].names['screen']}): " + " | ".join(run.tail[-5:]))
         return command, run.returncode, error, run.disk_full
 
     def restart_step(self, folder: Path) -> Optional[int]:

@@ -14,15 +14,16 @@ import jinja2
 from ...atomic_files import write_text
 from ...contact_physics import sphere_volume
 from ...deck import DeckError, check_commands, template_environment
+from ...engines import ENGINE_FILES
 from ...fill_placement import Batch, fill_batches, fill_steps
 from ...geometry import write_stl
 from ...plan import RunPlan
-from ...run_folder import LIGGGHTS_FILES, RESTART_FILE, DumpLayout, RunFolder
+from ...run_folder import RESTART_FILE, DumpLayout, RunFolder
 from .encoding import LiggghtsEncoding, encode
 from .tables import CONTACT_KEYWORDS, WALL_CONTACT_KEYWORDS, local_columns
 
-DECK_NAME = LIGGGHTS_FILES["deck"]
-RESUME_DECK_NAME = LIGGGHTS_FILES["resume_deck"]
+DECK_NAME = ENGINE_FILES["liggghts"].names["deck"]
+RESUME_DECK_NAME = ENGINE_FILES["liggghts"].names["resume_deck"]
 
 #: The only commands a siloflow LIGGGHTS deck may contain (no shell, include, python, ...).
 ALLOWED_COMMANDS = frozenset("""

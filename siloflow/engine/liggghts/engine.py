@@ -11,11 +11,12 @@ from typing import Optional
 from ...atomic_files import write_text
 from ...case import Case
 from ...deck import check_deck_file
+from ...engines import ENGINE_FILES
 from ...errors import CaseError, SetupError
 from ...fill_placement import fill_batches
 from ...guard import RunGuard
 from ...plan import RunPlan
-from ...run_folder import LIGGGHTS_FILES, LIGGGHTS_TABLES, RESTART_FILE
+from ...run_folder import RESTART_FILE
 from ..base import Engine, Finished, Launched, ProgressCallback
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
@@ -23,6 +24,8 @@ from .encoding import encode
 from .insertion import short_batches_note
 from .log import LogState, decode, diagnose, parse_log_text
 
+FILES = ENGINE_FILES["liggghts"]
+LIGGGHTS_FILES, LIGGGHTS_TABLES = FILES.names, FILES.tables
 LOG_NAME = LIGGGHTS_FILES["log"]
 SCREEN_NAME = LIGGGHTS_FILES["screen"]
 #: a resumed run's own log and screen (the first part's stay as they were)

@@ -9,9 +9,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
-from .deck import LIGGGHTS_VOLUME_LIMIT
 from ...errors import ANSI_ESCAPES
 from ...guard import GuardTrip, RunGuard
+from .deck import LIGGGHTS_VOLUME_LIMIT
 
 _STAGE = re.compile(r"^SILOFLOW_STAGE (\w+) (\d+)\s*$")
 _MARK = re.compile(r"^SILOFLOW_(INSERTED|SETTLED|NOT_SETTLED|DONE)\s*(\S*)\s*$")
