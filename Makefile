@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly golden paper-a-quick paper-b-quick paper-a paper-b clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b clean
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -34,17 +34,22 @@ demo: install
 
 # the papers' cases (decks/paper_*.yaml; scale factors in their comments). Quick: minutes to a
 # quarter of an hour each on 2 cores; paper scale: hours (spheres) to far beyond this machine.
+# paper A's claims report (reports/paper_a): make paper-a [SCALE=quick|paper] [SEEDS=n] [CONFIRM=yes];
+# finished runs in runs/paper_a are reused; paper-a-report rewrites the report from its data/
+SCALE ?= quick
+SEEDS ?= 1
+paper-a: install
+	$(VENV)/bin/siloflow paper-a --scale $(SCALE) --seeds $(SEEDS) $(if $(filter yes,$(CONFIRM)),--yes,)
+
+paper-a-report: $(VENV)/.installed
+	$(VENV)/bin/siloflow paper-a --from-data
+
 paper-a-quick: install
-	$(VENV)/bin/siloflow run decks/paper_a_spheres_quick.yaml -o runs/paper_a_spheres_quick --force
-	$(VENV)/bin/siloflow run decks/paper_a_clumps_quick.yaml -o runs/paper_a_clumps_quick --force
+	$(VENV)/bin/siloflow paper-a --scale quick
 
 paper-b-quick: install
 	$(VENV)/bin/siloflow run decks/paper_b_quick.yaml -o runs/paper_b_quick --force
 	$(VENV)/bin/siloflow cg runs/paper_b_quick --width 2 --unit radius --nr 50 --nz 150
-
-paper-a: install
-	$(VENV)/bin/siloflow run decks/paper_a_spheres.yaml -o runs/paper_a_spheres --force
-	$(VENV)/bin/siloflow run decks/paper_a_clumps.yaml -o runs/paper_a_clumps --force
 
 paper-b: install
 	$(VENV)/bin/siloflow run decks/paper_b.yaml -o runs/paper_b --force

@@ -68,6 +68,20 @@ class Estimate:
         return Estimate(self.value / other.value, math.hypot(parts[0][0], parts[1][0]), _welch_dof(parts))
 
 
+    def scaled(self, factor: float) -> "Estimate":
+        """factor x self (an exact factor: a unit or a scale)."""
+        return Estimate(factor * self.value, abs(factor) * self.stderr, self.dof)
+
+
+def weighted_sum(estimates: Sequence[Estimate], weights: Sequence[float], constant: float = 0.0) -> Estimate:
+    """constant + sum w_k x_k of independent estimates: errors in quadrature, Welch-Satterthwaite's dof."""
+    if len(estimates) != len(weights) or not estimates:
+        raise ValueError("one weight per estimate, at least one")
+    parts = [(abs(w) * e.stderr, e.dof) for e, w in zip(estimates, weights)]
+    return Estimate(constant + sum(w * e.value for e, w in zip(estimates, weights)),
+                    math.sqrt(sum(s ** 2 for s, _ in parts)), _welch_dof(parts))
+
+
 def _welch_dof(parts: Sequence[tuple[float, float]]) -> float:
     """Welch-Satterthwaite degrees of freedom of a sum of independent errors ``(stderr, dof)``."""
     num = sum(s ** 2 for s, _ in parts) ** 2

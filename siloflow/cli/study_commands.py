@@ -270,3 +270,45 @@ def stability(case_file: Path = typer.Argument(..., help="YAML case file"),
                     f"({e['signal']}): margin x{e['margin']:.2g}")
         out.print(printable(line), markup=False, highlight=False)
     out.print(f"envelope: {output} (envelope.csv, edges.json, envelope.png)")
+
+
+@app.command("paper-a")
+def paper_a(scale: str = typer.Option("quick", "--scale", help="quick (minutes, lengths x 1/4) or paper (the paper's "
+                                      "silo: hours to days; asks for --yes)"),
+            seeds: int = typer.Option(1, "--seeds", help="runs of each model (seeds narrow the intervals)"),
+            runs: Path = typer.Option(Path("runs/paper_a"), "--runs", help="where the runs go (reused when finished)"),
+            output: Path = typer.Option(Path("reports/paper_a"), "-o", "--output", help="the report's folder"),
+            decks: Path = typer.Option(Path("decks"), "--decks", help="folder of paper A's decks"),
+            from_data: bool = typer.Option(False, "--from-data", help="write the report again from its data/ "
+                                           "(no run)"),
+            yes: bool = typer.Option(False, "--yes", help="run even when the cost estimate exceeds this machine")) -> None:
+    """Paper A's claims: run its sphere and multi-element models, write report.md/.html with every claim
+    beside our number, its 95 % interval and a computed verdict."""
+    from ..reproduce_paper_a import run_paper_a
+    try:
+        if from_data:
+            from postprocess.report.paper_a import regenerate_paper_a_report
+            written = regenerate_paper_a_report(output)
+        else:
+            signal.signal(signal.SIGTERM, _interrupt)
+            with _bar() as progress:
+                written = run_paper_a(scale, seeds, decks, runs, output, confirm=yes, say=out.print,
+                                      progress=progress)
+    except SiloflowError as exc:
+        _fail(exc)
+    out.print(f"paper A's report: {output / 'report.html'} ({len(written)} files)")
+
+
+@contextmanager
+def _bar():
+    """A progress callback drawing one engine run's bar at a time (a new task per run)."""
+    from .run_commands import _progress_bar
+    with _progress_bar() as bar:
+        tasks: dict = {}
+
+        def progress(stage: str, step: int, total: int) -> None:
+            if not tasks or (stage == "fill" and step < tasks.get("last", 0)):
+                tasks["id"] = bar.add_task("run", total=total, stage=stage, step=0)
+            tasks["last"] = step
+            bar.update(tasks["id"], completed=step, total=total, stage=stage, step=f"{step}/{total}")
+        yield progress
