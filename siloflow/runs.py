@@ -9,9 +9,11 @@ For scripts and notebooks (sweeps)::
     r.flow                           # discharge time series (DataFrame, SI)
     r.wall_pressure                  # band pressure per sample (DataFrame, Pa)
     for frame in r.frames(): ...     # the particle dumps, one frame at a time
+    r.cg()                           # coarse-grained fields (xarray.Dataset): stored or computed
+    r.to_universe()                  # the dumps of a window as an MDAnalysis Universe
 
 The tables are read from what ``siloflow post`` wrote (``results/``); a folder not yet
-post-processed is analysed on first access.
+post-processed is analysed on first access. docs/python_api.md has the whole API.
 """
 from __future__ import annotations
 

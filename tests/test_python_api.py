@@ -62,6 +62,17 @@ def test_with_changes_refuses_an_invalid_change_naming_the_field(change, field, 
     assert any(path == field and words in msg for path, msg in info.value.problems), info.value.problems
 
 
+def test_with_changes_derives_the_defaults_again():
+    data = Case.from_yaml(CASE).model_dump(mode="json", exclude_unset=True)
+    del data["fill"]["settle"]["static_window"]
+    case = Case.model_validate(data)                       # its static window is the default: 20 samples
+    assert case.fill.settle.static_window == pytest.approx(0.1)
+    assert case.with_changes({"outputs.sample_interval": 0.01}).fill.settle.static_window == pytest.approx(0.2)
+    assert case.with_changes({"fill.count": 100}).fill.settle.static_window == pytest.approx(0.1)
+    given = Case.from_yaml(CASE)                           # a window the case sets stays
+    assert given.with_changes({"outputs.sample_interval": 0.01}).fill.settle.static_window == 0.02
+
+
 def test_with_changes_reruns_the_validators_that_model_copy_skips():
     case = Case.from_yaml(CASE)
     unchecked = case.model_copy(update={"fill": case.fill.model_copy(update={"count": -5})})

@@ -76,6 +76,12 @@ class Case(Strict):
             raise CaseError([("(changes)", f"give a dict of dotted field paths and values, not "
                                            f"{type(changes).__name__}")], "Case.with_changes")
         data = self.model_dump(mode="json", exclude_unset=True)   # the case as given: defaults re-derived
+        settle = self.fill.settle
+        timing = {"outputs", "outputs.sample_interval", "fill", "fill.settle", "fill.settle.check_interval"}
+        if settle.static_window == min(default_static_window(self.outputs.sample_interval, settle.check_interval),
+                                       100.0) and timing & set(changes) and not {
+                "fill", "fill.settle", "fill.settle.static_window"} & set(changes):
+            data["fill"]["settle"].pop("static_window", None)   # the default static window follows its intervals
         for path, value in changes.items():
             _set_path(data, path, value.model_dump(mode="json", exclude_unset=True)
                       if isinstance(value, BaseModel) else value)
