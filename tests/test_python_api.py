@@ -14,6 +14,7 @@ import pytest
 import xarray as xr
 
 import siloflow
+from conftest import needs_liggghts
 from postprocess.dumps import read_frames
 from siloflow.case import Case
 from siloflow.errors import CaseError, ReadError, SetupError
@@ -150,3 +151,23 @@ def test_example_notebook_runs_headless(tmp_path):
     peak = float(re.search(r"first peak at ([0-9.]+) mm", text).group(1))
     assert abs(peak - 2.5) < 0.2                            # the RDF's first peak: grains in contact
     assert "188 atoms" in text                              # the discharge window's common particles
+
+
+# ------------------------------------------------------------------ with the engine
+@needs_liggghts
+def test_run_a_changed_case_and_read_it_back(tmp_path):
+    """``siloflow.run`` of a case changed in Python (the tiny silo, fewer grains, a shorter
+    discharge): a complete Run whose tables, frames, fields and Universe read as the stored one's."""
+    case = Case.from_yaml(CASE).with_changes({"fill.count": 150, "discharge.duration": 0.15, "seed": 7})
+    r = siloflow.run(case, tmp_path / "run")
+    assert r.state == "complete" and r.summary["flow_rate"]["rate"] > 0
+    assert siloflow.open_run(tmp_path / "run").flow.equals(r.flow)
+    frames = list(r.frames())
+    assert max(f.n for f in frames) == 150 and frames[-1].n < 150
+    u = r.to_universe()
+    assert u.atoms.n_atoms == 150 and len(u.trajectory) >= 2
+    for ts, step in zip(u.trajectory, u.dump_steps):
+        frame = next(f for f in frames if f.timestep == step)
+        order = np.argsort(frame.column("id"))
+        np.testing.assert_allclose(u.atoms.positions, frame.positions()[order], rtol=0, atol=1e-8)
+    assert float(r.cg(nr=4, nz=12).rho.max()) > 0
