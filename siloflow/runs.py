@@ -9,9 +9,11 @@ For scripts and notebooks (sweeps)::
     r.flow                           # discharge time series (DataFrame, SI)
     r.wall_pressure                  # band pressure per sample (DataFrame, Pa)
     for frame in r.frames(): ...     # the particle dumps, one frame at a time
+    r.cg()                           # coarse-grained fields (xarray.Dataset): stored or computed
+    r.to_universe()                  # the dumps of a window as an MDAnalysis Universe
 
 The tables are read from what ``siloflow post`` wrote (``results/``); a folder not yet
-post-processed is analysed on first access.
+post-processed is analysed on first access. docs/python_api.md has the whole API.
 """
 from __future__ import annotations
 
@@ -138,6 +140,109 @@ class Run:
                             f"{self.plan.outputs.dump_every} steps: they are missing (deleted or moved), or the run "
                             f"({self.state}) stopped before the first")
         return read_frames(files, columns=columns, every=every)
+
+    # ------------------------------------------------------------ coarse-graining and MDAnalysis
+    def cg(self, stored: Optional[bool] = None, **settings):
+        """The coarse-grained fields of the steady discharge (``siloflow cg``), an ``xarray.Dataset``
+        (dimensions z, r of an (r, z) grid; rho, velocity, solid_fraction, kinetic_stress, ..., in SI;
+        see docs/coarse_graining.md). Without ``settings``, the folder's results/cg/fields.nc, written
+        by ``siloflow cg``, when there is one (loaded into memory, the file closed); else, or with
+        ``settings``, computed now through the same code (``postprocess.cg_run.analyse_cg``, from the
+        run's geometry and steady-flow window, as ``siloflow cg`` does) and not written. ``settings``
+        are ``siloflow cg``'s options, by the same names and defaults: ``kernel`` ("gaussian"),
+        ``width`` (2.0), ``unit`` ("radius"), ``nr`` (100), ``nz`` (300), ``grid`` ("rz"),
+        ``method`` ("exact"), ``refine`` (2), ``species`` ("radius", or None), ``per_frame``
+        (False), ``every`` (1). ``stored``: True, the stored fields only (``ReadError`` when there
+        are none, or with ``settings``); False, always compute."""
+        import xarray as xr
+
+        from .run_folder import RESULTS
+        known = {"kernel": "kernel_name", "width": "width", "unit": "unit", "nr": "nr", "nz": "nz",
+                 "grid": "grid_kind", "method": "method", "refine": "refine", "species": "species",
+                 "per_frame": "per_frame", "every": "every"}
+        unknown = sorted(set(settings) - set(known))
+        if unknown:
+            raise SetupError(f"Run.cg: unknown setting(s) {', '.join(unknown)}; known: {', '.join(known)}")
+        path = self.folder / RESULTS / "cg" / "fields.nc"
+        if stored and settings:
+            raise SetupError("Run.cg(stored=True) reads the stored fields: give no settings")
+        if stored or (stored is None and not settings and path.is_file()):
+            self._finished()
+            if not path.is_file():
+                raise ReadError(f"{self.folder} has no coarse-grained fields ({path.relative_to(self.folder)}): "
+                                f"run `siloflow cg {self.folder}`, or call Run.cg() without stored=True to compute them")
+            try:
+                with xr.open_dataset(path) as ds:
+                    return ds.load()
+            except (OSError, ValueError) as exc:
+                raise ReadError(f"cannot read {path}: {exc}") from None
+        from postprocess.cg_run import analyse_cg, setup_from_run
+        self._results()                                  # the steady-flow window is the summary's
+        return analyse_cg(setup_from_run(self.run_folder), **{known[k]: v for k, v in settings.items()}).dataset
+
+    def _stage_bounds(self, stages) -> tuple[int, Optional[int]]:
+        """First step and the step after the last (None: the end) of the frames of ``stages``."""
+        starts = {name: step for name, step in self.record.stage_steps.items() if isinstance(step, int)}
+        order = sorted(starts, key=lambda name: starts[name])
+        if stages is None:                              # the closed silo: after the fill, before the opening
+            if "open" not in starts:
+                raise ReadError(f"{self.folder}: the run's record has no opening (stages: {', '.join(order)}); "
+                                "choose stages or steps")
+            after_fill = [n for n in order if starts[n] > starts.get("fill", -1) and starts[n] < starts["open"]]
+            if not after_fill:
+                raise ReadError(f"{self.folder}: no stage between the fill and the opening (stages: {', '.join(order)})")
+            stages = after_fill
+        names = [stages] if isinstance(stages, str) else list(stages)
+        missing = [n for n in names if n not in starts]
+        if missing or not names:
+            raise ReadError(f"{self.folder}: no stage {', '.join(missing) or '(none given)'} in this run; "
+                            f"its stages are {', '.join(order)}")
+        last = max(names, key=lambda n: starts[n])
+        later = [starts[n] for n in order if starts[n] > starts[last]]
+        return min(starts[n] for n in names), (min(later) if later else None)
+
+    def to_universe(self, stages=None, steps: Optional[tuple] = None, every: int = 1, atoms: str = "fixed",
+                    dimensions=None):
+        """The particle dumps of a window as an MDAnalysis ``Universe`` (in memory), for MDAnalysis'
+        own analyses (``InterRDF``, ``AtomNeighborSearch``, ...); see ``postprocess.universe`` for
+        what it holds (SI units; ``radii``, ``types``, ``names`` (species), ``masses``, residues =
+        rigid bodies (clumps), no unit cell unless ``dimensions``).
+
+        The window: ``stages`` (a stage name or names of the run's record, ``Run.record.stage_steps``:
+        fill, settle, static, open, discharge, ...; the frames from the first one's start to the
+        next stage's) or ``steps`` ((first, last) engine steps, inclusive, None for open ends);
+        by default the closed silo, every frame after the fill and before the opening (settle,
+        static, ...), whose particles do not change. Every ``every``-th frame of the window.
+        ``atoms``: "fixed", refuse a window whose particles change (``ReadError``: the fill inserts
+        them, the discharge removes them); "common", keep the particles present in every frame of it
+        (over the discharge, those still in the silo at the window's end). For a changing count,
+        one Universe per frame: ``postprocess.universe.universe_from_frames([frame])`` over
+        ``Run.frames()``."""
+        import re
+
+        from postprocess.dumps import read_frames
+        from postprocess.universe import universe_from_frames
+        if stages is not None and steps is not None:
+            raise SetupError("Run.to_universe: give stages or steps, not both")
+        if steps is None:
+            lo, end = self._stage_bounds(stages)
+            hi = None if end is None else end - 1
+        else:
+            lo, hi = steps
+        files = self.run_folder.dump_files("particles")
+        if files is None:
+            list(self.frames())                          # raises the ReadError saying why there are none
+        def step_of(path):
+            return int(re.findall(r"\d+", path.name)[-1])
+        chosen = [p for p in files if (lo is None or step_of(p) >= lo) and (hi is None or step_of(p) <= hi)]
+        frames = [f for f in read_frames(chosen, every=every) if (lo is None or f.timestep >= lo)
+                  and (hi is None or f.timestep <= hi)] if chosen else []
+        if not frames:
+            raise ReadError(f"{self.folder}: no particle dump between steps {lo} and {hi if hi is not None else 'the end'}"
+                            f" (dumps every {self.plan.outputs.dump_every} steps)")
+        types = {int(k): v for k, v in self.run_folder.dump_layout.types.items()}
+        return universe_from_frames(frames, atoms=atoms, type_names=types, steps_to_time=self.plan.dt,
+                                    dimensions=dimensions)
 
 
 def open_run(folder, unfinished: bool = False) -> Run:

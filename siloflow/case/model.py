@@ -60,6 +60,33 @@ class Case(Strict):
         from ..case_reader import read_case
         return read_case(Case, path)
 
+    def with_changes(self, changes: dict) -> "Case":
+        """A new case: this one with ``changes`` ({dotted field path: value}, e.g.
+        ``{"geometry.orifice_radius": 0.006, "fill.count": 500}``) applied, validated again whole:
+        every field's and every cross-section check runs, as for a case file. A value may be a
+        plain value, a dict (a whole section) or a section's model. The case is frozen and
+        ``model_copy(update=...)`` would skip validation; this does not. A change that the schema
+        refuses (an unknown field, a value out of range, a section that no longer fits another)
+        raises ``CaseError`` naming each field with its problem; nothing else is changed."""
+        from pydantic import BaseModel
+
+        from ..case_reader import validate_case
+        from ..errors import CaseError
+        if not isinstance(changes, dict):
+            raise CaseError([("(changes)", f"give a dict of dotted field paths and values, not "
+                                           f"{type(changes).__name__}")], "Case.with_changes")
+        data = self.model_dump(mode="json", exclude_unset=True)   # the case as given: defaults re-derived
+        settle = self.fill.settle
+        timing = {"outputs", "outputs.sample_interval", "fill", "fill.settle", "fill.settle.check_interval"}
+        if settle.static_window == min(default_static_window(self.outputs.sample_interval, settle.check_interval),
+                                       100.0) and timing & set(changes) and not {
+                "fill", "fill.settle", "fill.settle.static_window"} & set(changes):
+            data["fill"]["settle"].pop("static_window", None)   # the default static window follows its intervals
+        for path, value in changes.items():
+            _set_path(data, path, value.model_dump(mode="json", exclude_unset=True)
+                      if isinstance(value, BaseModel) else value)
+        return validate_case(Case, data, "Case.with_changes")
+
     name: SafeName
     description: str = Field("", max_length=2000, description="free text, never written into a deck")
     gravity: Positive = Field(9.81, le=1000, description="m/s2, acting along -z")
@@ -127,6 +154,22 @@ class Case(Strict):
         if problems:
             raise ValueError("; ".join(problems))
         return self
+
+
+def _set_path(data: dict, path, value) -> None:
+    """Set ``value`` at the dotted ``path`` of the case dict ``data`` (missing sections made);
+    ``CaseError`` when the path is not a dotted name or runs through a value that is not a section."""
+    from ..errors import CaseError
+    keys = path.split(".") if isinstance(path, str) else []
+    if not keys or not all(keys):
+        raise CaseError([(str(path), "not a dotted field path such as geometry.orifice_radius")], "Case.with_changes")
+    node = data
+    for depth, key in enumerate(keys[:-1]):
+        node = node.setdefault(key, {})
+        if not isinstance(node, dict):
+            raise CaseError([(".".join(keys[:depth + 1]), f"is a {type(node).__name__}, not a section: "
+                                                          f"{path} cannot be set inside it")], "Case.with_changes")
+    node[keys[-1]] = value
 
 
 def _sampling_problems(case: "Case") -> list[str]:
