@@ -163,6 +163,7 @@ def test_the_installed_version_names_the_lammps_extra_when_it_is_missing(install
 def test_the_extras_are_declared_and_the_core_needs_none_of_them():
     extras = PYPROJECT["project"]["optional-dependencies"]
     assert set(EXTRAS) == {"lammps", "vtk", "mdanalysis", "notebook"} <= set(extras)
+    assert extras["all"] == [f"siloflow[{','.join(EXTRAS)}]"]
     core = " ".join(PYPROJECT["project"]["dependencies"]).lower()
     for name in ("lammps", "vtk", "mdanalysis", "nbclient"):
         assert name not in core, f"{name} is an extra, not a core dependency"
