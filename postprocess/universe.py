@@ -37,17 +37,14 @@ from typing import Iterable, Optional, Sequence
 import numpy as np
 
 from siloflow.errors import ReadError
+from siloflow.extras import require
 
 ATOM_POLICIES = ("fixed", "common")
 
 
 def _mdanalysis():
-    try:
-        import MDAnalysis
-    except ImportError:
-        raise ReadError("MDAnalysis is not installed: pip install 'MDAnalysis>=2.7,<3' "
-                        "(it comes with siloflow's test extra, pip install -e '.[test]')") from None
-    return MDAnalysis
+    """MDAnalysis, or ``siloflow.extras.MissingExtra`` naming the extra to install."""
+    return require("mdanalysis", purpose="a Universe of the dumps (Run.to_universe)")
 
 
 def _ids(frame) -> np.ndarray:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 import re
-from importlib import resources
 from pathlib import Path
 
 import jinja2
@@ -20,6 +19,7 @@ from .atomic_files import write_json, write_text
 from .case import SAFE_NAME_PATTERN, Case
 from .case_file import case_to_yaml
 from .errors import SetupError, SiloflowError
+from .resources import template_text
 from .run_folder import CASE_NAME, MANIFEST_NAME, RunFolder, check_plain_tree, new_folder, sha256
 
 #: words no deck line may hold, whatever its command (LIGGGHTS and LAMMPS both have ``shell``)
@@ -52,9 +52,10 @@ def _safe_name(value) -> str:
 
 
 def template_environment(engine: str = "liggghts") -> jinja2.Environment:
-    """Jinja environment of an engine's templates: StrictUndefined, strict filters, no autoescape."""
-    root = resources.files("siloflow.templates") / engine
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(root)), undefined=jinja2.StrictUndefined,
+    """Jinja environment of an engine's templates (package resources, :mod:`siloflow.resources`):
+    StrictUndefined, strict filters, no autoescape."""
+    env = jinja2.Environment(loader=jinja2.FunctionLoader(lambda name: template_text(engine, name)),
+                             undefined=jinja2.StrictUndefined,
                              keep_trailing_newline=True, autoescape=False)
     env.filters.update(num=_num, int=_integer, safe_name=_safe_name)
     return env

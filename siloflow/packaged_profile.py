@@ -1,5 +1,6 @@
-"""The fast profile siloflow ships: ``fast_profile.json`` beside this module, written from the
-committed accuracy benchmark by ``benchmarks/publish_fast_profile.py``.
+"""The fast profile siloflow ships: ``fast_profile.json`` beside this module (package data, read
+through :mod:`siloflow.resources`), written from the committed accuracy benchmark by
+``benchmarks/publish_fast_profile.py``.
 
 The case schema copies it into a case asking for ``profile: fast`` (``engine.fast_profile``) while
 validating, so it is read here, below the schema; applying a profile to a case is
@@ -9,10 +10,12 @@ from __future__ import annotations
 
 import json
 from functools import lru_cache
-from pathlib import Path
 
-#: the fast profile as the accuracy benchmark recommended it (benchmarks/publish_fast_profile.py)
-FAST_PROFILE_FILE = Path(__file__).with_name("fast_profile.json")
+from .resources import fast_profile_file
+
+#: the fast profile as the accuracy benchmark recommended it (benchmarks/publish_fast_profile.py):
+#: a package resource (an ``importlib.resources`` Traversable: read it, do not write it)
+FAST_PROFILE_FILE = fast_profile_file()
 #: the fields of fast_profile.json a case carries (``siloflow.case.PinnedProfile``)
 PINNED = ("timestep_fraction", "overlap_ratio", "error_bounds", "tolerances", "speedup", "benchmark")
 
@@ -20,7 +23,7 @@ PINNED = ("timestep_fraction", "overlap_ratio", "error_bounds", "tolerances", "s
 @lru_cache(maxsize=1)
 def fast_profile() -> dict:
     """The packaged fast profile's whole record (fast_profile.json)."""
-    return json.loads(FAST_PROFILE_FILE.read_text())
+    return json.loads(FAST_PROFILE_FILE.read_text(encoding="utf-8"))
 
 
 def packaged_fast_profile() -> dict:

@@ -259,10 +259,11 @@ def _within(module: str, packages) -> bool:
 #: the readers of dump files: they read any dump, ours or not, and import nothing of siloflow's
 #: but its errors
 READERS = ("postprocess.dumps",)
-#: what analyses and the report may import of siloflow: readers' errors, atomic writes, the run
-#: folder (and the plan it holds), the engine names, and pure formulas (EN 1991-4, clump shapes)
-POST_MAY_IMPORT = ("siloflow.errors", "siloflow.atomic_files", "siloflow.run_folder", "siloflow.plan",
-                   "siloflow.engines", "siloflow.design_loads", "siloflow.clumps")
+#: what analyses and the report may import of siloflow: errors (and the optional extras' names),
+#: atomic writes, the run folder (and the plan it holds), the engine names, and pure formulas
+#: (EN 1991-4, clump shapes)
+POST_MAY_IMPORT = ("siloflow.errors", "siloflow.extras", "siloflow.atomic_files", "siloflow.run_folder",
+                   "siloflow.plan", "siloflow.engines", "siloflow.design_loads", "siloflow.clumps")
 #: the steps before the run folder, which post-processing never reaches
 BEFORE_THE_RUN_FOLDER = ("siloflow.derived", "siloflow.profiles", "siloflow.geometry", "siloflow.deck",
                          "siloflow.engine", "siloflow.runs", "siloflow.fill_cache", "siloflow.cli", "siloflow.sweep",

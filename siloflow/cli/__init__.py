@@ -1,4 +1,4 @@
-"""Command line: ``siloflow validate | schema | render | run | post | status | cg | cg-scaling |
+"""Command line: ``siloflow validate | schema | render | example | run | post | status | cg | cg-scaling |
 sweep | bench | stability | beverloo | design | cache``.
 
 The only package that prints, exits or sets up logging; everything else raises siloflow's named

@@ -1,8 +1,10 @@
-"""``siloflow validate | schema | render``: a case file checked, the schema, a deck folder without a run."""
+"""``siloflow validate | schema | render | example``: a case file checked, the schema, a deck folder
+without a run, the shipped example cases."""
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Optional
 
 import typer
 
@@ -80,6 +82,36 @@ def render(case_file: Path = typer.Argument(..., help="YAML case file"),
     for line in (clump_note(d), dust_note(d), profile_note(d.profile) if d.profile.name != "custom" else ""):
         if line:
             out.print(line)
+
+
+@app.command()
+def example(name: Optional[str] = typer.Argument(None, help="example case to copy out (omit: list them)"),
+            output: Optional[Path] = typer.Option(None, "-o", "--output",
+                                                  help="file to write (default NAME.yaml here; '-': standard output)"),
+            force: bool = typer.Option(False, "--force", help="replace an existing file")) -> None:
+    """List the example cases siloflow ships (the demo, the quick case, the papers' cases), or copy one
+    out to edit, render or run (they are installed with siloflow: decks/ in the repository)."""
+    from ..atomic_files import write_text
+    from ..resources import example_case, example_names
+    try:
+        if name is None:
+            for stem in example_names():
+                first = example_case(stem).read_text(encoding="utf-8").splitlines()[:1] or [""]
+                out.print(printable(f"{stem}: {first[0].lstrip('#').strip()}"), markup=False, highlight=False,
+                          soft_wrap=True)
+            return
+        text = example_case(name).read_text(encoding="utf-8")
+    except SiloflowError as exc:
+        _fail(exc)
+    if output is not None and str(output) == "-":
+        print(text, end="")
+        return
+    target = output or Path(Path(name).stem + ".yaml")
+    if target.exists() and not force:
+        err.print(printable(f"siloflow: {target} exists (--force replaces it)"), markup=False, highlight=False)
+        raise typer.Exit(1)
+    write_text(target, text)
+    out.print(printable(f"example case {Path(name).stem} written to {target}"), markup=False, highlight=False)
 
 
 def profile_note(p) -> str:

