@@ -14,6 +14,7 @@ import yaml
 
 from .case_file import case_from_dict
 from .errors import SetupError
+from .resources import example_text
 from .run_folder import STATUS_NAME, RunFolder, run_state
 
 #: the decks of each scale, and the runs' silo over the paper's (lengths)
@@ -36,18 +37,21 @@ class PaperRun:
     folder: Path
 
 
-def plan_runs(scale: str, seeds: int, decks: Path, runs: Path) -> list[PaperRun]:
+def plan_runs(scale: str, seeds: int, decks: Optional[Path], runs: Path) -> list[PaperRun]:
     """The runs the report needs: ``seeds`` of each model, the first with the deck's seed, the
-    others with the next ones (``seed + k``)."""
+    others with the next ones (``seed + k``). The decks are siloflow's shipped ones, or those in
+    the folder ``decks``."""
     if scale not in SCALES:
         raise SetupError(f"--scale {scale!r}: one of {', '.join(SCALES)}")
     if not 1 <= seeds <= 50:
         raise SetupError(f"--seeds {seeds}: between 1 and 50")
     out = []
     for model in ("spheres", "clumps"):
-        path = Path(decks) / SCALES[scale][model]
+        name = SCALES[scale][model]
+        path = Path(decks) / name if decks is not None else f"siloflow's shipped {name}"
         try:
-            data = yaml.safe_load(path.read_text(encoding="utf-8"))
+            text = Path(path).read_text(encoding="utf-8") if decks is not None else example_text(name)
+            data = yaml.safe_load(text)
         except (OSError, yaml.YAMLError) as exc:
             raise SetupError(f"cannot read paper A's deck {path}: {exc}") from None
         for k in range(seeds):
@@ -106,7 +110,7 @@ def cost_text(c: dict, runs: list[PaperRun]) -> str:
             f"and {c['disk_bytes'] / 1e9:.3g} GB of disk")
 
 
-def run_paper_a(scale: str = "quick", seeds: int = 1, decks: Path = Path("decks"), runs: Path = Path("runs/paper_a"),
+def run_paper_a(scale: str = "quick", seeds: int = 1, decks: Optional[Path] = None, runs: Path = Path("runs/paper_a"),
                 out: Path = Path("reports/paper_a"), confirm: bool = False, say: Callable[[str], None] = print,
                 progress=None) -> list[Path]:
     """Run what is missing of paper A's runs (finished ones are reused, interrupted ones resumed)

@@ -165,9 +165,8 @@ def test_report_is_written_and_regenerated_byte_for_byte(tmp_path):
 
 def test_the_paper_scale_is_refused_without_confirmation(tmp_path):
     from siloflow.reproduce_paper_a import run_paper_a
-    from conftest import ROOT
     said = []
     with pytest.raises(SetupError, match="--yes"):
-        run_paper_a("paper", 1, ROOT / "decks", tmp_path / "runs", tmp_path / "out", say=said.append)
+        run_paper_a("paper", 1, None, tmp_path / "runs", tmp_path / "out", say=said.append)
     assert "core-hours" in said[0] and "GB of disk" in said[0]
     assert not (tmp_path / "runs").exists() and not (tmp_path / "out").exists()

@@ -278,7 +278,8 @@ def paper_a(scale: str = typer.Option("quick", "--scale", help="quick (minutes, 
             seeds: int = typer.Option(1, "--seeds", help="runs of each model (seeds narrow the intervals)"),
             runs: Path = typer.Option(Path("runs/paper_a"), "--runs", help="where the runs go (reused when finished)"),
             output: Path = typer.Option(Path("reports/paper_a"), "-o", "--output", help="the report's folder"),
-            decks: Path = typer.Option(Path("decks"), "--decks", help="folder of paper A's decks"),
+            decks: Optional[Path] = typer.Option(None, "--decks", help="a folder of paper A's decks (default: "
+                                                 "siloflow's shipped ones)"),
             from_data: bool = typer.Option(False, "--from-data", help="write the report again from its data/ "
                                            "(no run)"),
             yes: bool = typer.Option(False, "--yes", help="run even when the cost estimate exceeds this machine")) -> None:
