@@ -209,17 +209,20 @@ def grain_pairs(atoms: Frame, contacts: Frame) -> tuple[np.ndarray, np.ndarray, 
     return i[keep], j[keep], fn[keep]
 
 
-def contacts_per_grain(runs: ModelRuns, t_after_open: float, spread: float) -> Estimate:
-    """Contacts between grains (dust included) per grain (clumps or balls; dust not counted as
-    grains) at ``t_after_open`` s after the outlet opened, over the frames within ``spread`` s of
-    it in every run."""
-    samples = []
+def frames_near(runs: ModelRuns, t_after_open: float, spread: float):
+    """(run, atoms, contacts) of every run's contact frames within ``spread`` s of ``t_after_open``
+    s after its outlet opened (the nearest frame to each of 5 times across that span)."""
     for folder, t_open in zip(runs.folders, runs.open_times):
         run = RunFolder(folder)
-        times = t_open + t_after_open + np.linspace(-spread, spread, 5)
-        for atoms, contacts in _frames_at(run, times):
-            i, _, _ = grain_pairs(atoms, contacts)
-            samples.append(len(i) / grain_count(atoms))
+        for atoms, contacts in _frames_at(run, t_open + t_after_open + np.linspace(-spread, spread, 5)):
+            yield run, atoms, contacts
+
+
+def contacts_per_grain(runs: ModelRuns, t_after_open: float, spread: float) -> Estimate:
+    """Contacts between grains (dust included) per grain (clumps or balls; dust not counted as
+    grains), one sample per frame of :func:`frames_near`."""
+    samples = [len(grain_pairs(atoms, contacts)[0]) / grain_count(atoms)
+               for _, atoms, contacts in frames_near(runs, t_after_open, spread)]
     return estimate(samples, f"{runs.name}: contacts per grain near {t_after_open:g} s of discharge")
 
 
@@ -277,17 +280,13 @@ def transverse_share(positions: np.ndarray, i: np.ndarray, j: np.ndarray, fn: np
 
 
 def arching_fraction(runs: ModelRuns, t_after_open: float, spread: float) -> Estimate:
-    """:func:`transverse_share` in the hopper, one sample per frame within ``spread`` s of
-    ``t_after_open`` s of discharge, every run: transverse, arch-like strong chains."""
+    """:func:`transverse_share` in the hopper, one sample per frame of :func:`frames_near`:
+    transverse, arch-like strong chains."""
     samples = []
-    for folder, t_open in zip(runs.folders, runs.open_times):
-        run = RunFolder(folder)
-        times = t_open + t_after_open + np.linspace(-spread, spread, 5)
-        for atoms, contacts in _frames_at(run, times):
-            i, j, fn = grain_pairs(atoms, contacts)
-            share = transverse_share(atoms.positions(), i, j, fn, run.plan.geometry.hopper_height)
-            if share is not None:
-                samples.append(share)
+    for run, atoms, contacts in frames_near(runs, t_after_open, spread):
+        share = transverse_share(atoms.positions(), *grain_pairs(atoms, contacts), run.plan.geometry.hopper_height)
+        if share is not None:
+            samples.append(share)
     return estimate(samples, f"{runs.name}: transverse share of the strong contacts in the hopper")
 
 
@@ -363,9 +362,14 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
     numbers: dict = {"seeds": seeds, "pressure_scale": p_scale, "time_scale": t_scale,
                      "W": {m: [w[m].value, w[m].stderr, w[m].dof] for m in MODELS}}
 
+    def measured(key: str, measure) -> dict[str, Estimate]:
+        """``measure`` of each model, recorded in ``numbers[key]`` as [value, stderr, dof]."""
+        est = {m: measure(models[m]) for m in MODELS}
+        numbers[key] = {m: [est[m].value, est[m].stderr, est[m].dof] for m in MODELS}
+        return est
+
     # discharge: longer for clumps <=> less bed volume per second through the same outlet
-    q = {m: volumetric_flow_rate(models[m]) for m in MODELS}
-    numbers["volumetric_flow_rate_m3_s"] = {m: [q[m].value, q[m].stderr, q[m].dof] for m in MODELS}
+    q = measured("volumetric_flow_rate_m3_s", volumetric_flow_rate)
     rows.append(ClaimRow(
         "Trends", "the clump model discharges longer",
         f"{PAPER_DISCHARGE_TIME['clumps']} s against {PAPER_DISCHARGE_TIME['spheres']} s",
@@ -373,8 +377,7 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
         "the same bed volume empties later when less of it leaves per second: the row's number is the sphere "
         f"model's volumetric flow rate over the clump model's (> 1: clumps longer); spheres {_fmt(q['spheres'], 'm3/s')}, "
         f"clumps {_fmt(q['clumps'], 'm3/s')}; steady mass flow rate over the bed's bulk density"))
-    cv = {m: pressure_variation(models[m]) for m in MODELS}
-    numbers["pressure_variation"] = {m: [cv[m].value, cv[m].stderr, cv[m].dof] for m in MODELS}
+    cv = measured("pressure_variation", pressure_variation)
     rows.append(ClaimRow(
         "Trends", "the clump model's wall pressure fluctuates less",
         "Fig. 11-12: the multi-element model's pressure fluctuates less and more gently",
@@ -382,8 +385,7 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
         f"coefficient of variation (sd / mean) of the pressure over the steady discharge at points "
         f"{', '.join(map(str, FIGURE_POINTS))}, per {per} and point: spheres {_fmt(cv['spheres'])}, clumps "
         f"{_fmt(cv['clumps'])}; the row's number is the difference"))
-    por = {m: porosity_3d(models[m]) for m in MODELS}
-    numbers["porosity_3d"] = {m: [por[m].value, por[m].stderr, por[m].dof] for m in MODELS}
+    por = measured("porosity_3d", porosity_3d)
     for m in MODELS:
         rows.append(ClaimRow(
             "Meso-structure", f"porosity of the {m} model (3D-converted)",
@@ -396,8 +398,7 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
         f"{100 * PAPER_POROSITY['clumps']:.2f} % against {100 * PAPER_POROSITY['spheres']:.2f} %",
         por["spheres"].minus(por["clumps"]).scaled(100.0), "points", greater(por["spheres"], por["clumps"]),
         "sphere model's porosity minus the clump model's, per measuring region"))
-    z = {m: coordination_by_layer(models[m]) for m in MODELS}
-    numbers["coordination"] = {m: [z[m].value, z[m].stderr, z[m].dof] for m in MODELS}
+    z = measured("coordination", coordination_by_layer)
     for m in MODELS:
         rows.append(ClaimRow(
             "Meso-structure", f"coordination number of the {m} model", f"{PAPER_COORDINATION[m]} (2D model)",
@@ -414,8 +415,7 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
     ends = [float(s["flow_rate"]["t_end"]) - t for r in models.values() for s, t in zip(r.summaries, r.open_times)]
     t_contacts = min(PAPER_CONTACT_TIME * t_scale, 0.8 * min(ends))
     spread = 0.1 * t_contacts
-    c = {m: contacts_per_grain(models[m], t_contacts, spread) for m in MODELS}
-    numbers["contacts_per_grain"] = {m: [c[m].value, c[m].stderr, c[m].dof] for m in MODELS}
+    c = measured("contacts_per_grain", lambda r: contacts_per_grain(r, t_contacts, spread))
     numbers["contacts_time_after_open_s"] = t_contacts
     capped = ", capped within the runs' discharge" if t_contacts < PAPER_CONTACT_TIME * t_scale else ""
     for m in MODELS:
@@ -435,8 +435,7 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
         c["clumps"].over(c["spheres"]), "", ratio_about(c["clumps"], c["spheres"], paper_ratio, ABOUT),
         f"the ratio of contacts per grain, clumps over spheres, against the paper's per grain, within "
         f"{100 * ABOUT:.0f} %"))
-    arch = {m: arching_fraction(models[m], t_contacts, spread) for m in MODELS}
-    numbers["transverse_strong_contacts"] = {m: [arch[m].value, arch[m].stderr, arch[m].dof] for m in MODELS}
+    arch = measured("transverse_strong_contacts", lambda r: arching_fraction(r, t_contacts, spread))
     rows.append(ClaimRow(
         "Trends", "the clump model shows arching force chains",
         "Fig. 14-15: several transverse arching chains in the multi-element model",
