@@ -10,7 +10,7 @@ SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
-	$(PIP) install -q -e '.[test]'
+	$(PIP) install -q -e '.[test,vtk]'
 	touch $@
 
 install: $(VENV)/.installed install-engine
