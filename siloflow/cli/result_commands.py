@@ -1,4 +1,5 @@
-"""``siloflow post | cg | cg-scaling | beverloo | design``: results of finished runs or any dump, and EN 1991-4 loads."""
+"""``siloflow post | cg | cg-scaling | beverloo | design | vtk``: results of finished runs or any dump, EN 1991-4
+loads, and ParaView files."""
 from __future__ import annotations
 
 import time
