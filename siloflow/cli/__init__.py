@@ -1,5 +1,5 @@
 """Command line: ``siloflow validate | schema | render | example | run | post | status | cg | cg-scaling |
-sweep | bench | stability | beverloo | design | cache``.
+sweep | bench | stability | paper-a | beverloo | design | vtk | cache``.
 
 The only package that prints, exits or sets up logging; everything else raises siloflow's named
 errors, mapped here to a message and exit code 1. One module per group of commands

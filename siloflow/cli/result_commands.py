@@ -1,4 +1,5 @@
-"""``siloflow post | cg | cg-scaling | beverloo | design``: results of finished runs or any dump, and EN 1991-4 loads."""
+"""``siloflow post | cg | cg-scaling | beverloo | design | vtk``: results of finished runs or any dump, EN 1991-4
+loads, and ParaView files."""
 from __future__ import annotations
 
 import time
@@ -210,3 +211,40 @@ def design(case_file: Path = typer.Argument(..., help="YAML case file (its desig
         write_text(output / "design_vs_dem.csv", compare_with_dem(loads, bands).to_csv(index=False))
     out.print(f"written: {output / 'design_loads.csv'}, {output / 'design_loads.png'}"
               + (f", {output / 'design_vs_dem.csv'}" if bands is not None else ""))
+
+
+@app.command()
+def vtk(source: Path = typer.Argument(..., help="a run folder, or a coarse-graining's fields.nc (or its folder)"),
+        output: Optional[Path] = typer.Option(None, "-o", "--output",
+                                              help="folder of the ParaView files (default <run>/results/paraview)"),
+        every: int = typer.Option(1, min=1, help="write every n-th particle dump frame"),
+        wall_every: int = typer.Option(1, min=1, help="write the walls at every n-th wall-force sample"),
+        theta: int = typer.Option(48, min=3, help="sectors an axisymmetric coarse-graining is revolved into"),
+        cg: bool = typer.Option(True, help="also write every results/**/fields.nc as VTK beside it")) -> None:
+    """ParaView files of a run (either engine): particles from the dumps, walls with their sensor
+    pressures, and the coarse-grained fields, in .pvd collections with times in seconds."""
+    from postprocess.report.paraview import write_cg_vtk, write_run_paraview
+    try:
+        if source.is_dir() and RunFolder(source).is_run_folder():
+            summary = write_run_paraview(source, output, every, wall_every, theta, cg)
+        elif source.name == "fields.nc" or (source / "fields.nc").is_file():
+            written = write_cg_vtk(source, theta)
+            out.print(f"written: {', '.join(str(p) for p in written)}")
+            return
+        else:
+            raise ReadError(f"{source} is neither a siloflow run folder nor a coarse-graining's fields.nc")
+    except SiloflowError as exc:
+        _fail(exc)
+    except ValueError as exc:
+        _fail(SiloflowError(str(exc)))
+    target = output or source / "results" / "paraview"
+    p = summary["particles"]
+    line = f"{p['frames']} particle frames"
+    if p["frames"]:
+        line += f" ({p['times_s'][0]:.4g} s to {p['times_s'][-1]:.4g} s)"
+    if "walls" in summary:
+        line += f", walls at {summary['walls']['samples']} samples"
+    out.print(line)
+    for path in summary.get("cg", []):
+        out.print(f"coarse-grained fields: {source / path}")
+    out.print(f"open in ParaView: {target / 'run.pvd'}")
