@@ -45,7 +45,7 @@ N_THETA = 48
 def vtk_modules():
     """The vtk modules used here (``siloflow.extras.MissingExtra``, a ``SetupError`` naming the
     extra, when the optional ``vtk`` package is missing)."""
-    require("vtk", module="vtkmodules.vtkCommonDataModel", purpose="ParaView files (siloflow vtk)")
+    require("vtk", module="vtkmodules", purpose="ParaView files (siloflow vtk)")
     from vtkmodules import vtkCommonCore, vtkCommonDataModel
     from vtkmodules.util import numpy_support
     return vtkCommonCore, vtkCommonDataModel, numpy_support
