@@ -19,7 +19,6 @@ z the height above the outlet plane, t_d = sqrt(2 r_b / g) paper B's time unit.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -228,22 +227,10 @@ def extract_run(folder, batches: int, width_flow_rb: float, width_stress_rb: flo
                "run_flow_rate": rate["rate"], "run_flow_rate_stderr": rate.get("stderr"),
                "settled_bulk_solid_fraction": fa.get("bulk_solid_fraction") if isinstance(
                    fa.get("bulk_solid_fraction"), float) else np.nan,
-               "engine_wall_s": getattr(record, "engine_seconds", None) or _engine_seconds(run)}
+               "engine_wall_s": float(record.wall_time)}
     flow_series = flows.assign(R_over_rb=key)[["R_over_rb", "time", "Wf_kg_s", "Wr_kg_s"]]
     return {RUNS: [run_row], BATCHES: batch_rows, FLOW: flow_series, OUTLET: outlet_rows, AXIAL: axial_rows,
             SPECIES: species_rows, MAPS: map_table}
-
-
-def _engine_seconds(run: RunFolder) -> float:
-    """The engine's wall time of a run (s), from its run record, NaN when not recorded."""
-    try:
-        data = json.loads((run.path / "run_record.json").read_text())
-    except (OSError, ValueError):
-        return float("nan")
-    for k in ("engine_seconds", "engine_s", "wall_s", "engine_wall_s"):
-        if isinstance(data.get(k), (int, float)):
-            return float(data[k])
-    return float("nan")
 
 
 def extract(folders, batches: int, width_flow_rb: float, width_stress_rb: float) -> dict:
