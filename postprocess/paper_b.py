@@ -162,9 +162,9 @@ def extract_run(folder, batches: int, width_flow_rb: float, width_stress_rb: flo
         row = surf_at.loc[frame.timestep]
         rad = frame.radii()
         d = 2.0 * float(np.mean(rad))
-        phi_frames.append((frame.timestep * dt, slab_solid_fraction(frame.positions(), rad, float(row.surface_height),
-                                                                   float(row.get("surface_spread", 0.0) or 0.0),
-                                                                   d, Rc)))
+        spread = float(row.get("surface_spread", 0.0))
+        phi_frames.append((frame.timestep * dt, slab_solid_fraction(
+            frame.positions(), rad, float(row.surface_height), spread if math.isfinite(spread) else 0.0, d, Rc)))
     phi_t = np.array(phi_frames) if phi_frames else np.empty((0, 2))
 
     setup = setup_from_run(run)
@@ -185,7 +185,7 @@ def extract_run(folder, batches: int, width_flow_rb: float, width_stress_rb: flo
         axial = axial_profiles(stress, setup.z_outlet)
         h_c = peak_height(axial.height.to_numpy(), axial.kinetic_pressure.to_numpy())
         in_b = (phi_t[:, 0] >= t0) & (phi_t[:, 0] <= t1) if len(phi_t) else np.zeros(0, bool)
-        phi_slab = np.where(in_b.any(), phi_t[in_b, 1].mean() if in_b.any() else np.nan, np.nan)
+        phi_slab = float(np.nanmean(phi_t[in_b, 1])) if in_b.any() else float("nan")
         wf = slope_in(dis.time, dis.outlet_mass, t0, t1)
         s_in = (surf.step * dt >= t0) & (surf.step * dt <= t1)
         v_s = -slope_in(surf.step[s_in] * dt, surf.surface_height[s_in], t0, t1)
@@ -205,9 +205,10 @@ def extract_run(folder, batches: int, width_flow_rb: float, width_stress_rb: flo
                                "v_z": r.v_z})
         col = stress.isel(r=0)
         heights = stress.z.values - setup.z_outlet
+        partial = col.solid_fraction_species if "solid_fraction_species" in col else col.rho_species / rho_p
         for k, radius in enumerate(np.asarray(stress.species.values, float)):
             pk = col.kinetic_pressure_species.isel(species=k).values
-            ph = col.solid_fraction_species.isel(species=k).values
+            ph = partial.isel(species=k).values
             for h, p, f in zip(heights, pk, ph):
                 if h <= z_keep:
                     species_rows.append({"R_over_rb": key, "batch": b, "radius": radius, "height": h,
@@ -233,14 +234,28 @@ def extract_run(folder, batches: int, width_flow_rb: float, width_stress_rb: flo
             SPECIES: species_rows, MAPS: map_table}
 
 
+def significant(table: pd.DataFrame, digits: int = 6) -> pd.DataFrame:
+    """``table`` with every float rounded to ``digits`` significant digits (small CSV files)."""
+    out = table.copy()
+    for c in out.columns:
+        if out[c].dtype.kind == "f":
+            v = out[c].to_numpy()
+            with np.errstate(divide="ignore", invalid="ignore"):
+                mag = np.where(np.isfinite(v) & (v != 0), np.floor(np.log10(np.abs(v))), 0)
+                scale = 10.0 ** (digits - 1 - mag)
+                out[c] = np.where(np.isfinite(v), np.round(v * scale) / scale, v)
+    return out
+
+
 def extract(folders, batches: int, width_flow_rb: float, width_stress_rb: float) -> dict:
-    """Every table (:data:`TABLES`: name -> DataFrame) of the runs in ``folders`` (one per aperture)."""
+    """Every table (:data:`TABLES`: name -> DataFrame) of the runs in ``folders`` (one per aperture),
+    floats to 6 significant digits (5 for the maps)."""
     parts = [extract_run(f, batches, width_flow_rb, width_stress_rb) for f in folders]
     out = {}
     for name in TABLES:
         frames = [p[name] if isinstance(p[name], pd.DataFrame) else pd.DataFrame(p[name]) for p in parts]
-        out[name] = pd.concat(frames, ignore_index=True).sort_values(
-            ["R_over_rb"], kind="stable").reset_index(drop=True)
+        table = pd.concat(frames, ignore_index=True).sort_values(["R_over_rb"], kind="stable").reset_index(drop=True)
+        out[name] = significant(table, 5 if name == MAPS else 6)
     return out
 
 

@@ -249,11 +249,11 @@ def study_record(scale: Scale, folders: list[Path], tables: dict, cg_scaling: di
 
 def pd_read_steps(folder: Path) -> int | None:
     """The last step of a run's flow table."""
-    import pandas as pd
+    from .run_folder import RunFolder
 
     try:
-        return int(pd.read_csv(folder / "output" / "flow.csv", usecols=["step"]).step.max())
-    except (OSError, ValueError, KeyError):
+        return int(RunFolder(folder).flow().step.max())
+    except (OSError, ValueError, KeyError, AttributeError):
         return None
 
 

@@ -31,7 +31,7 @@ def synthetic_tables(seed: int = 1, noise: float = 0.01, phi_bulk: float = 0.60,
     rng = np.random.default_rng(seed)
     rho_p, g, Rc = 7520.0, 10.0, 16 * RB
     keys = (4.5, 5.5, 6.5)
-    radii = RB * (0.5 + np.arange(1, 8) / 16)
+    radii = RB * (0.5 + np.arange(2, 9) / 16)      # the deck's seven sizes, r_b/2 + r_b/8 to r_b
     t = {n: [] for n in pb.TABLES}
 
     def jitter(size=None):
