@@ -197,11 +197,13 @@ def run_folders(sweep: Path) -> list[Path]:
 
 
 def run_cg(folders: list[Path], work: Path) -> dict | None:
-    """``siloflow cg`` on each run (w = 2 mean radii, the Makefile's paper-b-quick grid), skipped
+    """``siloflow cg`` on each run (w = 2 mean radii, the Makefile's paper-b-quick grid, the lattice
+    sums), skipped
     where done, then ``siloflow cg-scaling`` across them; its JSON."""
     for f in folders:
         if not (f / "results" / "cg" / "cg_summary.json").is_file():
-            cmd = siloflow_cmd("cg", f, "--width", 2, "--unit", "radius", "--nr", 50, "--nz", 150)
+            cmd = siloflow_cmd("cg", f, "--width", 2, "--unit", "radius", "--nr", 50, "--nz", 150,
+                               "--method", "lattice")
             print("$", " ".join(map(str, cmd[2:])), flush=True)
             subprocess.run(cmd, check=True, cwd=ROOT)
     out = work / "cg_scaling.json"
