@@ -48,7 +48,7 @@ def synthetic_tables(seed: int = 1, noise: float = 0.01, phi_bulk: float = 0.60,
                            "settled_bulk_solid_fraction": 0.61, "engine_wall_s": 600.0})
         edges = np.linspace(1.3, 2.8, batches + 1)
         x = np.linspace(0.025, 0.975, 20)
-        z = np.arange(0.002, 8 * R, 0.004)
+        z = np.arange(-0.05, 8 * R, 0.004)          # the grid reaches below the outlet plane, as a run's does
         h_c = R if kinetic_scale_with_R else 5 * RB
         for b in range(batches):
             vc, phic = vc0 * jitter(), phic0 * jitter()
@@ -63,7 +63,7 @@ def synthetic_tables(seed: int = 1, noise: float = 0.01, phi_bulk: float = 0.60,
                 t[pb.OUTLET].append({"R_over_rb": k, "batch": b, "r": xi * R, "r_over_R": xi,
                                      "solid_fraction": phic * (1 - 0.2 * xi ** 2) * (1 + 0.1 * e),
                                      "v_z": -vc * math.sqrt(1 - xi ** 2) * (1 + 0.1 * e)})
-            pc = 3000 * (1 - np.exp(-z / (2 * (R if contact_depends_on_R else 5.5 * RB)))) * jitter(len(z)) ** 0.1
+            pc = 3000 * (1 - np.exp(-np.clip(z, 0, None) / (2 * (R if contact_depends_on_R else 5.5 * RB)))) * jitter(len(z)) ** 0.1
             pk = 2.0 * np.exp(-((z - hc_b) / (0.8 * h_c)) ** 2) * jitter(len(z)) ** 0.1
             for zi, c, kk in zip(z, pc, pk):
                 t[pb.AXIAL].append({"R_over_rb": k, "batch": b, "height": zi, "contact_pressure": c,

@@ -35,9 +35,11 @@ def flow_rates_plot(a: PaperBAnalysis):
     rho_p = a.numbers.get("rho_p", float("nan"))
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.5))
     flow = a.curves["flow"]
+    top = 0.0
     for k in keys:
-        f = flow[flow.R_over_rb == k]
+        f = flow[(flow.R_over_rb == k) & (flow.time >= a.curves["t_open"][k] - 2 * t_d)]
         t = (f.time - a.curves["t_open"][k]) / t_d
+        top = max(top, float(np.nanmax(f.Wf_kg_s)) if len(f) else 0.0)
         ax1.plot(t, f.Wf_kg_s, "o", ms=2.5, color=col[k], label=f"Wf, R = {k:g} r_b")
         ax1.plot(t, f.Wr_kg_s, "-", lw=1, color=col[k], label=f"Wr, R = {k:g} r_b")
         scale = rho_p * a.curves["phi_c"][k].value * a.curves["v_c"][k].value * math.pi * R[k] ** 2
@@ -46,6 +48,7 @@ def flow_rates_plot(a: PaperBAnalysis):
         ax1.axvspan((t0 - a.curves["t_open"][k]) / t_d, (t1 - a.curves["t_open"][k]) / t_d, color=col[k], alpha=0.05)
     ax1.set(xlabel="(t - t_open) / t_d", ylabel="flow rate (kg/s)", title="Wf (symbols), Wr (lines); shaded: steady window")
     ax2.set(xlabel="(t - t_open) / t_d", ylabel="Wf / (rho_p phi_c v_c pi R^2)", title="rescaled flow rate")
+    ax1.set_ylim(0, 1.3 * top if top > 0 else None)
     ax1.legend(fontsize=7, ncol=2)
     ax2.legend(fontsize=7)
     ax2.set_ylim(0, None)
