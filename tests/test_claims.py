@@ -9,8 +9,19 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from postprocess.claims import (FAILS, HOLDS, NOT_RESOLVED, Estimate, collapse, follows, greater, monotonic,
-                                power_law_exponent, ratio_about, within)
+from postprocess.claims import (
+    FAILS,
+    HOLDS,
+    NOT_RESOLVED,
+    Estimate,
+    collapse,
+    follows,
+    greater,
+    monotonic,
+    power_law_exponent,
+    ratio_about,
+    within,
+)
 
 
 def test_estimate_intervals_are_student_and_normal():

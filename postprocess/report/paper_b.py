@@ -41,7 +41,8 @@ def flow_rates_plot(a: PaperBAnalysis):
         t = (f.time - a.curves["t_open"][k]) / t_d
         top = max(top, float(np.nanmax(f.Wf_kg_s)) if len(f) else 0.0)
         ax1.plot(t, f.Wf_kg_s, "o", ms=2.5, color=col[k], label=f"Wf, R = {k:g} r_b")
-        ax1.plot(t, f.Wr_kg_s, "-", lw=1, color=col[k], label=f"Wr, R = {k:g} r_b")
+        wr = f.Wr_kg_s.notna()          # Wr exists at the dump frames only, Wf at every sample
+        ax1.plot(t[wr], f.Wr_kg_s[wr], "-", lw=1, color=col[k], label=f"Wr, R = {k:g} r_b")
         scale = rho_p * a.curves["phi_c"][k].value * a.curves["v_c"][k].value * math.pi * R[k] ** 2
         ax2.plot(t, f.Wf_kg_s / scale, "o", ms=2.5, color=col[k], label=f"R = {k:g} r_b")
         t0, t1 = a.curves["window"][k]
