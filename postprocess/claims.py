@@ -22,6 +22,8 @@ import numpy as np
 from scipy import stats
 
 HOLDS, FAILS, NOT_RESOLVED = "holds", "fails", "not resolved"
+#: the verdict of a report row that shows a figure or a number the paper states no test for
+SHOWN = "shown"
 Verdict = Literal["holds", "fails", "not resolved"]
 #: the confidence of every verdict unless told otherwise
 CONFIDENCE = 0.95
@@ -169,6 +171,49 @@ def _combine(verdicts: Sequence[Verdict]) -> Verdict:
     if FAILS in verdicts:
         return FAILS
     return HOLDS if all(v == HOLDS for v in verdicts) else NOT_RESOLVED
+
+
+def all_of(verdicts: Sequence[Verdict]) -> Verdict:
+    """A claim made of parts (the same claim at several apertures, say): fails if any part
+    fails, holds if every part holds, else not resolved. The parts should be computed at
+    Bonferroni's level, ``bonferroni(n)``, so that the whole claim keeps the confidence."""
+    verdicts = list(verdicts)
+    if not verdicts or any(v not in (HOLDS, FAILS, NOT_RESOLVED) for v in verdicts):
+        raise ValueError(f"verdicts to combine: {verdicts}")
+    return _combine(verdicts)
+
+
+def bonferroni(parts: int, confidence: float = CONFIDENCE) -> float:
+    """The confidence of each of ``parts`` tests whose joint claim is held to ``confidence``."""
+    if parts < 1:
+        raise ValueError("at least one part")
+    return 1 - (1 - confidence) / parts
+
+
+def pooled_mean(estimates: Sequence[Estimate]) -> Estimate:
+    """The plain mean of independent estimates (e.g. one per aperture): errors in quadrature
+    over n, Welch-Satterthwaite's dof."""
+    if not estimates:
+        raise ValueError("nothing to pool")
+    n = len(estimates)
+    parts = [(e.stderr / n, e.dof) for e in estimates]
+    return Estimate(sum(e.value for e in estimates) / n, math.sqrt(sum(s * s for s, _ in parts)),
+                    _welch_dof(parts))
+
+
+@dataclass(frozen=True)
+class ClaimRow:
+    """One row of a claims report (papers A and B): the claim, the paper's statement or number,
+    ours and its uncertainty (as a reader reads them), the computed verdict (:data:`HOLDS`,
+    :data:`FAILS`, :data:`NOT_RESOLVED`, or ``"shown"`` for a figure-only row that states no
+    testable number) and a note (how it was measured, the tolerance, the test)."""
+
+    claim: str
+    paper: str
+    ours: str
+    uncertainty: str
+    verdict: str
+    note: str = ""
 
 
 def power_law_exponent(x: Sequence[float], y: Sequence[Estimate]) -> Estimate:

@@ -3,7 +3,7 @@
 Paper A (``../shared/papers/multi-element-silo-discharge.txt``, numbers in ``REFERENCES.md``) runs
 its sphere model and its multi-element model (3-sphere clumps plus dust) in a slab silo and
 compares them with each other and with a laboratory test. :func:`paper_a_claims` turns one or more
-run folders of each model into claim rows (:class:`ClaimRow`): the paper's number, ours with
+run folders of each model into claims (:class:`MeasuredClaim`): the paper's number, ours with
 its uncertainty, and a verdict computed by :mod:`postprocess.claims`. Nothing here writes files;
 ``postprocess.report.paper_a`` does.
 
@@ -27,15 +27,7 @@ import pandas as pd
 from siloflow.errors import ReadError
 from siloflow.run_folder import RESULT_TABLES, RunFolder
 
-from .claims import (
-    FAILS,
-    HOLDS,
-    NOT_RESOLVED,
-    Estimate,
-    greater,
-    ratio_about,
-    weighted_sum,
-)
+from .claims import ClaimRow, Estimate, greater, ratio_about, weighted_sum
 from .coordination import Coordination, normal_force, rows_of
 from .dumps import Frame, read_frames
 from .force_chains import ForceChains, force_chains
@@ -67,11 +59,11 @@ MODELS = ("spheres", "clumps")
 
 
 @dataclass(frozen=True)
-class ClaimRow:
-    """One row of a claims report: the ``claim``, what the paper says (``paper``, text), our
-    measurement (``ours``, an :class:`Estimate` in ``unit``, or None), the ``verdict`` (holds /
-    fails / not resolved, or "shown" for a row that only places numbers side by side) and how the
-    number and its uncertainty were obtained (``basis``)."""
+class MeasuredClaim:
+    """One claim as measured: its report ``section``, the ``claim``, what the paper says (``paper``,
+    text), our measurement (``ours``, an :class:`Estimate` in ``unit``, or None), the ``verdict``
+    (holds / fails / not resolved, or "shown" for a row that only places numbers side by side) and
+    how the number and its uncertainty were obtained (``basis``). :meth:`row` is its report row."""
 
     section: str
     claim: str
@@ -80,6 +72,28 @@ class ClaimRow:
     unit: str
     verdict: str
     basis: str
+
+    def row(self) -> ClaimRow:
+        """The report's row (``postprocess.claims.ClaimRow``): ours and its 95 % interval as text."""
+        if self.ours is None:
+            return ClaimRow(f"{self.section}: {self.claim}", self.paper, "not measured", "", self.verdict, self.basis)
+        lo, hi = self.ours.interval()
+        unit = f" {self.unit}" if self.unit else ""
+        return ClaimRow(f"{self.section}: {self.claim}", self.paper, f"{self.ours.value:.4g}{unit}",
+                        f"95 % [{lo:.4g}, {hi:.4g}]", self.verdict, self.basis)
+
+    def to_json(self) -> dict:
+        """JSON-ready (the estimate as value, stderr, dof; an infinite dof as null)."""
+        e = self.ours
+        return {"section": self.section, "claim": self.claim, "paper": self.paper, "unit": self.unit,
+                "verdict": self.verdict, "basis": self.basis, "ours": None if e is None else
+                {"value": e.value, "stderr": e.stderr, "dof": None if math.isinf(e.dof) else e.dof}}
+
+    @classmethod
+    def from_json(cls, d: dict) -> "MeasuredClaim":
+        e = d.get("ours")
+        ours = None if e is None else Estimate(e["value"], e["stderr"], math.inf if e["dof"] is None else e["dof"])
+        return cls(d["section"], d["claim"], d["paper"], ours, d["unit"], d["verdict"], d["basis"])
 
 
 @dataclass
@@ -324,7 +338,7 @@ def table_3(models: dict[str, ModelRuns], pressure_scale: float) -> tuple[pd.Dat
 
 
 def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale: float,
-                   time_scale: float | None = None) -> tuple[list[ClaimRow], dict]:
+                   time_scale: float | None = None) -> tuple[list[MeasuredClaim], dict]:
     """Paper A's claims on the runs of its sphere model and its multi-element model.
 
     ``length_scale``: the runs' silo over the paper's (1/4 at quick scale). Pressures scale to
@@ -338,20 +352,20 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
     t_scale = math.sqrt(length_scale) if time_scale is None else time_scale
     seeds = {m: len(r.folders) for m, r in models.items()}
     per = "seed" if min(seeds.values()) > 1 else "side wall of one run"
-    rows: list[ClaimRow] = []
+    rows: list[MeasuredClaim] = []
 
     t3, w = table_3(models, p_scale)
     for _, r in t3.iterrows():
         for m in MODELS:
             e = max_dynamic_pressure(models[m], int(r.point)).scaled(p_scale)
             paper_value = r[f"paper_{m}_Pa"]
-            rows.append(ClaimRow(
+            rows.append(MeasuredClaim(
                 "Table 3: maximum dynamic wall pressure", f"point {int(r.point)}, {m} model",
                 f"test {r.test_Pa:.1f} Pa; paper's model {paper_value:.1f} Pa ({100 * (paper_value / r.test_Pa - 1):+.1f} %)",
                 e, "Pa", "shown",
                 f"ours {100 * (e.value / r.test_Pa - 1):+.1f} % from the test; the maximum after opening per {per}, "
                 f"x {p_scale:g} to the paper's silo"))
-    rows.append(ClaimRow(
+    rows.append(MeasuredClaim(
         "Eq. 34: error against the test", "the clump model's W is lower than the sphere model's",
         f"W: clumps {100 * PAPER_W['clumps']:.2f} %, spheres {100 * PAPER_W['spheres']:.3f} % (on the full series)",
         w["spheres"].minus(w["clumps"]), "", greater(w["spheres"], w["clumps"]),
@@ -370,7 +384,7 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
 
     # discharge: longer for clumps <=> less bed volume per second through the same outlet
     q = measured("volumetric_flow_rate_m3_s", volumetric_flow_rate)
-    rows.append(ClaimRow(
+    rows.append(MeasuredClaim(
         "Trends", "the clump model discharges longer",
         f"{PAPER_DISCHARGE_TIME['clumps']} s against {PAPER_DISCHARGE_TIME['spheres']} s",
         q["spheres"].over(q["clumps"]), "", greater(q["spheres"], q["clumps"]),
@@ -378,7 +392,7 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
         f"model's volumetric flow rate over the clump model's (> 1: clumps longer); spheres {_fmt(q['spheres'], 'm3/s')}, "
         f"clumps {_fmt(q['clumps'], 'm3/s')}; steady mass flow rate over the bed's bulk density"))
     cv = measured("pressure_variation", pressure_variation)
-    rows.append(ClaimRow(
+    rows.append(MeasuredClaim(
         "Trends", "the clump model's wall pressure fluctuates less",
         "Fig. 11-12: the multi-element model's pressure fluctuates less and more gently",
         cv["spheres"].minus(cv["clumps"]), "", greater(cv["spheres"], cv["clumps"]),
@@ -387,25 +401,25 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
         f"{_fmt(cv['clumps'])}; the row's number is the difference"))
     por = measured("porosity_3d", porosity_3d)
     for m in MODELS:
-        rows.append(ClaimRow(
+        rows.append(MeasuredClaim(
             "Meso-structure", f"porosity of the {m} model (3D-converted)",
             f"{100 * PAPER_POROSITY[m]:.2f} % (test {100 * PAPER_POROSITY['test']:.2f} %)",
             por[m].scaled(100.0), "%", "shown",
             f"settled bed, the case's measuring circles converted by Eq. 36-37 as docs/papers.md reads them; "
             f"{100 * (por[m].value - PAPER_POROSITY['test']):+.2f} points from the test"))
-    rows.append(ClaimRow(
+    rows.append(MeasuredClaim(
         "Trends", "the clump model packs denser (lower porosity)",
         f"{100 * PAPER_POROSITY['clumps']:.2f} % against {100 * PAPER_POROSITY['spheres']:.2f} %",
         por["spheres"].minus(por["clumps"]).scaled(100.0), "points", greater(por["spheres"], por["clumps"]),
         "sphere model's porosity minus the clump model's, per measuring region"))
     z = measured("coordination", coordination_by_layer)
     for m in MODELS:
-        rows.append(ClaimRow(
+        rows.append(MeasuredClaim(
             "Meso-structure", f"coordination number of the {m} model", f"{PAPER_COORDINATION[m]} (2D model)",
             z[m], "", "shown",
             "contacts between distinct grains per grain (dust contacts counted, rattlers kept) in the settled "
             "core, per horizontal layer; ours is a slab one grain thick, the paper's a 2D model"))
-    rows.append(ClaimRow(
+    rows.append(MeasuredClaim(
         "Trends", "the clump model has a higher coordination number",
         f"{PAPER_COORDINATION['clumps']} against {PAPER_COORDINATION['spheres']}",
         z["clumps"].minus(z["spheres"]), "", greater(z["clumps"], z["spheres"]),
@@ -419,7 +433,7 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
     numbers["contacts_time_after_open_s"] = t_contacts
     capped = ", capped within the runs' discharge" if t_contacts < PAPER_CONTACT_TIME * t_scale else ""
     for m in MODELS:
-        rows.append(ClaimRow(
+        rows.append(MeasuredClaim(
             "Meso-structure", f"contacts per grain of the {m} model at {t_contacts:.3g} s of discharge",
             f"{PAPER_CONTACTS[m]:,} contacts at {PAPER_CONTACT_TIME} s among {PAPER_GRAINS[m]:,} grains "
             f"({PAPER_CONTACTS[m] / PAPER_GRAINS[m]:.3g} per grain)",
@@ -428,7 +442,7 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
             f"{t_contacts:.3g} s after opening (the paper's {PAPER_CONTACT_TIME} s x {t_scale:.3g}"
             f"{capped})"))
     paper_ratio = (PAPER_CONTACTS["clumps"] / PAPER_GRAINS["clumps"]) / (PAPER_CONTACTS["spheres"] / PAPER_GRAINS["spheres"])
-    rows.append(ClaimRow(
+    rows.append(MeasuredClaim(
         "Trends", "the clump model has about twice the contacts",
         f"{PAPER_CONTACTS['clumps']:,} against {PAPER_CONTACTS['spheres']:,} (x{PAPER_CONTACTS['clumps'] / PAPER_CONTACTS['spheres']:.2f}; "
         f"x{paper_ratio:.2f} per grain)",
@@ -436,7 +450,7 @@ def paper_a_claims(spheres: Sequence[Path], clumps: Sequence[Path], length_scale
         f"the ratio of contacts per grain, clumps over spheres, against the paper's per grain, within "
         f"{100 * ABOUT:.0f} %"))
     arch = measured("transverse_strong_contacts", lambda r: arching_fraction(r, t_contacts, spread))
-    rows.append(ClaimRow(
+    rows.append(MeasuredClaim(
         "Trends", "the clump model shows arching force chains",
         "Fig. 14-15: several transverse arching chains in the multi-element model",
         arch["clumps"].minus(arch["spheres"]), "", greater(arch["clumps"], arch["spheres"]),
@@ -487,11 +501,3 @@ def chains_from_table(table: pd.DataFrame, step: int = 0) -> ForceChains:
     """:func:`chains_table` back as ``ForceChains`` (the mid-plane slice, ``thickness`` unknown: 0)."""
     seg = table[["x0", "z0", "x1", "z1"]].to_numpy(float).reshape(-1, 2, 2)
     return ForceChains(step, 1, seg, table.fn.to_numpy(float), 0.0, 0.0)
-
-
-def verdict_counts(rows: Sequence[ClaimRow]) -> dict[str, int]:
-    """How many rows hold, fail, are not resolved, or are shown."""
-    out = {HOLDS: 0, FAILS: 0, NOT_RESOLVED: 0, "shown": 0}
-    for r in rows:
-        out[r.verdict] = out.get(r.verdict, 0) + 1
-    return out

@@ -9,8 +9,19 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from postprocess.claims import (FAILS, HOLDS, NOT_RESOLVED, Estimate, collapse, follows, greater, monotonic,
-                                power_law_exponent, ratio_about, within)
+from postprocess.claims import (
+    FAILS,
+    HOLDS,
+    NOT_RESOLVED,
+    Estimate,
+    collapse,
+    follows,
+    greater,
+    monotonic,
+    power_law_exponent,
+    ratio_about,
+    within,
+)
 
 
 def test_estimate_intervals_are_student_and_normal():
@@ -105,3 +116,24 @@ def test_power_law_exponent():
     s = power_law_exponent(R, scattered)
     unscaled = 0.001 / math.sqrt(np.sum((np.log(R) - np.log(R).mean()) ** 2))    # what the errors alone give
     assert s.dof == 2 and s.stderr > 10 * unscaled and within(s, 0.5, 0.1) != FAILS
+
+
+def test_all_of_bonferroni_and_pooled_mean():
+    from postprocess.claims import all_of, bonferroni, pooled_mean
+
+    assert all_of([HOLDS, HOLDS]) == HOLDS
+    assert all_of([HOLDS, NOT_RESOLVED]) == NOT_RESOLVED
+    assert all_of([NOT_RESOLVED, FAILS, HOLDS]) == FAILS
+    with pytest.raises(ValueError):
+        all_of([])
+    with pytest.raises(ValueError):
+        all_of(["maybe"])
+    assert bonferroni(1) == pytest.approx(0.95) and bonferroni(5) == pytest.approx(0.99)
+    # three apertures each at 0.60 +/- 0.003: the pooled mean holds 0.60 +/- 0.02; at 0.65 it fails;
+    # with errors of 0.03 it is not resolved
+    p = pooled_mean([Estimate(0.59, 0.003, 4), Estimate(0.60, 0.003, 4), Estimate(0.61, 0.003, 4)])
+    assert p.value == pytest.approx(0.60) and p.stderr == pytest.approx(0.003 / math.sqrt(3))
+    assert p.dof == pytest.approx(12.0)
+    assert within(p, 0.60, 0.02) == HOLDS
+    assert within(pooled_mean([Estimate(0.65, 0.003, 4)] * 3), 0.60, 0.02) == FAILS
+    assert within(pooled_mean([Estimate(0.61, 0.03, 4)] * 3), 0.60, 0.02) == NOT_RESOLVED

@@ -130,10 +130,10 @@ def test_transverse_share_counts_strong_horizontal_contacts_below_the_hopper_top
 
 
 def _report_inputs():
-    rows = [pa.ClaimRow("Trends", "a claim that holds", "paper says so", Estimate(2.0, 0.1, 5), "", HOLDS, "how"),
-            pa.ClaimRow("Trends", "one that fails", "paper", Estimate(-1.0, 0.1, 5), "", FAILS, "how"),
-            pa.ClaimRow("Trends", "one not resolved", "paper", Estimate(0.1, 1.0, 1), "Pa", NOT_RESOLVED, "how"),
-            pa.ClaimRow("Meso", "shown", "paper", None, "", "shown", "no sample")]
+    rows = [pa.MeasuredClaim("Trends", "a claim that holds", "paper says so", Estimate(2.0, 0.1, 5), "", HOLDS, "how"),
+            pa.MeasuredClaim("Trends", "one that fails", "paper", Estimate(-1.0, 0.1, 5), "", FAILS, "how"),
+            pa.MeasuredClaim("Trends", "one not resolved", "paper", Estimate(0.1, 1.0, 1), "Pa", NOT_RESOLVED, "how"),
+            pa.MeasuredClaim("Meso", "shown", "paper", None, "", "shown", "no sample")]
     t3 = [{"point": k, "test_Pa": v[0], "paper_spheres_Pa": v[1], "ours_spheres_Pa": v[1] * 1.1} for k, v in
           pa.TABLE_3.items()]
     numbers = {"table_3": t3, "contacts_time_after_open_s": 0.4, "pressure_scale": 4.0, "time_scale": 0.5}
@@ -157,7 +157,8 @@ def test_report_is_written_and_regenerated_byte_for_byte(tmp_path):
     md = first[Path("report.md")].decode()
     for verdict in (HOLDS, FAILS, NOT_RESOLVED, "shown"):
         assert f"| {verdict} |" in md
-    assert "2 [1.743, 2.257]" in md                 # 2.0 +/- t(0.975, 5) 0.1
+    assert "| 2 | 95 % [1.743, 2.257] |" in md        # 2.0 +/- t(0.975, 5) 0.1
+    assert "3 claims tested: 1 hold, 1 fail, 1 not resolved; 1 rows shown" in md
     regenerate_paper_a_report(tmp_path / "a")
     again = {p.relative_to(tmp_path / "a"): p.read_bytes() for p in (tmp_path / "a").rglob("*") if p.is_file()}
     assert again == first

@@ -1,95 +1,77 @@
-"""A paper's claims report: the claim rows (``postprocess.paper_a.ClaimRow``) as a table with
-verdicts, the tables and figures behind them, written as report.md and a self-contained
-report.html (``html_page``), and the data that regenerates both (``data/``) without a run."""
+"""A paper's claims report (issue 38; papers A and B): the rows of
+:class:`postprocess.claims.ClaimRow` as one table, in report.md and report.html, with the
+figures as PNG beside them (and embedded in the HTML) and the result tables the report was made
+from. Generic: the paper's own text and figures come as blocks and Matplotlib figures."""
 from __future__ import annotations
 
-import json
-import math
 from pathlib import Path
-
-import pandas as pd
 
 from siloflow.atomic_files import write_text
 
-from ..claims import CONFIDENCE, Estimate
+from ..claims import FAILS, HOLDS, NOT_RESOLVED, SHOWN, ClaimRow
 from .files import write_figures, write_tables
 from .html_page import report_html
 from .text import Items, Table, Text, Title, markdown
 
-#: the data folder beside a report, from which it is regenerated
-DATA = "data"
+REPORT_MD, REPORT_HTML = "report.md", "report.html"
+#: the claims table's columns
+CLAIM_HEADER = ["Claim", "Paper", "Ours", "Uncertainty", "Verdict", "Note"]
+def _cell(text) -> str:
+    """A table cell on one line; a ``|`` (which would split a Markdown cell) written as ``/``."""
+    return " ".join(str(text).replace("|", "/").split())
 
 
-def _number(x: float) -> str:
-    return f"{x:.4g}"
+def claims_table(rows: list[ClaimRow]) -> Table:
+    """The claims as one table block (every cell on one line)."""
+    return Table(list(CLAIM_HEADER), [[_cell(v) for v in (r.claim, r.paper, r.ours, r.uncertainty, r.verdict, r.note)]
+                                      for r in rows])
 
 
-def ours_text(row) -> str:
-    """Our value with its 95 % interval, or why there is none."""
-    e = row.ours
-    if e is None:
-        return "not measured"
-    lo, hi = e.interval(CONFIDENCE)
-    unit = f" {row.unit}" if row.unit else ""
-    return f"{_number(e.value)}{unit} [{_number(lo)}, {_number(hi)}]"
+def verdict_line(rows: list[ClaimRow]) -> Text:
+    """'11 claims tested: 6 hold, 2 fail, 3 not resolved; 2 rows shown (figures).'"""
+    n = {v: sum(r.verdict == v for r in rows) for v in (HOLDS, FAILS, NOT_RESOLVED, SHOWN)}
+    tested = n[HOLDS] + n[FAILS] + n[NOT_RESOLVED]
+    return Text(f"{tested} claims tested: {n[HOLDS]} hold, {n[FAILS]} fail, {n[NOT_RESOLVED]} not resolved; "
+                f"{n[SHOWN]} rows shown without a test.")
 
 
-def claims_table(rows) -> Table:
-    """The claims as a report table: section, claim, paper, ours [95 % interval], verdict, how."""
-    return Table(["section", "claim", "paper", f"ours [{100 * CONFIDENCE:.0f} % interval]", "verdict", "how measured"],
-                 [[r.section, r.claim, r.paper, ours_text(r), r.verdict, r.basis] for r in rows])
+VERDICT_LEGEND = Items([
+    f"- {HOLDS}: the claim is true over the whole 95 % interval of our number (Student's t; claims "
+    "made at several points or apertures at once held to 95 % jointly, Bonferroni);",
+    f"- {FAILS}: it is false over the whole interval;",
+    f"- {NOT_RESOLVED}: the interval holds values for which it is true and values for which it is false;",
+    f"- {SHOWN}: a number or figure the paper states no testable claim about.",
+], lead="Verdicts (computed by postprocess/claims.py from the numbers, never typed):")
 
 
-def rows_to_json(rows) -> list[dict]:
-    """Claim rows as JSON-ready dicts (an estimate as value, stderr, dof; inf as null)."""
-    out = []
-    for r in rows:
-        e = r.ours
-        out.append({"section": r.section, "claim": r.claim, "paper": r.paper, "unit": r.unit, "verdict": r.verdict,
-                    "basis": r.basis, "ours": None if e is None else
-                    {"value": e.value, "stderr": e.stderr, "dof": None if math.isinf(e.dof) else e.dof}})
-    return out
+def claims_blocks(title: str, intro: list, rows: list[ClaimRow], after: list | None = None,
+                  figures: list | None = None) -> list:
+    """The report's blocks: the title, ``intro`` blocks, the verdict count and legend, the claims
+    table, ``after`` blocks and a Markdown image line per figure file name in ``figures``."""
+    blocks = [Title(title), *intro, verdict_line(rows), VERDICT_LEGEND, claims_table(rows), *(after or [])]
+    if figures:
+        blocks.append(Text("## Figures"))
+        blocks += [Text(f"![{name}]({name})") for name in figures]
+    return blocks
 
 
-def rows_from_json(data: list[dict], row_type) -> list:
-    """Claim rows (of ``row_type``) back from :func:`rows_to_json`."""
-    rows = []
-    for d in data:
-        e = d.get("ours")
-        ours = None if e is None else Estimate(e["value"], e["stderr"], math.inf if e["dof"] is None else e["dof"])
-        rows.append(row_type(d["section"], d["claim"], d["paper"], ours, d["unit"], d["verdict"], d["basis"]))
-    return rows
-
-
-def write_claims_report(folder, title: str, lead: list, rows, tables: dict[str, pd.DataFrame],
-                        figures: dict, data: dict) -> list[Path]:
-    """Write report.md and report.html (blocks: ``title``, the ``lead`` paragraphs, the verdict
-    counts, the claims table, then each table of ``tables``), the figures (file name ->
-    Figure), the tables as CSV, and ``data/claims.json`` (the rows and ``data``) beside them.
-    Returns the paths written."""
+def write_claims_report(folder, title: str, blocks: list, figures: dict | None = None,
+                        tables: dict | None = None, results_dir: str | None = "results",
+                        html_tables: dict | None = None) -> list[Path]:
+    """Write a claims report into ``folder`` (made if missing): ``figures`` ({file name: Figure}:
+    PNG beside the report, closed), ``tables`` ({file name: DataFrame}: CSV into
+    ``folder/results_dir``), report.md (``blocks``) and report.html (the blocks, each figure
+    embedded, ``html_tables`` shown whole or as statistics). Every file atomically; returns the
+    paths written."""
     folder = Path(folder)
-    (folder / DATA).mkdir(parents=True, exist_ok=True)
-    counts = {}
-    for r in rows:
-        counts[r.verdict] = counts.get(r.verdict, 0) + 1
-    blocks = [Title(title), *[Text(t) for t in lead],
-              Items([f"- {k}: {v}" for k, v in sorted(counts.items())], lead="Verdicts:"),
-              claims_table(rows)]
-    for name, table in tables.items():
-        blocks.append(Text(f"{name}:"))
-        blocks.append(Table(list(table.columns), [[_cell(v) for v in rec] for rec in table.itertuples(index=False)]))
-    written = write_figures(figures, folder)
-    pngs = {p.name: p.read_bytes() for p in written if p.suffix == ".png"}
-    written += write_tables({f"{name}.csv": t for name, t in tables.items()}, folder / DATA)
-    text = markdown(blocks) + "".join(f"\n![{name}]({name})\n" for name in pngs)
-    write_text(folder / "report.md", text)
-    write_text(folder / "report.html", report_html(blocks, title, {}, pngs, kind="Claims report"))
-    write_text(folder / DATA / "claims.json", json.dumps({"rows": rows_to_json(rows), **data}, indent=1,
-                                                         allow_nan=False) + "\n")
-    return written + [folder / "report.md", folder / "report.html", folder / DATA / "claims.json"]
-
-
-def _cell(value) -> str:
-    if isinstance(value, float):
-        return _number(value)
-    return str(value)
+    folder.mkdir(parents=True, exist_ok=True)
+    figures, tables = figures or {}, tables or {}
+    written = write_tables(tables, folder / results_dir) if tables and results_dir else []
+    written += write_figures(figures, folder)
+    write_text(folder / REPORT_MD, markdown(blocks))
+    pngs = {name: (folder / name).read_bytes() for name in figures}
+    html_blocks = [b for b in blocks if not (isinstance(b, Text) and b.text.startswith("!["))]
+    html_blocks = [Text(b.text.lstrip("# ")) if isinstance(b, Text) and b.text.startswith("## ") else b
+                   for b in html_blocks]
+    write_text(folder / REPORT_HTML, report_html(html_blocks, folder.name, html_tables or {}, pngs, title=title))
+    return written + [folder / REPORT_MD, folder / REPORT_HTML]

@@ -9,7 +9,7 @@ import html
 
 import pandas as pd
 
-from .text import Items, Table, Text, Title
+from .text import Items, Table, Title
 
 #: report.html allows nothing but data: images and its own inline style
 CONTENT_SECURITY_POLICY = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
@@ -75,10 +75,10 @@ def _html_table(name: str, table: pd.DataFrame) -> str:
             f'<div class="wide">{table.describe().to_html(border=0, na_rep="nan", escape=True)}</div>')
 
 
-def report_html(blocks, name: str, tables: dict, figures: dict, kind: str = "Run report") -> str:
+def report_html(blocks, name: str, tables: dict, figures: dict, title: str | None = None) -> str:
     """report.html: the report's blocks, every figure (``figures``: file name -> PNG bytes)
-    embedded as a base64 ``data:`` URL, and every CSV table (``tables``: file name -> DataFrame);
-    its title is ``kind: name``."""
+    embedded as a base64 ``data:`` URL, and every CSV table (``tables``: file name -> DataFrame).
+    ``title``: the page's title (default "Run report: ``name``")."""
     figs = "\n".join(
         f'<figure><img src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}" '
         f'alt="{html.escape(fname, quote=True)}"><figcaption>{_esc(fname)}</figcaption></figure>'
@@ -87,7 +87,7 @@ def report_html(blocks, name: str, tables: dict, figures: dict, kind: str = "Run
     return (
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
         f"<meta http-equiv=\"Content-Security-Policy\" content=\"{CONTENT_SECURITY_POLICY}\">\n"
-        f"<title>{_esc(f'{kind}: {name}')}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n"
+        f"<title>{_esc(title or f'Run report: {name}')}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n"
         f"{html_blocks(blocks)}\n"
         + (f"<h2>Figures</h2>\n{figs}\n" if figs else "")
         + (f"<h2>Tables</h2>\n<p class=\"note\">The tables written beside this report (results/).</p>\n{csvs}\n"

@@ -12,15 +12,24 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import pandas as pd
 
+from siloflow.atomic_files import write_text
 from siloflow.errors import ReadError
 
-from ..paper_a import FIGURE_POINTS, MODELS, ClaimRow, chains_from_table, chains_table
-from .claims_report import DATA, rows_from_json, write_claims_report
+from ..paper_a import (
+    FIGURE_POINTS,
+    MODELS,
+    MeasuredClaim,
+    chains_from_table,
+    chains_table,
+)
+from .claims_report import claims_blocks, write_claims_report
 from .figures import LineCollection
-from .files import write_tables
+from .text import Table, Text
+
+#: the data folder beside the report, from which it is regenerated
+DATA = "data"
 
 TITLE = "Paper A: the multi-element wheat model against spheres"
-TABLES = ("table_3", "pressure_series", "force_chains_spheres", "force_chains_clumps")
 
 
 def pressure_plot(series: pd.DataFrame):
@@ -74,27 +83,40 @@ def lead_text(meta: dict) -> list[str]:
     ]
 
 
-def write_paper_a_report(folder, rows: list[ClaimRow], numbers: dict, meta: dict, series: pd.DataFrame,
+def write_paper_a_report(folder, claims: list[MeasuredClaim], numbers: dict, meta: dict, series: pd.DataFrame,
                          chains: dict) -> list[Path]:
-    """Write reports/paper_a (``folder``): report.md, report.html, figures, ``data/``."""
-    tables = {"table_3": pd.DataFrame(numbers["table_3"]), "pressure_series": series,
-              **{f"force_chains_{m}": chains_table(c) for m, c in chains.items()}}
+    """Write reports/paper_a (``folder``): report.md, report.html, the figures, and ``data/``
+    (Table 3, the pressure series, the force chains, claims.json) from which
+    :func:`regenerate_paper_a_report` writes it again."""
+    folder = Path(folder)
+    table_3 = pd.DataFrame(numbers["table_3"])
+    tables = {"table_3.csv": table_3, "pressure_series.csv": series,
+              **{f"force_chains_{m}.csv": chains_table(c) for m, c in chains.items()}}
     figures = {"pressure_points.png": pressure_plot(series),
                "force_chains.png": chains_plot(chains, numbers["contacts_time_after_open_s"])}
-    shown = {"table_3": tables["table_3"]}
-    written = write_claims_report(folder, TITLE, lead_text(meta), rows, shown, figures,
-                                  {"numbers": numbers, "meta": meta})
-    return written + write_tables({f"{name}.csv": tables[name] for name in TABLES[1:]}, Path(folder) / DATA)
+    after = [Text("Table 3's layout (maximum dynamic wall pressure, Pa; ours scaled to the paper's silo, with the "
+                  "95 % interval's ends):"),
+             Table(list(table_3.columns), [[_cell(v) for v in rec] for rec in table_3.itertuples(index=False)])]
+    blocks = claims_blocks(TITLE, [Text(t) for t in lead_text(meta)], [c.row() for c in claims], after,
+                           list(figures))
+    written = write_claims_report(folder, TITLE, blocks, figures, tables, results_dir=DATA)
+    write_text(folder / DATA / "claims.json", json.dumps(
+        {"claims": [c.to_json() for c in claims], "numbers": numbers, "meta": meta}, indent=1, allow_nan=False) + "\n")
+    return written + [folder / DATA / "claims.json"]
+
+
+def _cell(value) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
 def regenerate_paper_a_report(folder) -> list[Path]:
-    """Write the report in ``folder`` again from its ``data/`` (no run needed)."""
+    """Write the report in ``folder`` again from its ``data/`` (no run)."""
     folder = Path(folder)
     try:
         data = json.loads((folder / DATA / "claims.json").read_text(encoding="utf-8"))
         series = pd.read_csv(folder / DATA / "pressure_series.csv")
         chains = {m: chains_from_table(pd.read_csv(folder / DATA / f"force_chains_{m}.csv")) for m in MODELS}
+        claims = [MeasuredClaim.from_json(d) for d in data["claims"]]
     except (OSError, ValueError, KeyError) as exc:
         raise ReadError(f"{folder}: no report data to regenerate from ({exc})") from None
-    rows = rows_from_json(data["rows"], ClaimRow)
-    return write_paper_a_report(folder, rows, data["numbers"], data["meta"], series, chains)
+    return write_paper_a_report(folder, claims, data["numbers"], data["meta"], series, chains)
