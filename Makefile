@@ -51,8 +51,7 @@ paper-a-quick: install
 	$(VENV)/bin/siloflow paper-a --scale quick
 
 paper-b-quick: install
-	$(VENV)/bin/siloflow run decks/paper_b_quick.yaml -o runs/paper_b_quick --force
-	$(VENV)/bin/siloflow cg runs/paper_b_quick --width 2 --unit radius --nr 50 --nz 150
+	$(PY) -m siloflow.reproduce_paper_b --scale quick
 
 # paper B's claims report (issue 38; siloflow/reproduce_paper_b.py): the polydisperse silo at three apertures sharing
 # one fill (siloflow sweep, fill cache), siloflow cg and cg-scaling on each, every claim of the paper beside
