@@ -124,6 +124,88 @@ def band_statistics(bands: pd.DataFrame, dynamic_mask, static_mask, sector_means
     return pd.DataFrame.from_dict(rows, orient="index", columns=BAND_STATISTICS).rename_axis("band")
 
 
+def sector_statistics(sectors: pd.DataFrame, walls, static_mask, dynamic_mask) -> pd.DataFrame:
+    """Per (band, sector) of a tidy sector table (step, band, sector, z_mid, pressure Pa): the
+    sector's azimuth (deg, the middle of its arc; a slab's side walls at 180 and 0), and the mean
+    pressure (Pa) over the static window and over the dynamic window, each with its batch-means
+    standard error (:func:`batch_means_stderr`: the samples are autocorrelated) and sample count.
+    ``walls``: the plan's walls (their theta0..theta1, or their normal for a slab)."""
+    azimuth = {}
+    for w in walls:
+        if w.role == "band":
+            tc = 0.5 * (w.theta0 + w.theta1) if w.theta0 is not None else math.atan2(w.normal[1], w.normal[0])
+            azimuth[(w.band, w.sector)] = math.degrees(tc) % 360.0
+    rows = []
+    for (band, sector), grp in sectors.groupby(["band", "sector"]):
+        row = {"band": band, "sector": sector, "z_mid": float(grp.z_mid.iloc[0]),
+               "azimuth_deg": azimuth.get((band, sector), float("nan"))}
+        for name, mask in (("static", static_mask), ("dynamic", dynamic_mask)):
+            x = grp[np.asarray(mask, bool)[grp.index]].sort_values("step").pressure.to_numpy(float)
+            se, _ = batch_means_stderr(x)
+            row.update({f"{name}_mean_pressure": float(x.mean()) if len(x) else float("nan"),
+                        f"{name}_mean_stderr": se, f"{name}_samples": len(x)})
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def eccentric_discharge(table: pd.DataFrame, sectors: int, offset: float, planar: bool = False) -> dict:
+    """An eccentric outlet's wall: per band, the dynamic mean pressure of the sector facing the
+    outlet (a cylinder's sector 0, centred on +x; a slab's side wall on the slot's side) and of the
+    wall opposite (sector ``sectors / 2``; for an odd count, the mean of the two sectors either
+    side of 180 deg; a slab's other side wall), their difference near - far (Pa) and the ratio
+    near / far.
+
+    The difference's error holds two parts in quadrature: each sector's time series (batch means)
+    and the packing against the wall, which differs from sector to sector in one fill and which
+    a time average never removes. The packing part, a fraction of the pressure, is measured on the
+    mirror pairs (sectors s and ``sectors`` - s, at -+ the same azimuth from the outlet, equal by
+    symmetry): over every loaded band and pair, its relative variance is max(0, sum(d^2 - e^2) /
+    sum(m^2)) / 2, d a pair's difference, e its time-series error and m its mean pressure (the
+    loaded bands weigh most).
+    ``table``: :func:`sector_statistics`."""
+    if planar:                          # sector 0 the wall at x = -width/2, sector 1 at +width/2
+        near, far, pairs = (1 if offset > 0 else 0), [0 if offset > 0 else 1], []
+    else:
+        near = 0
+        far = [sectors // 2] if sectors % 2 == 0 else [sectors // 2, sectors // 2 + 1]
+        pairs = [(k, sectors - k) for k in range(1, (sectors + 1) // 2) if k != sectors - k]
+    excess = []
+    by_band = {band: grp.set_index("sector") for band, grp in table.groupby("band")}
+    for by in by_band.values():
+        for a, b in pairs:
+            if a in by.index and b in by.index and by.loc[a].dynamic_samples and by.loc[a].dynamic_mean_pressure:
+                d = by.loc[a].dynamic_mean_pressure - by.loc[b].dynamic_mean_pressure
+                e = math.hypot(by.loc[a].dynamic_mean_stderr, by.loc[b].dynamic_mean_stderr)
+                m = 0.5 * (by.loc[a].dynamic_mean_pressure + by.loc[b].dynamic_mean_pressure)
+                if np.isfinite(d) and np.isfinite(e) and m > 0:
+                    excess.append((d * d - e * e, m * m))
+    packing = math.sqrt(max(0.0, sum(x for x, _ in excess) / sum(w for _, w in excess)) / 2.0) \
+        if excess else float("nan")
+    out = []
+    for band, by in by_band.items():
+        if near not in by.index or any(k not in by.index for k in far):
+            continue
+        a = by.loc[near]
+        p_far = float(np.mean([by.loc[k].dynamic_mean_pressure for k in far]))
+        se_far = math.hypot(*[by.loc[k].dynamic_mean_stderr for k in far]) / len(far)
+        time_se = math.hypot(a.dynamic_mean_stderr, se_far)
+        pack_se = packing * math.hypot(a.dynamic_mean_pressure, p_far / math.sqrt(len(far))) \
+            if np.isfinite(packing) else 0.0
+        out.append({"band": int(band), "z_mid": float(a.z_mid), "near_pressure": float(a.dynamic_mean_pressure),
+                    "far_pressure": p_far, "difference": float(a.dynamic_mean_pressure - p_far),
+                    "difference_stderr": float(math.hypot(time_se, pack_se)), "time_stderr": float(time_se),
+                    "ratio": float(a.dynamic_mean_pressure / p_far) if p_far else float("nan")})
+    return {"outlet_offset_m": offset, "near_sector": near, "far_sectors": far,
+            "packing_relative_sd": packing, "mirror_pairs": len(excess),
+            "what": "dynamic mean pressure over the steady discharge on the wall sector facing the outlet "
+                    "(near) and opposite it (far); error: each sector's batch means and the packing against the "
+                    "wall in quadrature (" + (f"{packing:.1%} of a sector's pressure" if packing > 0 else
+                                              "no spread beyond the time series'" if packing == 0 else
+                                              "not measured: no mirror pair of sectors, the time series' error only")
+                    + (f", from {len(excess)} mirror-pair differences)" if excess else ")"),
+            "bands": out}
+
+
 def analyse_run(folder, measured_pressure=None) -> RunResults:
     """Compute the results of a run folder: its summary, tables and what its figures show
     (:class:`RunResults`); nothing is written. The report layer
@@ -153,7 +235,7 @@ def analyse_run(folder, measured_pressure=None) -> RunResults:
     # wall pressure
     bands, table = None, pd.DataFrame(columns=["band", "z_mid", "static_pressure", "static_shear",
                                                "max_dynamic_pressure", "discharge_factor", *BAND_STATISTICS])
-    pressure_stats = None
+    pressure_stats, sector_table = None, None
     if run.has_bands:
         sectors = band_pressures(run.forces, run.walls)
         bands = band_mean(sectors)
@@ -173,7 +255,14 @@ def analyse_run(folder, measured_pressure=None) -> RunResults:
         window = pressure_window(steady, rate)
         dyn_mask = bands.step > run.stage_steps["open"] + run.sample_steps
         dyn_mask &= (bands.time >= window["t_start"]) & (bands.time <= window["t_end"]) if window else False
-        sector_means = sectors[static_window(sectors, run)].groupby(["band", "sector"]).pressure.mean()
+        sector_static = static_window(sectors, run)
+        sector_means = sectors[sector_static].groupby(["band", "sector"]).pressure.mean()
+        sector_dynamic = sectors.step > run.stage_steps["open"] + run.sample_steps
+        if window:
+            sector_dynamic &= (sectors.step * run.dt >= window["t_start"]) & (sectors.step * run.dt <= window["t_end"])
+        else:
+            sector_dynamic &= False
+        sector_table = sector_statistics(sectors, run.walls, sector_static, sector_dynamic)
         table = table.join(band_statistics(bands, dyn_mask, static_mask, sector_means)).reset_index()
         n_dyn = int(table.dynamic_samples.min()) if len(table) else 0
         pressure_stats = {
@@ -228,7 +317,12 @@ def analyse_run(folder, measured_pressure=None) -> RunResults:
     if bands is not None:
         results.tables.update({RESULT_TABLES["wall_pressure"]: bands,
                                RESULT_TABLES["wall_pressure_sectors"]: sectors.assign(time=sectors.step * run.dt),
-                               RESULT_TABLES["bands"]: table, "wall_pressure_sectors.parquet": sectors})
+                               RESULT_TABLES["bands"]: table, "wall_pressure_sectors.parquet": sectors,
+                               RESULT_TABLES["sectors"]: sector_table})
+        offset = getattr(run.plan.geometry, "outlet_offset", 0.0)
+        if offset:
+            summary["eccentric_discharge"] = eccentric_discharge(sector_table, run.plan.sensors.sectors, offset,
+                                                                 planar=run.plan.geometry.kind == "planar")
     summary["frame_analyses"] = analyse_dumps(run, table, dis, rate, results)
     summary["design_loads"] = en1991_comparison(run, table, summary, results)
     if measured_pressure is not None:

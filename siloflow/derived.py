@@ -63,8 +63,8 @@ def bed_volume(case: Case, height: float) -> float:
     """Volume of the silo below ``height`` (m above the outlet), m3."""
     g = case.geometry
     if isinstance(g, PlanarGeometry):       # trapezoid of the wedge hopper, then the full width
-        h_w = min(height, g.hopper_height)
-        w_top = g.outlet_width + 2.0 * h_w * math.tan(math.radians(g.half_angle_deg))
+        h_w = min(height, g.hopper_height)      # 0 on a flat floor (no wedge); an offset slot shears it
+        w_top = g.outlet_width + (2.0 * h_w * math.tan(math.radians(g.half_angle_deg)) if h_w > 0 else 0.0)
         area = 0.5 * (g.outlet_width + w_top) * h_w + g.width * max(0.0, height - g.hopper_height)
         return area * g.thickness
     R = g.radius
@@ -391,6 +391,8 @@ def derive(case: Case) -> RunPlan:
         # centres only (all_in no: a clump's bounding sphere is wider than the slab); wheat is
         # inserted lying flat in the slab, so its half thickness is its sphere radius
         half_t = 0.5 * g.thickness - (0.5 * p.width if p.kind == "clumps" else r)
+        if g.periodic_depth:                  # the whole periodic length (centres wrap)
+            half_t = 0.5 * g.thickness
         half_x = min(pour, g.half_width - 1.05 * r)
         insertion_region = {"shape": "block", "xlo": -half_x, "xhi": half_x,
                             "ylo": -half_t, "yhi": half_t, "z_min": z_min + r, "z_max": z_max - r}
@@ -478,7 +480,8 @@ def derive(case: Case) -> RunPlan:
                 outlet_radius=g.outlet_radius, radius=None if planar else g.radius,
                 width=g.width if planar else None, thickness=g.thickness if planar else None,
                 face_friction=g.face_friction if planar else None,
-                mesh_segments=None if planar else g.mesh_segments)
+                mesh_segments=None if planar else g.mesh_segments,
+                outlet_offset=g.outlet_offset, periodic_depth=planar and g.periodic_depth)
     materials = {"particle": Material(youngs_modulus=_modulus_of(case, "particle")[0],
                                       poisson_ratio=_modulus_of(case, "particle")[1]),
                  "wall": Material(youngs_modulus=_modulus_of(case, None)[0], poisson_ratio=_modulus_of(case, None)[1])}
@@ -575,22 +578,26 @@ def shaping_fields(case: Case, role: str, kind: str = "angle") -> list[str]:
     'edge', a too short edge: the outlet's size, which sets the hopper's shortest sides)."""
     g = case.geometry
     sensors = "sensors.heights" if case.sensors.heights is not None else "sensors.bands"
+    offset = ["geometry.outlet_offset"] if getattr(g, "outlet_offset", 0.0) else []
     if kind == "edge" and role in ("hopper", "cone", "bottom", "plate", "outlet"):
         if isinstance(g, PlanarGeometry):
-            return ["geometry.outlet_width", "geometry.width", "geometry.half_angle_deg", "geometry.thickness"]
+            return ["geometry.outlet_width", "geometry.width", "geometry.half_angle_deg", "geometry.thickness"] + offset
         orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
-        return [orifice, "geometry.mesh_segments", "geometry.radius"]
+        return [orifice, "geometry.mesh_segments", "geometry.radius"] + offset
     if isinstance(g, PlanarGeometry):
         return {"band": [sensors, "geometry.height", "geometry.thickness"],
                 "wall": [sensors, "geometry.height", "geometry.thickness"],
-                "hopper": ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width", "geometry.thickness"],
-                "face": ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width", "geometry.height"],
-                }.get(role, ["geometry.outlet_width", "geometry.thickness"])
+                "hopper": offset + ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width",
+                                    "geometry.thickness"],
+                "bottom": offset + ["geometry.outlet_width", "geometry.width", "geometry.thickness"],
+                "face": offset + ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width",
+                                  "geometry.height"],
+                }.get(role, ["geometry.outlet_width", "geometry.thickness"] + offset)
     orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
     return {"band": [sensors, "geometry.height", "geometry.mesh_segments", "sensors.sectors"],
             "wall": [sensors, "geometry.height", "geometry.mesh_segments"],
-            "cone": ["geometry.half_angle_deg", orifice, "geometry.radius", "geometry.mesh_segments"],
-            "bottom": [orifice, "geometry.radius", "geometry.mesh_segments"],
+            "cone": offset + ["geometry.half_angle_deg", orifice, "geometry.radius", "geometry.mesh_segments"],
+            "bottom": offset + [orifice, "geometry.radius", "geometry.mesh_segments"],
             }.get(role, [orifice, "geometry.mesh_segments"])
 
 

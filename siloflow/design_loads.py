@@ -523,7 +523,8 @@ def design_loads(geometry, material, fill_height: float, wall_type: str = "D2", 
     aac : int
         action assessment class 1, 2 or 3 (§2.5); AAC 3 is computed as AAC 2.
     eccentricity : float
-        e, m: the filling and outlet eccentricity (e = max(e_f, e_o)); E = 2 e / d_c.
+        e, m: the filling and outlet eccentricity (e = max(e_f, e_o)); E = 2 e / d_c. A geometry with an
+        ``outlet_offset`` larger than it uses that (e_o).
     heights : array, optional
         z values, m above the outlet (default: 161 up the wall, 41 in a hopper).
     top : str
@@ -564,6 +565,11 @@ def design_loads(geometry, material, fill_height: float, wall_type: str = "D2", 
         raise ValueError(f"eccentricity ({eccentricity} m) must be within the silo (0 <= e < r = {r:.4g} m)")
 
     notes = []
+    e_o = float(getattr(geometry, "outlet_offset", 0.0) or 0.0)
+    if e_o > eccentricity:             # (5.22) e = max(e_f, e_o): the silo's own outlet eccentricity
+        notes.append(f"e = the outlet's eccentricity e_o = {e_o:.4g} m (geometry.outlet_offset), larger than the "
+                     f"given {eccentricity:.4g} m (5.22)")
+        eccentricity = e_o
     a_over_u = d_c / 4.0
     h_c = fill_height - transition
     ratio = h_c / d_c

@@ -77,6 +77,9 @@ def fill_key_inputs(plan, engine) -> dict:
     geometry = dict(data["geometry"])
     if plan.geometry.hopper_height == 0:           # the orifice is closed by the plate during the fill
         geometry.pop("outlet_radius")
+        geometry.pop("outlet_offset")
+    elif not plan.geometry.outlet_offset:          # keys made before eccentric outlets stay valid
+        geometry.pop("outlet_offset")
     data["geometry"] = geometry
     # the guard's limits do not make another bed, but a bed settled unwatched is not one a watched run may take
     data["guarded"] = plan.guard is not None and plan.guard.enabled

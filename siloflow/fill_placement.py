@@ -85,11 +85,29 @@ def _random_centres(plan: RunPlan, r: np.ndarray, dust: np.ndarray, rng: np.rand
     return np.column_stack([rng.uniform(reg.xlo, reg.xhi, n), y, rng.uniform(reg.z_min, reg.z_max, n)])
 
 
-def _overlapping(x: np.ndarray, r: np.ndarray, y: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """(i, j) pairs, (m, 2), of spheres ``x``/``r`` overlapping spheres ``y``/``s`` (k-d trees)."""
+def _overlapping(x: np.ndarray, r: np.ndarray, y: np.ndarray, s: np.ndarray,
+                 period_y: tuple[float, float] | None = None) -> np.ndarray:
+    """(i, j) pairs, (m, 2), of spheres ``x``/``r`` overlapping spheres ``y``/``s`` (k-d trees);
+    ``period_y`` (lo, hi), m: the box is periodic along y between them (a periodic slab)."""
     if not len(x) or not len(y):
         return np.empty((0, 2), int)
-    d = cKDTree(x).sparse_distance_matrix(cKDTree(y), float(r.max() + s.max()), output_type="ndarray")
+    cutoff = float(r.max() + s.max())
+    if period_y is not None:
+        # k-d trees with a box: every coordinate in [0, size); x and z get a box too wide to wrap
+        lo_y, length = period_y[0], period_y[1] - period_y[0]
+        both = np.vstack([x, y])
+        lo = both.min(axis=0)
+        size = both.max(axis=0) - lo + 4 * cutoff + 1.0
+        size[1] = length
+
+        def shifted(p):
+            q = p - lo
+            q[:, 1] = np.mod(p[:, 1] - lo_y, length)
+            return q
+        d = cKDTree(shifted(x), boxsize=size).sparse_distance_matrix(cKDTree(shifted(y), boxsize=size), cutoff,
+                                                                      output_type="ndarray")
+    else:
+        d = cKDTree(x).sparse_distance_matrix(cKDTree(y), cutoff, output_type="ndarray")
     hit = d["v"] < r[d["i"]] + s[d["j"]]
     return np.column_stack([d["i"][hit], d["j"][hit]])
 
@@ -108,6 +126,8 @@ def place(plan: RunPlan, kinds: list[int], rng: np.random.Generator, obstacles=N
     radii = np.array([plan.species[k].radius for k in kinds], float)
     dust = np.array([plan.species[k].stream == "dust" for k in kinds], bool)
     n = len(kinds)
+    g = plan.geometry
+    period = (-0.5 * g.thickness, 0.5 * g.thickness) if g.periodic_depth else None
     fixed_x = np.asarray(obstacles[0], float).reshape(-1, 3) if obstacles is not None else np.empty((0, 3))
     fixed_r = np.asarray(obstacles[1], float).reshape(-1) if obstacles is not None else np.empty(0)
     centres = np.full((n, 3), np.nan)
@@ -124,12 +144,12 @@ def place(plan: RunPlan, kinds: list[int], rng: np.random.Generator, obstacles=N
         others = np.concatenate([np.full(len(fixed_r), -1), np.flatnonzero(placed)])
         good = np.flatnonzero(ok)
         hits = _overlapping(cand[good], radii[todo][good], np.vstack([fixed_x, centres[placed]]),
-                            np.concatenate([fixed_r, radii[placed]]))
+                            np.concatenate([fixed_r, radii[placed]]), period)
         mine, theirs = todo[good][hits[:, 0]], others[hits[:, 1]]
         ok[good[hits[:, 0]][theirs < mine]] = False
         # against each other: the earlier candidate wins
         good = np.flatnonzero(ok)
-        pairs = _overlapping(cand[good], radii[todo][good], cand[good], radii[todo][good])
+        pairs = _overlapping(cand[good], radii[todo][good], cand[good], radii[todo][good], period)
         later: dict[int, list[int]] = {}
         for i, j in pairs[pairs[:, 0] < pairs[:, 1]]:
             later.setdefault(int(good[j]), []).append(int(good[i]))

@@ -192,7 +192,8 @@ class Outlet(Frozen):
 
 class Silo(Frozen):
     """The silo's shape as post-processing and engines need it (m): ``kind`` cylinder, hopper or
-    planar (a slab, ``thickness`` deep along y); ``half_width`` is the radius or half the width."""
+    planar (a slab, ``thickness`` deep along y); ``half_width`` is the radius or half the width;
+    the outlet's centre is at (``outlet_offset``, 0, 0)."""
 
     kind: Literal["cylinder", "hopper", "planar"]
     half_width: float
@@ -204,6 +205,8 @@ class Silo(Frozen):
     thickness: Optional[float] = None
     face_friction: Optional[float] = None
     mesh_segments: Optional[int] = None   # facets around a cylinder's circumference
+    outlet_offset: float = 0.0            # the outlet's centre at x = outlet_offset (an eccentric outlet)
+    periodic_depth: bool = False          # a slab periodic along y over its thickness (no faces)
 
     @property
     def top(self) -> float:

@@ -60,7 +60,8 @@ CG_SUMMARY_NAME = "cg_summary.json"
 OLD_PLAN_NAME = "derived.json"
 #: what ``siloflow post`` writes under results/ (besides the summary), read back by ``siloflow.runs``
 RESULT_TABLES = {"flow": "discharge.csv", "wall_pressure": "wall_pressure.csv",
-                 "wall_pressure_sectors": "wall_pressure_sectors.csv", "bands": "bands.csv"}
+                 "wall_pressure_sectors": "wall_pressure_sectors.csv", "bands": "bands.csv",
+                 "sectors": "sectors.csv"}
 #: files siloflow writes at the top of a run folder besides the manifest's (status and records),
 #: and the engines' decks, logs and screens (each engine's, siloflow.engines.ENGINE_FILES)
 TOP_LEVEL_FILES = frozenset({MANIFEST_NAME, STATUS_NAME, RECORD_NAME}

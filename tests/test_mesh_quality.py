@@ -170,31 +170,40 @@ def reference_surface(case, wall: WallMesh) -> np.ndarray:
     """The same surface by the original structured generators on their coarsest grid (slivers or not:
     they cover the exact polygonal surface), to compare area and outline with."""
     g = case.geometry
+    e = g.outlet_offset
     if g.kind == "planar":
         a, b, w0 = g.half_width, 0.5 * g.thickness, g.outlet_radius
         hh, top = g.hopper_height, g.hopper_height + g.height
+        run = a + e - w0 if wall.sector == 0 else a - e - w0          # from the slot's edge to the wall
         if wall.role == "face":
-            outline = np.array([(-w0, 0.0), (w0, 0.0), (a, hh), (a, top), (-a, top), (-a, hh)])
+            outline = np.array([(e - w0, 0.0), (e + w0, 0.0), (a, hh), (a, top), (-a, top), (-a, hh)] if hh > 0
+                               else [(-a, 0.0), (a, 0.0), (a, top), (-a, top)])
             centre = outline.mean(axis=0)
-            fan = [(centre, outline[k], outline[(k + 1) % 6]) for k in range(6)]
+            k = len(outline)
+            fan = [(centre, outline[i], outline[(i + 1) % k]) for i in range(k)]
             return np.array([[(p[0], 0.0, p[1]) for p in t] for t in fan])
         if wall.role in ("band", "wall"):
             return rectangle((0, 0, 0), (0, 2 * b, 0), (0, 0, wall.z1 - wall.z0), 1, 1)
         if wall.role == "hopper":
-            return rectangle((0, 0, 0), (0, 2 * b, 0), (a - w0, 0, hh), 1, 1)
+            return rectangle((0, 0, 0), (0, 2 * b, 0), (run, 0, hh), 1, 1)
+        if wall.role == "bottom":
+            return rectangle((0, 0, 0), (0, 2 * b, 0), (run, 0, 0), 1, 1)
         if wall.role == "plate":
             return rectangle((0, 0, 0), (2 * w0, 0, 0), (0, 2 * b, 0), 1, 1)
-        half = float(np.abs(wall.triangles[..., 0]).max())
-        return rectangle((0, 0, 0), (2 * half, 0, 0), (0, 3 * b, 0), 1, 1)
+        half = 0.5 * float(np.ptp(wall.triangles[..., 0]))
+        depth = float(np.ptp(wall.triangles[..., 1]))
+        return rectangle((0, 0, 0), (2 * half, 0, 0), (0, depth, 0), 1, 1)
     n = math.ceil(g.mesh_segments / case.sensors.sectors) * case.sensors.sectors
     if wall.role in ("band", "wall"):
         n_th = round(n * (wall.theta1 - wall.theta0) / (2 * math.pi))
         return surface_of_revolution(g.radius, wall.z0, g.radius, wall.z1, wall.theta0, wall.theta1, n_th, 1)
-    if wall.role == "cone":
-        return surface_of_revolution(g.outlet_radius, 0.0, g.radius, g.hopper_height, 0.0, 2 * math.pi, n, 1)
-    if wall.role == "bottom":
+    if wall.role == "cone":                      # an eccentric outlet: the right cone sheared to it
+        cone = surface_of_revolution(g.outlet_radius, 0.0, g.radius, g.hopper_height, 0.0, 2 * math.pi, n, 1)
+        cone[..., 0] += e * (1.0 - cone[..., 2] / g.hopper_height)
+        return cone
+    if wall.role == "bottom":                    # an eccentric orifice keeps the annulus' area and outline
         return surface_of_revolution(g.outlet_radius, 0.0, g.radius, 0.0, 0.0, 2 * math.pi, n, 1)
-    radius = float(np.hypot(wall.triangles[..., 0], wall.triangles[..., 1]).max())
+    radius = float(np.hypot(wall.triangles[..., 0] - e, wall.triangles[..., 1]).max())
     theta = np.linspace(0.0, 2 * math.pi, n + 1)
     ring = np.stack([radius * np.cos(theta), radius * np.sin(theta), np.zeros(n + 1)], axis=1)
     return np.stack([np.zeros((n, 3)), ring[:-1], ring[1:]], axis=1)         # the n-gon as a fan
@@ -246,7 +255,14 @@ def test_existing_cases_keep_their_meshes_and_all_are_good():
             g = case.geometry
             n = math.ceil(g.mesh_segments / case.sensors.sectors) * case.sensors.sectors
             plate = next(w for w in walls if w.name == "plate")
-            np.testing.assert_array_equal(plate.triangles, disc(g.outlet_radius, 0.0, n))
+            if not g.outlet_offset:
+                np.testing.assert_array_equal(plate.triangles, disc(g.outlet_radius, 0.0, n))
+                continue
+            # eccentric: the same disc turned by half a sector and moved to the outlet
+            a = -math.pi / case.sensors.sectors
+            turn = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+            np.testing.assert_allclose(plate.triangles, disc(g.outlet_radius, 0.0, n) @ turn.T
+                                       + [g.outlet_offset, 0, 0], atol=1e-15)
 
 
 @pytest.mark.parametrize("geometry, sensors, field", [

@@ -340,6 +340,19 @@ def _band_blocks(summary: dict) -> list:
                             "C_h"], rows)]
 
 
+def _eccentric_blocks(summary: dict) -> list:
+    """An eccentric outlet's near and far walls per band (summary's ``eccentric_discharge``)."""
+    ecc = summary.get("eccentric_discharge")
+    if not ecc:
+        return []
+    rows = [[str(b["band"]), _fmt(b["z_mid"], ".3f"), _fmt(b["near_pressure"], ".1f"), _fmt(b["far_pressure"], ".1f"),
+             f"{_fmt(b['difference'], '+.1f')} +/- {_fmt(b['difference_stderr'], '.2g')}", _cell(b["ratio"], ".2f")]
+            for b in ecc["bands"]]
+    return [Text(f"Eccentric outlet ({_fmt(ecc['outlet_offset_m'], '.4g')} m off the middle, towards sector "
+                 f"{ecc['near_sector']}): {ecc['what']}. Every sector: sectors.csv (Pa)."),
+            Table(["band", "z (m)", "near (Pa)", "far (Pa)", "near - far (Pa)", "near / far"], rows)]
+
+
 def _en_blocks(summary: dict) -> list:
     """EN 1991-4's pressures beside the DEM's, with the verdicts; or why they are not computed."""
     en = summary.get("design_loads") or {}
@@ -365,6 +378,7 @@ def report_blocks(summary: dict, name: str) -> list:
     blocks = [Title(f"Run report: {name}"), Items(_facts(summary))]
     if summary["bands"]:
         blocks += _band_blocks(summary)
+    blocks += _eccentric_blocks(summary)
     blocks += _en_blocks(summary)
     if "pressure_comparison" in summary:
         blocks.append(Table(["band", "max measured (Pa)", "max simulated (Pa)", "difference", "W (Eq. 34)"],

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal, Optional, Union
 
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from .fields import Int, NonNegative, Positive, Real, Strict
 
@@ -25,16 +25,37 @@ def _smaller(model, small: str, large: str):
     return model
 
 
+def _offset_fits(outlet: str):
+    """A field validator of ``outlet_offset``: the outlet (radius field ``outlet``), moved that far,
+    must stay inside the silo's ``radius`` (the fields before it, when they are valid)."""
+    def check(value, info: ValidationInfo):
+        r, R = info.data.get(outlet), info.data.get("radius")
+        if value and r is not None and R is not None and not value + r < R:
+            raise ValueError(f"{value} m puts the outlet (radius {outlet} = {r} m) against or through the wall: "
+                             f"outlet_offset + {outlet} must be smaller than radius ({R} m)")
+        return value
+    return field_validator("outlet_offset")(check)
+
+
+def _outlet_offset():
+    """The field of the outlet's offset from the silo axis (an eccentric outlet, EN 1991-4 §5.2.4)."""
+    return Field(0.0, le=100, description="distance from the silo axis to the outlet's centre, along +x, m "
+                 "(0: centred; eccentric: the sensor sectors are then centred on the outlet's azimuth)")
+
+
 class CylinderGeometry(Strict):
-    """Cylindrical silo with a flat bottom and a centred circular orifice (z = 0 at the bottom)."""
+    """Cylindrical silo with a flat bottom and a circular orifice, centred or ``outlet_offset``
+    along +x (z = 0 at the bottom)."""
 
     kind: Literal["cylinder"]
     radius: Positive = Field(description="inner radius of the cylinder, m", le=100)
     height: Positive = Field(description="height of the cylinder wall, m", le=1000)
-    orifice_radius: Positive = Field(description="radius of the centred orifice, m")
+    orifice_radius: Positive = Field(description="radius of the orifice, m")
+    outlet_offset: NonNegative = _outlet_offset()
     mesh_segments: Int = Field(64, ge=16, le=1024, description="facets around the circumference")
 
     _orifice_fits = model_validator(mode="after")(lambda self: _smaller(self, "orifice_radius", "radius"))
+    _offset_fits = _offset_fits("orifice_radius")
 
     @property
     def outlet_radius(self) -> float:
@@ -50,7 +71,10 @@ class CylinderGeometry(Strict):
 
 
 class HopperGeometry(Strict):
-    """Cylinder on a conical hopper whose outlet (radius ``outlet_radius``) is at z = 0."""
+    """Cylinder on a conical hopper whose outlet (radius ``outlet_radius``) is at z = 0. With an
+    ``outlet_offset`` e the cone is oblique (its outlet circle's centre at x = e, its top the
+    cylinder's): its walls are steeper on the outlet's side (tan = (R - r - e) / h) than opposite
+    (tan = (R - r + e) / h), ``half_angle_deg`` setting the height h = (R - r) / tan(half angle)."""
 
     kind: Literal["hopper"]
     radius: Positive = Field(description="inner radius of the cylinder, m", le=100)
@@ -58,9 +82,11 @@ class HopperGeometry(Strict):
     half_angle_deg: Real = Field(description="hopper half angle from the vertical, degrees",
                                   gt=0, lt=90, allow_inf_nan=False)
     outlet_radius: Positive = Field(description="radius of the hopper outlet, m")
+    outlet_offset: NonNegative = _outlet_offset()
     mesh_segments: Int = Field(64, ge=16, le=1024)
 
     _outlet_fits = model_validator(mode="after")(lambda self: _smaller(self, "outlet_radius", "radius"))
+    _offset_fits = _offset_fits("outlet_radius")
 
     @property
     def half_width(self) -> float:
@@ -75,20 +101,45 @@ class HopperGeometry(Strict):
 class PlanarGeometry(Strict):
     """Quasi-2D slab silo (paper A): vertical side walls at x = +-width/2 on a wedge hopper of
     ``half_angle_deg`` from the vertical down to a slot of ``outlet_width`` at z = 0, closed by
-    front and back faces at y = +-thickness/2 (about one grain apart). ``face_friction`` is the
-    grains' friction on the faces: 0 (default) mimics a 2D model, which has no faces. The
-    sensors are sections of both side walls (paper A: 10 per side)."""
+    front and back faces at y = +-thickness/2 (about one grain apart). ``half_angle_deg: 90`` is a
+    flat floor with the slot in it (no hopper). ``outlet_offset`` moves the slot's centre along +x
+    (the wedge's two walls then differ: tan = (width/2 -+ offset - outlet_width/2) / its height).
+    ``face_friction`` is the grains' friction on the faces: 0 (default) mimics a 2D model, which
+    has no faces. ``periodic_depth`` removes the faces: the slab is periodic along y over
+    ``thickness`` (which then holds several grains). The sensors are sections of both side walls
+    (paper A: 10 per side)."""
 
     kind: Literal["planar"]
     width: Positive = Field(description="inner width between the side walls, m", le=100)
     height: Positive = Field(description="height of the vertical side walls above the hopper, m", le=1000)
     thickness: Positive = Field(description="distance between the front and back faces, m", le=100)
-    half_angle_deg: Real = Field(60.0, gt=0, lt=90, allow_inf_nan=False,
-                                  description="hopper half angle from the vertical, degrees")
+    half_angle_deg: Real = Field(60.0, gt=0, le=90, allow_inf_nan=False,
+                                  description="hopper half angle from the vertical, degrees (90: a flat floor)")
     outlet_width: Positive = Field(description="width of the outlet slot, m")
+    outlet_offset: Real = Field(0.0, ge=-100, le=100, allow_inf_nan=False,
+                                description="the slot's centre at x = outlet_offset, m (0: centred)")
     face_friction: NonNegative = Field(0.0, le=10, description="grain friction on the front and back faces")
+    periodic_depth: bool = Field(False, strict=True, description="periodic along y instead of front and back "
+                                 "faces: no faces, no face friction; thickness is the periodic length, m")
 
     _outlet_fits = model_validator(mode="after")(lambda self: _smaller(self, "outlet_width", "width"))
+
+    @field_validator("periodic_depth")
+    @classmethod
+    def _no_faces(cls, value, info: ValidationInfo):
+        if value and info.data.get("face_friction"):
+            raise ValueError(f"a periodic slab has no faces: face_friction ({info.data['face_friction']}) "
+                             "must be 0 (or unset)")
+        return value
+
+    @field_validator("outlet_offset")
+    @classmethod
+    def _slot_fits(cls, value, info: ValidationInfo):
+        w, ow = info.data.get("width"), info.data.get("outlet_width")
+        if value and w is not None and ow is not None and not abs(value) + 0.5 * ow < 0.5 * w:
+            raise ValueError(f"{value} m puts the slot (outlet_width {ow} m) against or through a side wall: "
+                             f"|outlet_offset| + outlet_width / 2 must be smaller than width / 2 ({0.5 * w} m)")
+        return value
 
     @property
     def outlet_radius(self) -> float:
@@ -100,8 +151,15 @@ class PlanarGeometry(Strict):
         return 0.5 * self.width
 
     @property
+    def flat_floor(self) -> bool:
+        """A slot in a flat floor (``half_angle_deg`` 90): no hopper."""
+        return self.half_angle_deg == 90
+
+    @property
     def hopper_height(self) -> float:
-        """Height of the wedge hopper, m."""
+        """Height of the wedge hopper, m (0 on a flat floor)."""
+        if self.flat_floor:
+            return 0.0
         return (self.width - self.outlet_width) / 2.0 / math.tan(math.radians(self.half_angle_deg))
 
 

@@ -16,6 +16,8 @@ from .particles import Particles
 from .stages import Discharge, Fill, Settle
 
 STATIC_WINDOW_SAMPLES = 20
+#: the fewest grain diameters a periodic slab's depth holds (a grain must not touch its own image)
+PERIODIC_GRAINS = 3.0
 
 
 def default_static_window(sample_interval: float, check_interval: float) -> float:
@@ -124,7 +126,15 @@ class Case(Strict):
             across = p.width if p.kind == "clumps" and p.shape == "wheat" else 2 * p.max_radius
             if p.kind == "clumps" and p.shape != "wheat":
                 problems.append("geometry.kind planar: clumps in a slab need shape 'wheat' (inserted flat)")
-            if g.thickness <= 1.01 * across:
+            if g.periodic_depth:
+                if p.kind == "clumps" or getattr(p, "dust", None) is not None:
+                    problems.append("geometry.periodic_depth: a periodic slab takes spheres without dust (clumps and "
+                                    "dust are held to a one-grain slab's mid-plane)")
+                if g.thickness < PERIODIC_GRAINS * 2 * p.max_radius:
+                    problems.append(f"geometry.thickness ({g.thickness} m) of a periodic slab must hold at least "
+                                    f"{PERIODIC_GRAINS:g} grain diameters ({PERIODIC_GRAINS * 2 * p.max_radius:.6g} m): "
+                                    "a grain must not touch its own periodic image")
+            elif g.thickness <= 1.01 * across:
                 problems.append(f"geometry.thickness ({g.thickness} m) must exceed the grains' thickness "
                                 f"({across:.6g} m) by 1 %")
         top = g.hopper_height + g.height

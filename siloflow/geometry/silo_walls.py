@@ -193,15 +193,55 @@ def cylinder_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outl
         meshes.append(_wall("bottom", "bottom", lambda: disc_tris(R, 0.0, r_out)))
     meshes.append(_wall("plate", "plate", lambda: disc_tris(r_out, 0.0)))
     meshes.append(_wall("outlet", "outlet", lambda: disc_tris(outlet_radius, outlet_z)))
+    if g.outlet_offset:
+        eccentric(meshes, g, sectors, n_ring)
     return meshes
+
+
+def eccentric(meshes: list[WallMesh], silo: Silo, sectors: int, n_ring: int) -> None:
+    """Make a centred cylinder's or hopper's meshes (in place) eccentric, the outlet's centre at
+    x = e = ``silo.outlet_offset``: everything turned
+    about z by half a sector, so that sector 0 is centred on +x (the outlet's azimuth: the near and
+    far walls are sensors of their own); then the plate and the counting disc moved by e along x; the
+    cone sheared (x + e (1 - z / h): its outlet ring moves by e, its top stays the cylinder's, every
+    facet stays flat); the flat floor's annulus mapped point by point by p + (1 - t) e x, t its
+    polygonal radius' place between the orifice's n-gon (t = 0, moved with it) and the wall's (t = 1,
+    in place), which keeps every facet in the plane z = 0 and on the same side up while e < R - r."""
+    e, R, r = silo.outlet_offset, silo.radius, silo.outlet_radius
+    phase = -math.pi / sectors
+    rot = np.array([[math.cos(phase), -math.sin(phase), 0.0], [math.sin(phase), math.cos(phase), 0.0], [0, 0, 1.0]])
+    half = math.pi / n_ring
+    for m in meshes:
+        p = np.asarray(m.triangles, float) @ rot.T
+        if m.role in ("plate", "outlet"):
+            p[..., 0] += e
+        elif m.role == "cone":
+            p[..., 0] += e * (1.0 - p[..., 2] / silo.hopper_height)
+        elif m.role == "bottom":
+            # the polygonal radius: |p| cos(angle to the middle of its n-gon side) / cos(pi / n), the
+            # n-gons' vertices now at 2 pi k / n + phase
+            theta = np.arctan2(p[..., 1], p[..., 0]) - phase
+            to_mid = np.mod(theta, 2 * half) - half
+            q = np.hypot(p[..., 0], p[..., 1]) * np.cos(to_mid) / math.cos(half)
+            t = np.clip((q - r) / (R - r), 0.0, 1.0)
+            p[..., 0] += (1.0 - t) * e
+        m.triangles = p
+        if m.theta0 is not None:
+            m.theta0, m.theta1 = m.theta0 + phase, m.theta1 + phase
+        if m.normal is not None:
+            tc = 0.5 * (m.theta0 + m.theta1)
+            m.normal = (math.cos(tc), math.sin(tc))
 def slab_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outlet_half: float) -> list[WallMesh]:
     """Meshes of a quasi-2D slab silo (x across, y through the slab, z up; z = 0 the outlet):
     side walls cut into sensor sections (sector 0 at x = -width/2, sector 1 at +width/2),
-    the wedge hopper, the front and back faces (role ``face``), the plate and the counting
-    rectangle ``outlet_half`` wide at ``outlet_z`` (m)."""
+    the wedge hopper's two walls (a flat floor's two pieces either side of the slot, role
+    ``bottom``, when the silo has no hopper), the front and back faces (role ``face``), the plate
+    and the counting rectangle ``outlet_half`` wide at ``outlet_z`` (m), the slot centred at
+    x = ``silo.outlet_offset``. A slab periodic along y (``silo.periodic_depth``) has no faces, and
+    its walls span the periodic length exactly."""
     g = silo
     a, b, hh, top = g.half_width, 0.5 * g.thickness, g.hopper_height, g.hopper_height + g.height
-    w0 = g.outlet_radius
+    w0, e = g.outlet_radius, g.outlet_offset
     # faces: few large facets (every grain touches the faces: their facet count is what costs);
     # thin walls: one facet across, at most MAX_FACET_ASPECT times longer
     facet = max(g.width / 2.0, g.thickness)
@@ -226,10 +266,12 @@ def slab_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outle
     for side in (0, 1):
         if bounds[-1] < g.height:
             side_piece(f"wall_above_s{side:02d}", "wall", side, hh + bounds[-1], top)
-    slant = math.hypot(a - w0, hh)
     for side, sign in ((0, -1.0), (1, 1.0)):
-        meshes.append(_wall(f"hopper_s{side:02d}", "hopper", lambda sign=sign: _balanced_rectangle(
-            (sign * w0, -b, 0.0), (0.0, 2 * b, 0.0), (sign * (a - w0), 0.0, hh), 1, _divisions(slant, long)),
+        edge = e + sign * w0                        # the slot's edge on this side, x
+        run = sign * a - edge                       # to the side wall's foot, along x
+        name, role = (f"hopper_s{side:02d}", "hopper") if hh > 0 else (f"bottom_s{side:02d}", "bottom")
+        meshes.append(_wall(name, role, lambda edge=edge, run=run: _balanced_rectangle(
+            (edge, -b, 0.0), (0.0, 2 * b, 0.0), (run, 0.0, hh), 1, _divisions(math.hypot(run, hh), long)),
             sector=side))
     # faces: the silo's outline in x-z (wedge, then the full width), on a grid of trapezoid rows where
     # that grid is good, else triangulated anew (a nearly flat or very steep wedge, a narrow slot)
@@ -237,11 +279,16 @@ def slab_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outle
     nx = _divisions(g.width, facet)
 
     def face_grid(y):
-        z = np.concatenate([np.linspace(0.0, hh, nz_h + 1), np.linspace(hh, top, nz_v + 1)[1:]])
-        half = np.where(z < hh, w0 + (a - w0) * z / max(hh, 1e-300), a)
-        u = np.linspace(-1.0, 1.0, nx + 1)
-        pts = np.stack([half[:, None] * u[None, :], np.full((len(z), nx + 1), y),
-                        np.broadcast_to(z[:, None], (len(z), nx + 1))], axis=-1)
+        z = np.concatenate([np.linspace(0.0, hh, nz_h + 1), np.linspace(hh, top, nz_v + 1)[1:]]) if hh > 0 \
+            else np.linspace(0.0, top, nz_v + 1)
+        if e == 0:                                   # symmetric about x = 0
+            half = np.where(z < hh, w0 + (a - w0) * z / max(hh, 1e-300), a)
+            x = half[:, None] * np.linspace(-1.0, 1.0, nx + 1)[None, :]
+        else:                                        # the wedge sheared to the slot's centre
+            f = np.where(z < hh, z / max(hh, 1e-300), 1.0)      # 0 at the slot, 1 from the hopper's top
+            left, right = (e - w0) + (-a - e + w0) * f, (e + w0) + (a - e - w0) * f
+            x = left[:, None] + (right - left)[:, None] * np.linspace(0.0, 1.0, nx + 1)[None, :]
+        pts = np.stack([x, np.full((len(z), nx + 1), y), np.broadcast_to(z[:, None], (len(z), nx + 1))], axis=-1)
         return _grid_triangles(pts)
 
     outline = None
@@ -249,18 +296,20 @@ def slab_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outle
     def face_refined(y):
         nonlocal outline
         if outline is None:
-            outline = _refine_polygon(np.array([(-w0, 0.0), (w0, 0.0), (a, hh), (a, top), (-a, top), (-a, hh)]),
-                                      facet)
+            corners = [(e - w0, 0.0), (e + w0, 0.0), (a, hh), (a, top), (-a, top), (-a, hh)] if hh > 0 else \
+                [(-a, 0.0), (a, 0.0), (a, top), (-a, top)]
+            outline = _refine_polygon(np.array(corners), facet)
         p, tri = outline
         xyz = np.column_stack([p[:, 0], np.full(len(p), y), p[:, 1]])
         return xyz[tri[:, [0, 2, 1]]]            # counter-clockwise in x-z: normal +y, like the grid's
 
-    for side, y in ((0, -b), (1, b)):
+    for side, y in ((0, -b), (1, b)) if not g.periodic_depth else ():       # periodic along y: no faces
         meshes.append(_wall(f"face_s{side:02d}", "face", lambda y=y: _structured_or_graded(
             2 * nx * (nz_h + nz_v), lambda: face_grid(y), lambda: face_refined(y)), sector=side))
     meshes.append(_wall("plate", "plate", lambda: _balanced_rectangle(
-        (-w0, -b, 0.0), (2 * w0, 0.0, 0.0), (0.0, 2 * b, 0.0), _divisions(2 * w0, facet), 1)))
+        (e - w0, -b, 0.0), (2 * w0, 0.0, 0.0), (0.0, 2 * b, 0.0), _divisions(2 * w0, facet), 1)))
+    y0, dy = (-b, 2 * b) if g.periodic_depth else (-1.5 * b, 3 * b)     # inside a periodic box, beyond faces
     meshes.append(_wall("outlet", "outlet", lambda: _balanced_rectangle(
-        (-outlet_half, -1.5 * b, outlet_z), (2 * outlet_half, 0.0, 0.0), (0.0, 3 * b, 0.0),
+        (e - outlet_half, y0, outlet_z), (2 * outlet_half, 0.0, 0.0), (0.0, dy, 0.0),
         _divisions(2 * outlet_half, facet), 1)))
     return meshes

@@ -8,11 +8,13 @@ sharing its contact parameters:
 
 - cylinder: the side wall (a cylinder open at both ends), the floor (the plane z = 0 joined with a
   large sphere whose cap is exactly the orifice: a union region keeps only the plane's annulus, as
-  LAMMPS' ``RegUnion::surface_interior`` drops contact points inside another closed sub-region);
+  LAMMPS' ``RegUnion::surface_interior`` drops contact points inside another closed sub-region); an
+  eccentric orifice (``geometry.outlet_offset``) moves the sphere, the orifice's edge and the plate;
 - conical hopper: the side wall and a cone open at both ends from the orifice to the wall;
 - slab: the two vertical walls (a block open along y and z), the front and back faces (a block open
   along x and z), and each inclined hopper wall as a plane joined with the half-space z < 0 (so the
-  plane ends at the orifice's edge);
+  plane ends at the orifice's edge); a flat floor (``half_angle_deg: 90``) is a block either side of
+  the slot, touched from outside; an offset slot (``outlet_offset``) moves the edges, rim and plate;
 - the orifice's edge: LAMMPS' union drops the edges where faces meet, and without the orifice's edge
   a grain whose centre is over the orifice falls through whatever it overlaps (measured: the flow
   rate 49 % above LIGGGHTS'). The edge is the side of a vanishingly thin cylinder (slab: block)
@@ -146,31 +148,45 @@ def walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
                                                                "open", "5", "open", "6"])]))
         # the faces go on below the orifice to the box's floor: a falling grain stays in the slab
         floor = plan.outlet.z - plan.opening.travel - 10 * d
-        out.append(LammpsWall("faces", [("faces", "block", [_n(-R - d), _n(R + d), _n(-half_y), _n(half_y),
-                                                                  _n(floor), _n(top), "open", "1", "open", "2",
-                                                                  "open", "5", "open", "6"])], partner=FACES))
-        length = math.hypot(R - ro, hh)
-        nx, nz = hh / length, (R - ro) / length       # the left wall's normal, into the silo
-        for side, sign in (("left", -1.0), ("right", 1.0)):
+        if not g.periodic_depth:                      # periodic along y: no faces
+            out.append(LammpsWall("faces", [("faces", "block", [_n(-R - d), _n(R + d), _n(-half_y), _n(half_y),
+                                                                      _n(floor), _n(top), "open", "1", "open", "2",
+                                                                      "open", "5", "open", "6"])], partner=FACES))
+        ex = g.outlet_offset                          # the slot's centre at x = ex
+        if hh == 0:
+            # a flat floor: a block either side of the slot, grains outside; its top is the floor and
+            # its face at the slot the slot's edge (a block's outside has its edges: no rim needed)
+            for side, lo, hi in (("left", -R - d, ex - ro), ("right", ex + ro, R + d)):
+                out.append(LammpsWall("bottom", [(f"floor_{side}", "block", [
+                    _n(lo), _n(hi), _n(-half_y - d), _n(half_y + d), _n(-thick), _n(0.0), "side", "out"])]))
+        for side, sign in (("left", -1.0), ("right", 1.0)) if hh > 0 else ():
             rid = f"hopper_{side}"
+            edge = ex + sign * ro                       # the slot's edge on this side
+            run = R - sign * ex - ro                    # from it to the side wall's foot, along x
+            length = math.hypot(run, hh)
+            nx, nz = hh / length, run / length          # the wall's normal into the silo: (-sign nx, 0, nz)
             out.append(LammpsWall("hopper", [
-                (f"{rid}_plane", "plane", [_n(sign * ro), _n(0.0), _n(0.0), _n(-sign * nx), _n(0.0), _n(nz)]),
+                (f"{rid}_plane", "plane", [_n(edge), _n(0.0), _n(0.0), _n(-sign * nx), _n(0.0), _n(nz)]),
                 (f"{rid}_below", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(-1.0)]),
                 (rid, "union", ["2", f"{rid}_plane", f"{rid}_below"])]))
-        # the orifice's edges (a union keeps faces, not the edges where they meet): the two sides of a
-        # vanishingly thin block across the orifice, open above and below, touched from outside
-        out.append(LammpsWall("hopper", [("rim", "block", [_n(-ro), _n(ro), _n(-half_y - d), _n(half_y + d),
-                                                               _n(-RIM_THICKNESS * d), _n(0.0), "open", "3",
-                                                               "open", "4", "open", "5", "open", "6",
-                                                               "side", "out"])]))
-        out.append(LammpsWall("plate", [("plate", "block", [_n(-ro), _n(ro), _n(-half_y - d), _n(half_y + d),
+        if hh > 0:
+            # the orifice's edges (a union keeps faces, not the edges where they meet): the two sides of a
+            # vanishingly thin block across the orifice, open above and below, touched from outside
+            out.append(LammpsWall("hopper", [("rim", "block", [_n(ex - ro), _n(ex + ro), _n(-half_y - d),
+                                                                   _n(half_y + d), _n(-RIM_THICKNESS * d), _n(0.0),
+                                                                   "open", "3", "open", "4", "open", "5", "open", "6",
+                                                                   "side", "out"])]))
+        out.append(LammpsWall("plate", [("plate", "block", [_n(ex - ro), _n(ex + ro), _n(-half_y - d), _n(half_y + d),
                                                                   _n(-thick), _n(0.0), "side", "out"])], plate=True))
         return out
     out.append(LammpsWall("side", [("side", "cylinder", ["z", _n(0.0), _n(0.0), _n(R), _n(hh), _n(top),
                                                                  "open", "1", "open", "2"])]))
+    ex = g.outlet_offset                            # the orifice's centre at (ex, 0)
     if g.kind == "hopper":
         if floor_dz:
             raise ValueError("a hopper's outlet does not move (fill.mobilise needs a flat-bottomed cylinder)")
+        if ex:
+            raise ValueError("LAMMPS' cone region is a right cone: no eccentric hopper outlet (Engine.check refuses it)")
         out.append(LammpsWall("hopper", [("cone", "cone", ["z", _n(0.0), _n(0.0), _n(ro), _n(R), _n(0.0),
                                                                    _n(hh), "open", "1", "open", "2"])]))
     else:
@@ -179,14 +195,14 @@ def walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
             ("bottom_plane", "plane", [_n(0.0), _n(0.0), _n(floor_dz), _n(0.0), _n(0.0), _n(1.0)]),
             # the sphere's cap at the floor is the orifice whatever the floor's height: its centre moves
             # with the floor, its radius stays
-            ("bottom_hole", "sphere", [_n(0.0), _n(0.0), _n(floor_dz - depth), _n(math.sqrt(depth * depth + ro * ro))]),
+            ("bottom_hole", "sphere", [_n(ex), _n(0.0), _n(floor_dz - depth), _n(math.sqrt(depth * depth + ro * ro))]),
             ("bottom", "union", ["2", "bottom_plane", "bottom_hole"])]))
     # the orifice's edge (a union keeps faces, not the edges where they meet): the side of a vanishingly
     # thin cylinder in the orifice, open above and below, touched from outside
     out.append(LammpsWall("bottom" if g.kind == "cylinder" else "hopper", [
-        ("rim", "cylinder", ["z", _n(0.0), _n(0.0), _n(ro), _n(floor_dz - RIM_THICKNESS * d), _n(floor_dz), "open", "1",
+        ("rim", "cylinder", ["z", _n(ex), _n(0.0), _n(ro), _n(floor_dz - RIM_THICKNESS * d), _n(floor_dz), "open", "1",
                              "open", "2", "side", "out"])]))
-    out.append(LammpsWall("plate", [("plate", "cylinder", ["z", _n(0.0), _n(0.0), _n(ro), _n(floor_dz - thick),
+    out.append(LammpsWall("plate", [("plate", "cylinder", ["z", _n(ex), _n(0.0), _n(ro), _n(floor_dz - thick),
                                                                     _n(floor_dz), "side", "out"])], plate=True))
     return out
 
@@ -236,8 +252,9 @@ def box(plan: RunPlan, count_every: int) -> dict:
     lowered = plan.fill.mobilise.drop if plan.fill.mobilise is not None else 0.0     # the plate opens from there
     below = lowered + plan.opening.travel + 2 * d + fall * count_every * plan.dt + 4 * d
     half_y = g.half_depth
-    return {"xlo": -g.half_width - 2 * d, "xhi": g.half_width + 2 * d, "ylo": -half_y - 2 * d,
-            "yhi": half_y + 2 * d, "zlo": plan.outlet.z - below, "zhi": g.top + 2 * d}
+    y_margin = 0.0 if g.periodic_depth else 2 * d          # a periodic slab's box is its periodic length
+    return {"xlo": -g.half_width - 2 * d, "xhi": g.half_width + 2 * d, "ylo": -half_y - y_margin,
+            "yhi": half_y + y_margin, "zlo": plan.outlet.z - below, "zhi": g.top + 2 * d}
 
 
 def count_every(plan: RunPlan) -> int:
@@ -312,6 +329,7 @@ def deck_context(plan: RunPlan) -> dict:
     every = count_every(plan)
     return {
         "name": plan.name, "planar": plan.planar, "box": box(plan, every), "n_types": n_types,
+        "boundary_y": "p" if plan.geometry.periodic_depth else "f",     # a slab periodic along y
         "skin": 0.5 * plan.particle_radius, "pairs": pairs, "timestep": plan.dt, "gravity": plan.gravity,
         "groups": [{"name": k, "types": v} for k, v in groups.items()], "regions": regions,
         "wall_fixes": fixes, "dust_in_plane": dust is not None and plan.planar, "dust_group": "dust",
@@ -356,7 +374,7 @@ def molecule_text(plan: RunPlan, species_index: int) -> str:
     centers, radii = clump_spheres(plan, species_index)
     centroid = union_centroid(centers, radii)
     mass = sp.density * sp.volume
-    inertia = sp.density * union_inertia(centers, radii, centroid)
+    inertia = stable_digits(sp.density * union_inertia(centers, radii, centroid))
     n = len(radii)
     rel = centers - centroid
     lines = [f"# siloflow clump {sp.name}: union volume {sp.volume!r} m3, density {sp.density!r} kg/m3", "",
@@ -369,6 +387,16 @@ def molecule_text(plan: RunPlan, species_index: int) -> str:
     lines += ["", "Diameters", ""] + [f"{k + 1} {2 * float(r)!r}" for k, r in enumerate(radii)]
     lines += ["", "Masses", ""] + [f"{k + 1} {mass / n!r}" for k in range(n)]
     return "\n".join(lines) + "\n"
+
+
+def stable_digits(inertia: np.ndarray) -> np.ndarray:
+    """An inertia tensor (kg m2) rounded to 10 significant digits, its terms below 1e-10 of the
+    largest set to 0: its grid integral is good to about 1e-4 (``clumps.union_inertia``), and the
+    summation's last digits (the products of a symmetric clump, about 1e-28) change with the numpy
+    and BLAS build, which would change the molecule file from one install to the next."""
+    scale = float(np.abs(inertia).max())
+    out = np.where(np.abs(inertia) < 1e-10 * scale, 0.0, inertia)
+    return np.array([[float(f"{v:.10g}") for v in row] for row in out])
 
 
 def insertion_radius(plan: RunPlan, species_index: int) -> float:

@@ -50,7 +50,7 @@ class LammpsEngine(Engine):
 
     def check(self, case: Case, plan: Optional[RunPlan] = None) -> list[tuple[str, str]]:
         """What this engine cannot do: STL inserts (LAMMPS has no mesh walls for grains), clumps in a
-        slab (rigid/small bodies cannot be held to a plane)."""
+        slab (rigid/small bodies cannot be held to a plane), an eccentric hopper (a cone region is a right cone)."""
         problems = []
         if case.inserts:
             problems.append(("inserts", "LAMMPS has no STL walls for grains (no mesh region): remove the "
@@ -59,6 +59,10 @@ class LammpsEngine(Engine):
             problems.append(("geometry.kind", "clumps in a slab must stay in its plane, and LAMMPS' fix "
                                               "rigid/small cannot hold a body's motion to a plane: use a cylinder "
                                               "or hopper, or engine.name: liggghts"))
+        if case.geometry.kind == "hopper" and case.geometry.outlet_offset:
+            problems.append(("geometry.outlet_offset", "LAMMPS' cone region is a right cone, so it has no "
+                                                       "oblique hopper for an eccentric outlet: set outlet_offset: "
+                                                       "0, or use engine.name: liggghts (mesh walls)"))
         if case.engine.ranks > (os.cpu_count() or 1):
             problems.append(("engine.ranks", f"{case.engine.ranks} ranks but this machine has {os.cpu_count()} "
                                              "cores: lower engine.ranks"))

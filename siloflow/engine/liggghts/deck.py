@@ -228,6 +228,7 @@ def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, r
     radii = f.radii
     return {
         "name": plan.name, "box": enc.box, "skin": enc.skin,
+        "boundary_y": "p" if plan.geometry.periodic_depth else "f",     # a slab periodic along y
         # LIGGGHTS refuses moduli outside 5e6-1e9 Pa in SI units unless told (docs/engine_facts.md)
         "hard_particles": any(e > 1e9 for e in youngs), "soft_particles": any(e < LIGGGHTS_SOFT_LIMIT for e in youngs),
         "properties": _properties(plan, enc, restored=resume),     # a resumed bed is past the fill
