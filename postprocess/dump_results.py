@@ -116,14 +116,20 @@ def case_regions(analysis) -> list[MeasureRegion]:
             for r in analysis.porosity_regions]
 
 
-def case_regions_porosity(analysis, atoms_files, settled: Frame, results: RunResults) -> dict:
+def periodic_length(g) -> float | None:
+    """A slab's periodic length along y (m), None for a walled silo (``g``: the plan's geometry)."""
+    return g.thickness if getattr(g, "periodic_depth", False) else None
+
+
+def case_regions_porosity(analysis, atoms_files, settled: Frame, results: RunResults,
+                          period_y: float | None = None) -> dict:
     """Porosity in the case's regions over all frames (porosity_regions.csv and its figure, added to
-    ``results``); the settled values."""
+    ``results``); the settled values. ``period_y``: a periodic slab's length along y, m."""
     a = analysis
     conversion = None
     if a.relative_density is not None:
         conversion = {"relative_density": a.relative_density, "reading": a.porosity_conversion}
-    analysis = Porosity(case_regions(a), conversion)
+    analysis = Porosity(case_regions(a), conversion, period_y=period_y)
     analysis.name = "porosity_regions"
     analysis.run(read_frames(atoms_files))
     results.add_analysis(analysis)
@@ -175,10 +181,10 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
         summary["bulk_solid_fraction"] = {"error": str(exc)}
     if regions is not None:
         try:
-            por = Porosity(regions, densities=run.run.species_densities()).run([settled])
+            por = Porosity(regions, densities=run.run.species_densities(), period_y=periodic_length(g)).run([settled])
         except ValueError as exc:      # a type the run's species do not list: the grain density only
             summary["bulk_density_note"] = f"{exc}; bulk density = particle density x solid fraction"
-            por = Porosity(regions).run([settled])
+            por = Porosity(regions, period_y=periodic_length(g)).run([settled])
         results.add_analysis(por, figure=False)
         at = por.table.set_index("region")
         phi_bulk, phi_section = (float(at.loc[k, "solid_fraction"]) for k in ("bulk_core", "cross_section"))
@@ -191,7 +197,8 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
         summary["cross_section_solid_fraction"] = phi_section
         summary["cross_section_bulk_density_kg_m3"] = rho_section
     if plan.analysis.porosity_regions:
-        summary["porosity_regions"] = case_regions_porosity(plan.analysis, atoms_files, settled, results)
+        summary["porosity_regions"] = case_regions_porosity(plan.analysis, atoms_files, settled, results,
+                                                            periodic_length(g))
 
     # coordination number in the core, every contact frame
     def core(frame: Frame) -> np.ndarray:

@@ -150,10 +150,15 @@ def surface_flow_rate(time, height, area: float, bulk_density: float) -> FlowRat
     return FlowRate(-fit.rate * scale, fit.stderr * scale, fit.t_start, fit.t_end, fit.n_samples)
 
 
-def beverloo(D0, d, C: float, k: float, rho_b, g: float = 9.81):
-    """Beverloo mass flow rate (kg/s) of a circular orifice of diameter D0 (m), grains of diameter d (m)."""
+def beverloo(D0, d, C: float, k: float, rho_b, g: float = 9.81, slot_length=None):
+    """Beverloo mass flow rate (kg/s) of a circular orifice of diameter D0 (m), grains of diameter d
+    (m): C rho_b sqrt(g) (D0 - k d)^(5/2). With ``slot_length`` L (m), a slot of width D0 and length
+    L (a slab's slot, L its depth): C rho_b sqrt(g) L (D0 - k d)^(3/2), the two-dimensional law
+    (no end correction on L: a periodic depth has no ends, a slab's faces are about a grain apart)."""
     span = np.maximum(np.asarray(D0, float) - k * np.asarray(d, float), 0.0)
-    return C * np.asarray(rho_b, float) * np.sqrt(g) * span ** 2.5
+    if slot_length is None:
+        return C * np.asarray(rho_b, float) * np.sqrt(g) * span ** 2.5
+    return C * np.asarray(rho_b, float) * np.sqrt(g) * np.asarray(slot_length, float) * span ** 1.5
 
 
 @dataclass
@@ -166,37 +171,41 @@ class BeverlooFit:
     rms_relative_residual: float
 
 
-def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None) -> BeverlooFit:
+def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=None) -> BeverlooFit:
     """Fit C and k of Beverloo's law to flow rates ``W`` (kg/s) of runs with orifice diameters
     ``D0`` (m), grain diameters ``d`` (m) and bulk densities ``rho_b`` (kg/m3); needs >= 3 runs
-    with at least 2 different D0/d. Standard errors from the fit covariance (scaled by the
+    with at least 2 different D0/d. ``slot_length`` (m, per run): slots of width D0, the
+    two-dimensional law (:func:`beverloo`). Standard errors from the fit covariance (scaled by the
     residuals, or by ``W_stderr`` when given)."""
     D0, d, W, rho_b = (np.asarray(a, float) * np.ones(len(np.atleast_1d(W))) for a in (D0, d, W, rho_b))
+    L = None if slot_length is None else np.asarray(slot_length, float) * np.ones(len(W))
     if len(W) < 3 or len(np.unique(np.round(D0 / d, 9))) < 2:
         raise ValueError("a Beverloo fit needs at least 3 runs and 2 different orifice/grain size ratios")
 
-    # W^(2/5) is linear in D0 and d: (W / (C rho_b sqrt g))^(2/5) = D0 - k d; start from that
-    y = (W / (rho_b * np.sqrt(g))) ** 0.4
+    # W^(1/n) is linear in D0 and d (n = 5/2, a slot's 3/2): (W / (C rho_b sqrt g [L]))^(1/n) = D0 - k d
+    n = 2.5 if L is None else 1.5
+    y = (W / (rho_b * np.sqrt(g) * (1.0 if L is None else L))) ** (1.0 / n)
     A = np.column_stack([D0, -d])
     (a, b), *_ = np.linalg.lstsq(A, y, rcond=None)
-    c0, k0 = (max(a, 1e-6)) ** 2.5, b / max(a, 1e-6)
+    c0, k0 = (max(a, 1e-6)) ** n, b / max(a, 1e-6)
 
     def model(X, C, k):
-        return beverloo(X[0], X[1], C, k, X[2], g)
+        return beverloo(X[0], X[1], C, k, X[2], g, None if L is None else X[3])
 
     sigma = None if W_stderr is None else np.asarray(W_stderr, float) * np.ones(len(W))
     if sigma is not None and not np.all(np.isfinite(sigma) & (sigma > 0)):
         sigma = None                # a run without a resolved error: weigh by the residuals instead
-    popt, pcov = curve_fit(model, np.vstack([D0, d, rho_b]), W, p0=[c0, k0], sigma=sigma,
-                           absolute_sigma=sigma is not None, maxfev=20000)
-    res = (W - model(np.vstack([D0, d, rho_b]), *popt)) / W
+    X = np.vstack([D0, d, rho_b] + ([] if L is None else [L]))
+    popt, pcov = curve_fit(model, X, W, p0=[c0, k0], sigma=sigma, absolute_sigma=sigma is not None, maxfev=20000)
+    res = (W - model(X, *popt)) / W
     err = np.sqrt(np.diag(pcov)) if np.all(np.isfinite(pcov)) else np.array([np.nan, np.nan])
     return BeverlooFit(float(popt[0]), float(err[0]), float(popt[1]), float(err[1]), len(W),
                        float(np.sqrt(np.mean(res ** 2))))
 
 
 def beverloo_table(folders) -> pd.DataFrame:
-    """One row per analysed run folder: orifice diameter D0, grain diameter d (m), bulk density
+    """One row per analysed run folder: orifice diameter D0 (a slab's slot width), grain diameter d,
+    slot length L (a slab's depth; NaN for a round orifice) (m), bulk density
     rho_b (kg/m3, measured in the settled bed when dumps exist, else packing fraction x rho_p),
     steady flow rate W and its standard error (kg/s), gravity (m/s2)."""
     rows = []
@@ -212,7 +221,9 @@ def beverloo_table(folders) -> pd.DataFrame:
         rate = summary["flow_rate"]
         if not (rate["rate"] and np.isfinite(rate["rate"])):
             raise ReadError(f"{folder}: no steady flow rate in its results")
-        rows.append({"run": str(folder), "D0": 2 * plan.geometry.outlet_radius, "d": 2 * grains[0].radius,
+        g = plan.geometry
+        rows.append({"run": str(folder), "D0": 2 * g.outlet_radius, "d": 2 * grains[0].radius,
+                     "L": g.thickness if g.kind == "planar" else np.nan,
                      "rho_b": float(rho_b), "W": rate["rate"], "W_stderr": rate.get("stderr", np.nan), "g": plan.gravity,
                      "rho_b_source": "measured" if fa.get("bulk_density_kg_m3") else "case packing fraction"})
     return pd.DataFrame(rows)

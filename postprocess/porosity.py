@@ -189,6 +189,20 @@ def section_weights(frame, axis: int, plane: float) -> np.ndarray | None:
     return weights
 
 
+def periodic_images(positions: np.ndarray, radii: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of a box periodic along y over [-period/2, period/2) (m) with the images of the
+    grains within their radius of either end, moved by -+ ``period``: (row index into the
+    originals, positions (m, 3))."""
+    half = 0.5 * period
+    y = positions[:, 1]
+    near_hi, near_lo = np.flatnonzero(y + radii > half), np.flatnonzero(y - radii < -half)
+    rows = np.concatenate([np.arange(len(y)), near_hi, near_lo])
+    shift = np.zeros((len(rows), 3))
+    shift[len(y):len(y) + len(near_hi), 1] = -period
+    shift[len(y) + len(near_hi):, 1] = period
+    return rows, positions[rows] + shift
+
+
 class Porosity(FrameAnalysis):
     """Porosity and solid fraction per region and frame.
 
@@ -206,8 +220,9 @@ class Porosity(FrameAnalysis):
     name = "porosity"
 
     def __init__(self, regions: list[MeasureRegion], conversion: dict | None = None,
-                 densities: dict[int, float] | None = None):
+                 densities: dict[int, float] | None = None, period_y: float | None = None):
         super().__init__()
+        self.period_y = period_y             # m: a slab periodic along y, centred on y = 0
         if not regions:
             raise ValueError("porosity needs at least one measurement region")
         self.regions = list(regions)
@@ -232,10 +247,16 @@ class Porosity(FrameAnalysis):
 
     def _single_frame(self, frame, contacts):
         pos, rad = frame.positions(), frame.radii()
-        tree = cKDTree(pos) if len(pos) else None
         volume_weights = grain_weights(frame)
         rho = self._row_densities(frame, clumps=volume_weights is not None)
         mass_weights = rho if rho is None or volume_weights is None else rho * volume_weights
+        if self.period_y is not None and len(pos):
+            # the periodic images of the grains across y = -+ L/2 hold the volume they carry across it
+            rows, pos = periodic_images(pos, rad, self.period_y)
+            rad = rad[rows]
+            volume_weights, rho, mass_weights = (None if w is None else w[rows] for w in
+                                                 (volume_weights, rho, mass_weights))
+        tree = cKDTree(pos) if len(pos) else None
         sections = {}                        # circle regions often share a plane (paper A: nine)
         rows = []
         for region in self.regions:

@@ -105,8 +105,8 @@ def sweep_table_runs(table_file: Path) -> list[Path]:
 
 
 def beverloo(folders: Sequence[Path]):
-    """Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) fitted across finished runs (different
-    orifices or grains), or across the complete runs of one sweep table (``sweep.csv``). Returns
+    """Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) (slabs' slots: C rho_b sqrt(g) L (D0 - k
+    d)^(3/2), L the slab's depth) fitted across finished runs (different orifices or grains), or across the complete runs of one sweep table (``sweep.csv``). Returns
     ``(table, fit)``: one row per run (D0, d, W, rho_b, g; SI) and ``postprocess.flow_rate``'s fit
     (C and k with standard errors). ``ReadError`` when the runs differ in gravity or cannot be read."""
     from postprocess.flow_rate import beverloo_table, fit_beverloo
@@ -116,8 +116,12 @@ def beverloo(folders: Sequence[Path]):
     table = beverloo_table(folders)
     if table.g.nunique() > 1:
         raise ReadError("the runs differ in gravity; one Beverloo fit needs one g")
+    slots = table.L.notna()
+    if slots.any() and not slots.all():
+        raise ReadError("the runs mix slots (slabs) and round orifices: one Beverloo fit needs one outlet shape")
     try:
-        fit = fit_beverloo(table.D0, table.d, table.W, table.rho_b, float(table.g.iloc[0]))
+        fit = fit_beverloo(table.D0, table.d, table.W, table.rho_b, float(table.g.iloc[0]),
+                           slot_length=table.L if slots.all() else None)
     except ValueError as exc:
         raise ReadError(str(exc)) from None
     return table, fit
