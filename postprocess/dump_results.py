@@ -95,14 +95,18 @@ def bed_regions(g, surface: float, d: float) -> list[MeasureRegion]:
         mid, t = (0.0, 0.0, 0.5 * (z0 + z1)), 0.5 * g.thickness
         return [MeasureRegion("bulk_core", "cylinder", mid, min(g.half_width - 2.0 * d, half), axis=1, t0=-t, t1=t),
                 MeasureRegion("cross_section", "cylinder", mid, min(g.half_width, half), axis=1, t0=-t, t1=t)]
-    return [MeasureRegion("bulk_core", "cylinder", (0.0, 0.0, 0.0), g.radius - 2.0 * d, axis=2, t0=z0, t1=z1),
-            MeasureRegion("cross_section", "cylinder", (0.0, 0.0, 0.0), g.radius, axis=2, t0=z0, t1=z1)]
+    # a cylinder, or a box: the vertical cylinder inscribed in its cross-section
+    radius = g.radius if g.kind != "box" else min(g.half_width, 0.5 * g.depth)
+    return [MeasureRegion("bulk_core", "cylinder", (0.0, 0.0, 0.0), radius - 2.0 * d, axis=2, t0=z0, t1=z1),
+            MeasureRegion("cross_section", "cylinder", (0.0, 0.0, 0.0), radius, axis=2, t0=z0, t1=z1)]
 
 
 def janssen_diameter(g) -> float:
     """The D of Janssen's p = rho g D / (4 mu K) (1 - exp(-4 mu K z / D)), m: the diameter of a
     cylinder; for a slab 4 A / P with P the perimeter that carries wall friction (the side
-    walls, and the faces only when they have friction)."""
+    walls, and the faces only when they have friction); for a box 4 A / P of its four walls."""
+    if g.kind == "box":
+        return 4.0 * g.width * g.depth / (2.0 * (g.width + g.depth))
     if g.kind != "planar":
         return 2.0 * g.radius
     perimeter = 2.0 * g.thickness + (2.0 * g.width if g.face_friction > 0 else 0.0)
@@ -157,11 +161,12 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
 
     g = plan.geometry
     R = g.half_width
-    planar = g.kind == "planar"
+    planar, box = g.kind == "planar", g.kind == "box"
 
-    # free surface over all frames; its table also says which frames exist
+    # free surface over all frames (a box: strips across its width, its whole depth); its table also
+    # says which frames exist
     surface = FreeSurface(radius=R, z_min=g.hopper_height, timestep=dt,
-                          thickness=g.thickness if planar else None).run(read_frames(atoms_files))
+                          thickness=g.thickness if planar else g.depth if box else None).run(read_frames(atoms_files))
     results.add_analysis(surface)
     steps = surface.table.step
     if not (steps <= open_step).any():
@@ -205,6 +210,8 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
         p = frame.positions()
         top = float(p[:, 2].max()) if frame.n else 0.0
         across = np.abs(p[:, 0]) if planar else np.hypot(p[:, 0], p[:, 1])
+        if box:                    # the core: two diameters from each of the four walls
+            across = np.maximum(np.abs(p[:, 0]), np.abs(p[:, 1]) + R - 0.5 * g.depth)
         return ((across < R - 2 * d) & (p[:, 2] > g.hopper_height + 2 * d)
                 & (p[:, 2] < top - 2 * d))
 

@@ -148,12 +148,13 @@ def sector_statistics(sectors: pd.DataFrame, walls, static_mask, dynamic_mask) -
     return pd.DataFrame(rows)
 
 
-def eccentric_discharge(table: pd.DataFrame, sectors: int, offset: float, planar: bool = False) -> dict:
+def eccentric_discharge(table: pd.DataFrame, sectors: int, offset: float, kind: str = "cylinder",
+                        offset_y: float = 0.0) -> dict:
     """An eccentric outlet's wall: per band, the dynamic mean pressure of the sector facing the
-    outlet (a cylinder's sector 0, centred on +x; a slab's side wall on the slot's side) and of the
-    wall opposite (sector ``sectors / 2``; for an odd count, the mean of the two sectors either
-    side of 180 deg; a slab's other side wall), their difference near - far (Pa) and the ratio
-    near / far.
+    outlet (a cylinder's sector 0, centred on +x; a slab's side wall on the slot's side; a box's
+    wall on the side the outlet is farther off the middle, x or y) and of the wall opposite
+    (sector ``sectors / 2``; for an odd count, the mean of the two sectors either side of 180 deg;
+    a slab's or box's opposite wall), their difference near - far (Pa) and the ratio near / far.
 
     The difference's error holds two parts in quadrature: each sector's time series (batch means)
     and the packing against the wall, which differs from sector to sector in one fill and which
@@ -163,8 +164,12 @@ def eccentric_discharge(table: pd.DataFrame, sectors: int, offset: float, planar
     sum(m^2)) / 2, d a pair's difference, e its time-series error and m its mean pressure (the
     loaded bands weigh most).
     ``table``: :func:`sector_statistics`."""
-    if planar:                          # sector 0 the wall at x = -width/2, sector 1 at +width/2
-        near, far, pairs = (1 if offset > 0 else 0), [0 if offset > 0 else 1], []
+    if kind in ("planar", "box"):       # sectors 0, 1 the walls at x = -+ width/2; a box's 2, 3 at y = -+ depth/2
+        if kind == "box" and abs(offset_y) > abs(offset):
+            near, far = (3, [2]) if offset_y > 0 else (2, [3])
+        else:
+            near, far = (1, [0]) if offset > 0 else (0, [1])
+        pairs = []
     else:
         near = 0
         far = [sectors // 2] if sectors % 2 == 0 else [sectors // 2, sectors // 2 + 1]
@@ -195,7 +200,8 @@ def eccentric_discharge(table: pd.DataFrame, sectors: int, offset: float, planar
                     "far_pressure": p_far, "difference": float(a.dynamic_mean_pressure - p_far),
                     "difference_stderr": float(math.hypot(time_se, pack_se)), "time_stderr": float(time_se),
                     "ratio": float(a.dynamic_mean_pressure / p_far) if p_far else float("nan")})
-    return {"outlet_offset_m": offset, "near_sector": near, "far_sectors": far,
+    return {"outlet_offset_m": offset, **({"outlet_offset_y_m": offset_y} if offset_y else {}),
+            "near_sector": near, "far_sectors": far,
             "packing_relative_sd": packing, "mirror_pairs": len(excess),
             "what": "dynamic mean pressure over the steady discharge on the wall sector facing the outlet "
                     "(near) and opposite it (far); error: each sector's batch means and the packing against the "
@@ -319,10 +325,11 @@ def analyse_run(folder, measured_pressure=None) -> RunResults:
                                RESULT_TABLES["wall_pressure_sectors"]: sectors.assign(time=sectors.step * run.dt),
                                RESULT_TABLES["bands"]: table, "wall_pressure_sectors.parquet": sectors,
                                RESULT_TABLES["sectors"]: sector_table})
-        offset = getattr(run.plan.geometry, "outlet_offset", 0.0)
-        if offset:
+        geo = run.plan.geometry
+        offset, offset_y = getattr(geo, "outlet_offset", 0.0), getattr(geo, "outlet_offset_y", 0.0)
+        if offset or offset_y:
             summary["eccentric_discharge"] = eccentric_discharge(sector_table, run.plan.sensors.sectors, offset,
-                                                                 planar=run.plan.geometry.kind == "planar")
+                                                                 geo.kind, offset_y)
     summary["frame_analyses"] = analyse_dumps(run, table, dis, rate, results)
     summary["design_loads"] = en1991_comparison(run, table, summary, results)
     if measured_pressure is not None:

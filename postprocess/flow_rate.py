@@ -150,15 +150,19 @@ def surface_flow_rate(time, height, area: float, bulk_density: float) -> FlowRat
     return FlowRate(-fit.rate * scale, fit.stderr * scale, fit.t_start, fit.t_end, fit.n_samples)
 
 
-def beverloo(D0, d, C: float, k: float, rho_b, g: float = 9.81, slot_length=None):
+def beverloo(D0, d, C: float, k: float, rho_b, g: float = 9.81, slot_length=None, slot_ends=False):
     """Beverloo mass flow rate (kg/s) of a circular orifice of diameter D0 (m), grains of diameter d
-    (m): C rho_b sqrt(g) (D0 - k d)^(5/2). With ``slot_length`` L (m), a slot of width D0 and length
-    L (a slab's slot, L its depth): C rho_b sqrt(g) L (D0 - k d)^(3/2), the two-dimensional law
-    (no end correction on L: a periodic depth has no ends, a slab's faces are about a grain apart)."""
-    span = np.maximum(np.asarray(D0, float) - k * np.asarray(d, float), 0.0)
+    (m): C rho_b sqrt(g) (D0 - k d)^(5/2). With ``slot_length`` L (m), a rectangular outlet of width
+    D0 and length L: C rho_b sqrt(g) (L - k d) (D0 - k d)^(3/2) where ``slot_ends`` (per outlet:
+    a box's rectangle or slot between walls), else C rho_b sqrt(g) L (D0 - k d)^(3/2) (a slab's
+    slot: a periodic depth has no ends, a walled slab's faces are about a grain apart)."""
+    d = np.asarray(d, float)
+    span = np.maximum(np.asarray(D0, float) - k * d, 0.0)
     if slot_length is None:
         return C * np.asarray(rho_b, float) * np.sqrt(g) * span ** 2.5
-    return C * np.asarray(rho_b, float) * np.sqrt(g) * np.asarray(slot_length, float) * span ** 1.5
+    L = np.asarray(slot_length, float)
+    length = np.where(np.asarray(slot_ends, bool), np.maximum(L - k * d, 0.0), L)
+    return C * np.asarray(rho_b, float) * np.sqrt(g) * length * span ** 1.5
 
 
 @dataclass
@@ -171,7 +175,7 @@ class BeverlooFit:
     rms_relative_residual: float
 
 
-def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=None) -> BeverlooFit:
+def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=None, slot_ends=False) -> BeverlooFit:
     """Fit C and k of Beverloo's law to flow rates ``W`` (kg/s) of runs with orifice diameters
     ``D0`` (m), grain diameters ``d`` (m) and bulk densities ``rho_b`` (kg/m3); needs >= 3 runs
     with at least 2 different D0/d. ``slot_length`` (m, per run): slots of width D0, the
@@ -179,6 +183,7 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=No
     residuals, or by ``W_stderr`` when given)."""
     D0, d, W, rho_b = (np.asarray(a, float) * np.ones(len(np.atleast_1d(W))) for a in (D0, d, W, rho_b))
     L = None if slot_length is None else np.asarray(slot_length, float) * np.ones(len(W))
+    ends = np.asarray(slot_ends, bool) * np.ones(len(W), bool)
     if len(W) < 3 or len(np.unique(np.round(D0 / d, 9))) < 2:
         raise ValueError("a Beverloo fit needs at least 3 runs and 2 different orifice/grain size ratios")
 
@@ -190,7 +195,7 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=No
     c0, k0 = (max(a, 1e-6)) ** n, b / max(a, 1e-6)
 
     def model(X, C, k):
-        return beverloo(X[0], X[1], C, k, X[2], g, None if L is None else X[3])
+        return beverloo(X[0], X[1], C, k, X[2], g, None if L is None else X[3], ends)
 
     sigma = None if W_stderr is None else np.asarray(W_stderr, float) * np.ones(len(W))
     if sigma is not None and not np.all(np.isfinite(sigma) & (sigma > 0)):
@@ -205,7 +210,8 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=No
 
 def beverloo_table(folders) -> pd.DataFrame:
     """One row per analysed run folder: orifice diameter D0 (a slab's slot width), grain diameter d,
-    slot length L (a slab's depth; NaN for a round orifice) (m), bulk density
+    outlet length L (a slab's depth, a box's rectangle or slot; NaN for a round orifice) (m), L_ends (the
+    outlet's length ends at walls or edges: Beverloo's L - k d), bulk density
     rho_b (kg/m3, measured in the settled bed when dumps exist, else packing fraction x rho_p),
     steady flow rate W and its standard error (kg/s), gravity (m/s2)."""
     rows = []
@@ -222,8 +228,10 @@ def beverloo_table(folders) -> pd.DataFrame:
         if not (rate["rate"] and np.isfinite(rate["rate"])):
             raise ReadError(f"{folder}: no steady flow rate in its results")
         g = plan.geometry
+        L = g.thickness if g.kind == "planar" else 2 * g.outlet_half_y if g.kind == "box" and g.outlet != "circle" \
+            else np.nan
         rows.append({"run": str(folder), "D0": 2 * g.outlet_radius, "d": 2 * grains[0].radius,
-                     "L": g.thickness if g.kind == "planar" else np.nan,
+                     "L": L, "L_ends": g.kind == "box",
                      "rho_b": float(rho_b), "W": rate["rate"], "W_stderr": rate.get("stderr", np.nan), "g": plan.gravity,
                      "rho_b_source": "measured" if fa.get("bulk_density_kg_m3") else "case packing fraction"})
     return pd.DataFrame(rows)

@@ -121,7 +121,7 @@ def beverloo(folders: Sequence[Path]):
         raise ReadError("the runs mix slots (slabs) and round orifices: one Beverloo fit needs one outlet shape")
     try:
         fit = fit_beverloo(table.D0, table.d, table.W, table.rho_b, float(table.g.iloc[0]),
-                           slot_length=table.L if slots.all() else None)
+                           slot_length=table.L if slots.all() else None, slot_ends=table.L_ends)
     except ValueError as exc:
         raise ReadError(str(exc)) from None
     return table, fit

@@ -10,7 +10,7 @@ import math
 
 from . import contact_physics as cp
 from ._version import __version__
-from .case import Case, HopperGeometry, PlanarGeometry
+from .case import BoxGeometry, Case, HopperGeometry, PlanarGeometry
 from .errors import CaseError, SetupError
 from .plan import (
     FACES,
@@ -62,6 +62,13 @@ DRAG_WARNING = 0.1
 def bed_volume(case: Case, height: float) -> float:
     """Volume of the silo below ``height`` (m above the outlet), m3."""
     g = case.geometry
+    if isinstance(g, BoxGeometry):          # the hopper's frustum (a pyramid's or a wedge's), then the box
+        hh, (hx, hy) = g.hopper_height, g.outlet_half_sizes
+        h_w = min(height, hh)
+        a0, a1 = 2 * hx, (g.width - 2 * hx) / hh if hh > 0 else 0.0           # width along x: a0 + a1 z
+        b0, b1 = 2 * hy, (g.depth - 2 * hy) / hh if hh > 0 else 0.0
+        hopper = a0 * b0 * h_w + (a0 * b1 + a1 * b0) * h_w ** 2 / 2 + a1 * b1 * h_w ** 3 / 3
+        return hopper + g.width * g.depth * max(0.0, height - hh)
     if isinstance(g, PlanarGeometry):       # trapezoid of the wedge hopper, then the full width
         h_w = min(height, g.hopper_height)      # 0 on a flat floor (no wedge); an offset slot shears it
         w_top = g.outlet_width + (2.0 * h_w * math.tan(math.radians(g.half_angle_deg)) if h_w > 0 else 0.0)
@@ -244,7 +251,10 @@ def bed_pressure(case: Case, bulk_density: float, depth: float) -> float:
     Jaky's K = 1 - sin(atan(friction)); hydrostatic rho_b g depth without wall friction."""
     g = case.geometry
     m = case.materials
-    if isinstance(g, PlanarGeometry):
+    if isinstance(g, BoxGeometry):
+        area = g.width * g.depth
+        grip = 2 * (g.width + g.depth) * m.particle_wall.friction
+    elif isinstance(g, PlanarGeometry):
         area = g.width * g.thickness
         grip = 2 * g.thickness * m.particle_wall.friction + 2 * g.width * g.face_friction
     else:
@@ -343,6 +353,7 @@ def derive(case: Case) -> RunPlan:
     case = effective_case(case, settings)  # the profile's time step and stiffness, applied once here
     g = case.geometry
     planar = isinstance(g, PlanarGeometry)
+    box = isinstance(g, BoxGeometry)
     p = case.particles
     r = p.max_radius                       # geometry margins use the largest grain (clumps: bounding sphere)
     d = 2 * r
@@ -387,7 +398,13 @@ def derive(case: Case) -> RunPlan:
                           f"{f.packing_fraction}) leaves no room to insert particles below the top "
                           f"({top:.4g} m): fill fewer particles or make the silo taller")])
     pour = f.pour_radius if f.pour_radius is not None else g.half_width      # central or distributed fill
-    if planar:
+    if box:
+        # centres only, a grain's radius (and 5 %) from the walls
+        half_x, half_y = min(pour, g.half_width - 1.05 * r), min(pour, 0.5 * g.depth - 1.05 * r)
+        insertion_region = {"shape": "block", "xlo": -half_x, "xhi": half_x,
+                            "ylo": -half_y, "yhi": half_y, "z_min": z_min + r, "z_max": z_max - r}
+        region_volume = 4 * half_x * half_y * (z_max - z_min)
+    elif planar:
         # centres only (all_in no: a clump's bounding sphere is wider than the slab); wheat is
         # inserted lying flat in the slab, so its half thickness is its sphere radius
         half_t = 0.5 * g.thickness - (0.5 * p.width if p.kind == "clumps" else r)
@@ -476,12 +493,15 @@ def derive(case: Case) -> RunPlan:
     if static_steps < 2 * sample_freq:      # the time check of the case can miss by a rounded step
         raise CaseError([("fill.settle.static_window", f"{static_steps} steps hold fewer than two samples of "
                           f"{sample_freq} steps (outputs.sample_interval): no static wall-load sample")])
+    round_silo = not (planar or box)
     silo = Silo(kind=g.kind, half_width=g.half_width, height=g.height, hopper_height=g.hopper_height,
-                outlet_radius=g.outlet_radius, radius=None if planar else g.radius,
-                width=g.width if planar else None, thickness=g.thickness if planar else None,
+                outlet_radius=g.outlet_radius, radius=g.radius if round_silo else None,
+                width=None if round_silo else g.width, thickness=g.thickness if planar else None,
                 face_friction=g.face_friction if planar else None,
-                mesh_segments=None if planar else g.mesh_segments,
-                outlet_offset=g.outlet_offset, periodic_depth=planar and g.periodic_depth)
+                mesh_segments=g.mesh_segments if round_silo else None,
+                outlet_offset=g.outlet_offset, periodic_depth=planar and g.periodic_depth,
+                **({"depth": g.depth, "outlet": g.outlet, "outlet_half_y": g.outlet_half_sizes[1],
+                    "outlet_offset_y": g.outlet_offset_y} if box else {}))
     materials = {"particle": Material(youngs_modulus=_modulus_of(case, "particle")[0],
                                       poisson_ratio=_modulus_of(case, "particle")[1]),
                  "wall": Material(youngs_modulus=_modulus_of(case, None)[0], poisson_ratio=_modulus_of(case, None)[1])}
@@ -515,7 +535,7 @@ def derive(case: Case) -> RunPlan:
                             empty_mass=dis.empty_fraction * (count * final_mass + (dust_count * dust.mass if dust
                                                                                    is not None else 0.0))),
         outlet=Outlet(z=outlet_z, radius=g.outlet_radius + 2 * d),
-        sensors=Sensors(bands=0, sectors=2 if planar else case.sensors.sectors),
+        sensors=Sensors(bands=0, sectors=2 if planar else 4 if box else case.sensors.sectors),
         outputs=Outputs(thermo_every=thermo_every, sample_steps=sample_freq, samples_per_average=sample_repeat,
                         dump_every=dump_every, vtk=bool(dump_every and needs["vtk"]),
                         contacts=bool(dump_every and needs["contacts"]), results=out.results,
@@ -623,14 +643,14 @@ def guard_limits(case: Case, species: list, v_open: float, z_lowest: float) -> G
     fall = math.sqrt(INSERTION_SPEED ** 2 + 2.0 * case.gravity * (top - z_lowest))
     r_min = min(sp.radius for sp in species if sp.stream == "grains")     # dust: watched by speed and escapes
     margin = gs.escape_margin * 2.0 * case.particles.max_radius
-    planar = isinstance(g, PlanarGeometry)
+    planar, box = isinstance(g, PlanarGeometry), isinstance(g, BoxGeometry)
     return Guard(enabled=gs.enabled, max_speed=gs.speed_factor * (fall + v_open),
                  max_overlap=gs.max_overlap * r_min + max(map(own_overlap, species)),
                  max_overlap_fraction=gs.max_overlap, grain_radius=r_min,
                  energy_growth=gs.energy_growth,
-                 escape_radius=None if planar else g.half_width + margin,
-                 escape_half_x=g.half_width + margin if planar else None,
-                 escape_half_y=0.5 * g.thickness + margin if planar else None,
+                 escape_radius=None if planar or box else g.half_width + margin,
+                 escape_half_x=g.half_width + margin if planar or box else None,
+                 escape_half_y=(0.5 * g.thickness if planar else 0.5 * g.depth) + margin if planar or box else None,
                  escape_z=top + margin)
 
 

@@ -52,6 +52,12 @@ def default_root() -> Path:
     return Path(base) / "siloflow"
 
 
+#: the plan silo's fields that place or shape its outlet (a flat floor's plate closes it for the fill)
+OUTLET_PLACE = ("outlet_offset", "outlet", "outlet_half_y", "outlet_offset_y")
+#: the plan silo's fields added after fills were first cached: left out of the key while unset
+LATER_SILO_FIELDS = ("outlet_offset", "periodic_depth", "depth", "outlet", "outlet_half_y", "outlet_offset_y")
+
+
 def walls_digest(plan) -> str:
     """SHA-256 of the walls the fill touches, mesh by mesh (each mesh's triangles, m, float64,
     order-free; the meshes order-free); a flat floor (bottom and plate of a silo without hopper)
@@ -76,10 +82,11 @@ def fill_key_inputs(plan, engine) -> dict:
     data = plan.model_dump(mode="json", exclude=set(AFTER_FILL))
     geometry = dict(data["geometry"])
     if plan.geometry.hopper_height == 0:           # the orifice is closed by the plate during the fill
-        geometry.pop("outlet_radius")
-        geometry.pop("outlet_offset")
-    elif not plan.geometry.outlet_offset:          # keys made before eccentric outlets stay valid
-        geometry.pop("outlet_offset")
+        for k in ("outlet_radius",) + OUTLET_PLACE:
+            geometry.pop(k, None)
+    for k in LATER_SILO_FIELDS:                    # keys made before these fields existed stay valid
+        if geometry.get(k, None) in (None, 0.0, False):
+            geometry.pop(k, None)
     data["geometry"] = geometry
     # the guard's limits do not make another bed, but a bed settled unwatched is not one a watched run may take
     data["guarded"] = plan.guard is not None and plan.guard.enabled

@@ -195,7 +195,7 @@ class Silo(Frozen):
     planar (a slab, ``thickness`` deep along y); ``half_width`` is the radius or half the width;
     the outlet's centre is at (``outlet_offset``, 0, 0)."""
 
-    kind: Literal["cylinder", "hopper", "planar"]
+    kind: Literal["cylinder", "hopper", "planar", "box"]
     half_width: float
     height: float                   # of the vertical part
     hopper_height: float            # 0 without a hopper
@@ -207,6 +207,10 @@ class Silo(Frozen):
     mesh_segments: Optional[int] = None   # facets around a cylinder's circumference
     outlet_offset: float = 0.0            # the outlet's centre at x = outlet_offset (an eccentric outlet)
     periodic_depth: bool = False          # a slab periodic along y over its thickness (no faces)
+    depth: Optional[float] = None         # a box's inner extent along y
+    outlet: Optional[str] = None          # a box's outlet: rectangle, slot or circle
+    outlet_half_y: Optional[float] = None  # a box's outlet half extent along y (a slot's: half the depth)
+    outlet_offset_y: float = 0.0          # a box's outlet centre's y
 
     @property
     def top(self) -> float:
@@ -215,6 +219,8 @@ class Silo(Frozen):
     @property
     def half_depth(self) -> float:
         """Half the extent along y, m."""
+        if self.kind == "box":
+            return 0.5 * self.depth
         return 0.5 * self.thickness if self.kind == "planar" else self.half_width
 
 

@@ -348,7 +348,9 @@ def _eccentric_blocks(summary: dict) -> list:
     rows = [[str(b["band"]), _fmt(b["z_mid"], ".3f"), _fmt(b["near_pressure"], ".1f"), _fmt(b["far_pressure"], ".1f"),
              f"{_fmt(b['difference'], '+.1f')} +/- {_fmt(b['difference_stderr'], '.2g')}", _cell(b["ratio"], ".2f")]
             for b in ecc["bands"]]
-    return [Text(f"Eccentric outlet ({_fmt(ecc['outlet_offset_m'], '.4g')} m off the middle, towards sector "
+    where = f"x {_fmt(ecc['outlet_offset_m'], '.4g')} m" + (f", y {_fmt(ecc['outlet_offset_y_m'], '.4g')} m"
+                                                             if "outlet_offset_y_m" in ecc else "")
+    return [Text(f"Eccentric outlet (at {where} off the middle, towards sector "
                  f"{ecc['near_sector']}): {ecc['what']}. Every sector: sectors.csv (Pa)."),
             Table(["band", "z (m)", "near (Pa)", "far (Pa)", "near - far (Pa)", "near / far"], rows)]
 

@@ -48,6 +48,7 @@ from .fields import (  # noqa: F401
 )
 from .geometry import (  # noqa: F401
     MAX_HOPPER_HEIGHT,
+    BoxGeometry,
     CylinderGeometry,
     Geometry,
     HopperGeometry,
@@ -92,4 +93,4 @@ from .stages import (  # noqa: F401
     Settle,
 )
 
-__all__ = ['Analysis', 'BenchQuantity', 'Case', 'ClumpSphere', 'Clumps', 'CylinderGeometry', 'DEFAULT_TIMESTEP_FRACTION', 'DESIGN_RANGES', 'DesignSettings', 'Discharge', 'Dust', 'EngineSettings', 'Fill', 'FiniteFloat', 'Fraction', 'Geometry', 'GrainRadius', 'Guard', 'HopperGeometry', 'Int', 'MAX_HOPPER_HEIGHT', 'MAX_STAGE_TIME', 'MAX_YOUNGS_MODULUS', 'MIN_DENSITY', 'MIN_GRAIN_RADIUS', 'MIN_TIMESTEP_FRACTION', 'MIN_YOUNGS_MODULUS', 'Materials', 'MeasurementRegion', 'Mobilise', 'MonodisperseSpheres', 'NonNegative', 'Opening', 'Outputs', 'PROFILE_FIELDS', 'PROFILE_NAMES', 'PairContact', 'ParticleMaterial', 'Particles', 'PinnedProfile', 'PlanarGeometry', 'PolydisperseSpheres', 'Positive', 'RESULTS', 'Real', 'SAFE_NAME_PATTERN', 'STATIC_WINDOW_SAMPLES', 'SafeName', 'Settle', 'Strict', 'TimestepFraction', 'WallInsert', 'WallMaterial', 'WallSensors', 'default_static_window', 'paper_b_radii']
+__all__ = ['Analysis', 'BenchQuantity', 'BoxGeometry', 'Case', 'ClumpSphere', 'Clumps', 'CylinderGeometry', 'DEFAULT_TIMESTEP_FRACTION', 'DESIGN_RANGES', 'DesignSettings', 'Discharge', 'Dust', 'EngineSettings', 'Fill', 'FiniteFloat', 'Fraction', 'Geometry', 'GrainRadius', 'Guard', 'HopperGeometry', 'Int', 'MAX_HOPPER_HEIGHT', 'MAX_STAGE_TIME', 'MAX_YOUNGS_MODULUS', 'MIN_DENSITY', 'MIN_GRAIN_RADIUS', 'MIN_TIMESTEP_FRACTION', 'MIN_YOUNGS_MODULUS', 'Materials', 'MeasurementRegion', 'Mobilise', 'MonodisperseSpheres', 'NonNegative', 'Opening', 'Outputs', 'PROFILE_FIELDS', 'PROFILE_NAMES', 'PairContact', 'ParticleMaterial', 'Particles', 'PinnedProfile', 'PlanarGeometry', 'PolydisperseSpheres', 'Positive', 'RESULTS', 'Real', 'SAFE_NAME_PATTERN', 'STATIC_WINDOW_SAMPLES', 'SafeName', 'Settle', 'Strict', 'TimestepFraction', 'WallInsert', 'WallMaterial', 'WallSensors', 'default_static_window', 'paper_b_radii']

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal, Optional, Union
 
-from pydantic import Field, ValidationInfo, field_validator, model_validator
+from pydantic import ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
 from .fields import Int, NonNegative, Positive, Real, Strict
 
@@ -163,7 +163,93 @@ class PlanarGeometry(Strict):
         return (self.width - self.outlet_width) / 2.0 / math.tan(math.radians(self.half_angle_deg))
 
 
-Geometry = Annotated[Union[CylinderGeometry, HopperGeometry, PlanarGeometry],
+class BoxGeometry(Strict):
+    """Rectangular silo (bin): vertical walls at x = +-width/2 and y = +-depth/2, on a flat floor
+    (``half_angle_deg`` 90, the default) or a hopper down to the outlet at z = 0. The outlet is a
+    ``rectangle`` (``outlet_width`` along x by ``outlet_length`` along y: a pyramidal hopper), a
+    ``slot`` (``outlet_width`` across the whole depth: a wedge hopper, its end walls vertical) or a
+    ``circle`` (``outlet_radius``; flat floor only), centred at (``outlet_offset``,
+    ``outlet_offset_y``). ``half_angle_deg`` is the angle of the hopper's walls facing x from the
+    vertical; those facing y share the hopper's height. The sensors are bands on each of the four
+    walls (sector 0 at x = -width/2, 1 at +width/2, 2 at y = -depth/2, 3 at +depth/2)."""
+
+    # the circle's radius is the field ``outlet_radius`` (dumped under that name too); the property
+    # ``outlet_radius`` is every silo's outlet half width along x
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, frozen=True, serialize_by_alias=True,
+                              validate_by_name=False, validate_by_alias=True)
+
+    kind: Literal["box"]
+    width: Positive = Field(description="inner width along x, m", le=100)
+    depth: Positive = Field(description="inner depth along y, m", le=100)
+    height: Positive = Field(description="height of the vertical walls above the hopper, m", le=1000)
+    half_angle_deg: Real = Field(90.0, gt=0, le=90, allow_inf_nan=False,
+                                 description="hopper angle of the walls facing x, from the vertical, degrees "
+                                             "(90: a flat floor)")
+    outlet: Literal["rectangle", "slot", "circle"] = Field("rectangle", description="the outlet's shape")
+    outlet_width: Optional[Positive] = Field(None, description="rectangle or slot: width along x, m")
+    outlet_length: Optional[Positive] = Field(None, description="rectangle: length along y, m")
+    outlet_radius_m: Optional[Positive] = Field(None, alias="outlet_radius", description="circle: radius, m")
+    outlet_offset: Real = Field(0.0, ge=-100, le=100, allow_inf_nan=False, description="outlet centre's x, m")
+    outlet_offset_y: Real = Field(0.0, ge=-100, le=100, allow_inf_nan=False, description="outlet centre's y, m")
+
+    @model_validator(mode="after")
+    def _outlet_fits(self):
+        need = {"rectangle": ("outlet_width", "outlet_length"), "slot": ("outlet_width",),
+                "circle": ("outlet_radius",)}[self.outlet]
+        given = {"outlet_width": self.outlet_width, "outlet_length": self.outlet_length,
+                 "outlet_radius": self.outlet_radius_m}
+        missing = [k for k in need if given[k] is None]
+        extra = [k for k, v in given.items() if v is not None and k not in need]
+        if missing or extra:
+            raise ValueError(f"outlet {self.outlet!r} takes {', '.join(need)}"
+                             + (f"; missing {', '.join(missing)}" if missing else "")
+                             + (f"; {', '.join(extra)} does not apply" if extra else ""))
+        if self.outlet == "circle" and self.half_angle_deg != 90:
+            raise ValueError("a circular outlet sits in a flat floor: half_angle_deg must be 90 (a rectangle or "
+                             "slot outlet takes a hopper)")
+        if self.outlet == "slot" and self.outlet_offset_y:
+            raise ValueError("a slot spans the whole depth: outlet_offset_y must be 0")
+        hx, hy = self.outlet_half_sizes
+        inside_x = abs(self.outlet_offset) + hx < 0.5 * self.width
+        inside_y = self.outlet == "slot" or abs(self.outlet_offset_y) + hy < 0.5 * self.depth
+        if not (inside_x and inside_y):
+            raise ValueError(f"the outlet ({2 * hx:g} x {2 * hy:g} m at x = {self.outlet_offset:g}, y = "
+                             f"{self.outlet_offset_y:g} m) must lie inside the floor ({self.width:g} x {self.depth:g} m), "
+                             "clear of the walls (an outlet across the whole depth is a slot)")
+        if self.hopper_height > MAX_HOPPER_HEIGHT:
+            raise ValueError(f"half_angle_deg ({self.half_angle_deg} deg) makes the hopper {self.hopper_height:.3g} m "
+                             f"tall, more than {MAX_HOPPER_HEIGHT:g} m")
+        return self
+
+    @property
+    def outlet_half_sizes(self) -> tuple[float, float]:
+        """The outlet's half extents along x and y, m (a circle's radius both)."""
+        if self.outlet == "circle":
+            return self.outlet_radius_m, self.outlet_radius_m
+        return 0.5 * self.outlet_width, (0.5 * self.depth if self.outlet == "slot" else 0.5 * self.outlet_length)
+
+    @property
+    def outlet_radius(self) -> float:
+        """The outlet's half width along x (a circle's radius), m."""
+        return self.outlet_half_sizes[0]
+
+    @property
+    def half_width(self) -> float:
+        return 0.5 * self.width
+
+    @property
+    def flat_floor(self) -> bool:
+        return self.half_angle_deg == 90
+
+    @property
+    def hopper_height(self) -> float:
+        """Height of the hopper, m (0 on a flat floor): the walls facing x at ``half_angle_deg``."""
+        if self.flat_floor:
+            return 0.0
+        return (0.5 * self.width - self.outlet_radius) / math.tan(math.radians(self.half_angle_deg))
+
+
+Geometry = Annotated[Union[CylinderGeometry, HopperGeometry, PlanarGeometry, BoxGeometry],
                      Field(discriminator="kind")]
 
 

@@ -137,6 +137,9 @@ class Case(Strict):
             elif g.thickness <= 1.01 * across:
                 problems.append(f"geometry.thickness ({g.thickness} m) must exceed the grains' thickness "
                                 f"({across:.6g} m) by 1 %")
+        if g.kind == "box" and (p.kind == "clumps" or getattr(p, "dust", None) is not None):
+            problems.append("geometry.kind box: a rectangular silo takes spheres (monodisperse or polydisperse) "
+                            "without dust for now; clumps and dust: kind cylinder, hopper or planar")
         top = g.hopper_height + g.height
         if f.mobilise is not None and g.kind != "cylinder":
             problems.append(f"fill.mobilise lowers a flat floor: it needs geometry.kind cylinder, not {g.kind} "

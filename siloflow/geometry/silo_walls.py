@@ -57,6 +57,8 @@ def silo_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outlet_z
     """
     if silo.kind == "planar":
         meshes = slab_meshes(silo, band_bounds, outlet_z, outlet_radius)
+    elif silo.kind == "box":
+        meshes = box_meshes(silo, band_bounds, outlet_z, outlet_radius)
     elif silo.kind in ("cylinder", "hopper"):
         meshes = cylinder_meshes(silo, band_bounds, sectors, outlet_z, outlet_radius)
     else:
@@ -313,3 +315,137 @@ def slab_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outle
         (e - outlet_half, y0, outlet_z), (2 * outlet_half, 0.0, 0.0), (0.0, dy, 0.0),
         _divisions(2 * outlet_half, facet), 1)))
     return meshes
+
+
+def _trapezoid(bottom0, bottom1, top0, top1, n_u: int, n_v: int) -> np.ndarray:
+    """Triangles of the planar quadrilateral with the parallel edges bottom0-bottom1 and top0-top1
+    (m), on an n_u (along the edges) x n_v grid of straight rows."""
+    u = np.linspace(0.0, 1.0, n_u + 1)[:, None]
+    lo = np.asarray(bottom0, float) + u * (np.asarray(bottom1, float) - bottom0)
+    hi = np.asarray(top0, float) + u * (np.asarray(top1, float) - top0)
+    v = np.linspace(0.0, 1.0, n_v + 1)[None, :, None]
+    return _grid_triangles(lo[:, None, :] + v * (hi - lo)[:, None, :])
+
+
+def box_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outlet_half: float) -> list[WallMesh]:
+    """Meshes of a rectangular silo (x across its width, y its depth, z up; z = 0 the outlet): the
+    four vertical walls cut into sensor bands (sector 0 at x = -width/2, 1 at +width/2, 2 at
+    y = -depth/2, 3 at +depth/2), the hopper's four faces (a pyramid's for a rectangular outlet; a
+    wedge's two inclined faces and two vertical end walls for a slot) or the flat floor around the
+    outlet (strips around a rectangle or slot; around a circle, rings from the circle's polygon to
+    the rectangle), the plate and the counting surface (the outlet grown by ``outlet_half`` - its
+    half width, m, at ``outlet_z``)."""
+    g = silo
+    a, b, hh, top = g.half_width, 0.5 * g.depth, g.hopper_height, g.hopper_height + g.height
+    ex, ey, hx, hy = g.outlet_offset, g.outlet_offset_y, g.outlet_radius, g.outlet_half_y
+    x0, x1, y0, y1 = ex - hx, ex + hx, ey - hy, ey + hy          # the outlet's extent (a circle's box)
+    facet = max(min(a, b) / 2.0, 1e-9)                           # the walls' facets: few and large
+    meshes: list[WallMesh] = []
+    # the walls: (sector, origin at z = 0 of the vertical part, its horizontal side, outward normal)
+    sides = [(0, (-a, -b), (0.0, 2 * b), (-1.0, 0.0)), (1, (a, -b), (0.0, 2 * b), (1.0, 0.0)),
+             (2, (-a, -b), (2 * a, 0.0), (0.0, -1.0)), (3, (-a, b), (2 * a, 0.0), (0.0, 1.0))]
+
+    def piece(name, role, side, z_lo, z_hi, **kw):
+        sector, (ox, oy), (ux, uy), normal = sides[side]
+        length = math.hypot(ux, uy)
+        sensor = {"normal": normal, "projected_area": length * (z_hi - z_lo)} if role == "band" else {}
+        meshes.append(_wall(name, role, lambda: _balanced_rectangle(
+            (ox, oy, z_lo), (ux, uy, 0.0), (0.0, 0.0, z_hi - z_lo), _divisions(length, facet),
+            _divisions(z_hi - z_lo, facet)), z0=z_lo, z1=z_hi, sector=sector, **sensor, **kw))
+
+    bounds = list(band_bounds)
+    for side in range(4):
+        if bounds[0] > 0:
+            piece(f"wall_below_s{side:02d}", "wall", side, hh, hh + bounds[0])
+    for k, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
+        for side in range(4):
+            piece(f"band{k:02d}_s{side:02d}", "band", side, hh + lo, hh + hi, band=k)
+    for side in range(4):
+        if bounds[-1] < g.height:
+            piece(f"wall_above_s{side:02d}", "wall", side, hh + bounds[-1], top)
+
+    if hh > 0:
+        # the hopper's faces from the outlet's edges (z = 0) to the walls' feet (z = hh); a slot's end
+        # faces are vertical, in the end walls' planes
+        corners = {"lo": [(x0, y0), (x1, y0), (x1, y1), (x0, y1)], "hi": [(-a, -b), (a, -b), (a, b), (-a, b)]}
+        for side, (i, j) in enumerate([(3, 0), (1, 2), (0, 1), (2, 3)]):       # faces facing -x, +x, -y, +y
+            p0, p1 = corners["lo"][i], corners["lo"][j]
+            q0, q1 = corners["hi"][i], corners["hi"][j]
+            along = max(math.dist(p0, p1), math.dist(q0, q1))
+            slant = math.dist((*p0, 0.0), (*q0, hh))
+            meshes.append(_wall(f"hopper_s{side:02d}", "hopper", lambda p0=p0, p1=p1, q0=q0, q1=q1, along=along,
+                                slant=slant: _trapezoid((*p0, 0.0), (*p1, 0.0), (*q0, hh), (*q1, hh),
+                                                        _divisions(along, facet), _divisions(slant, facet)),
+                                sector=side))
+    elif g.outlet == "circle":
+        meshes.append(_wall("bottom", "bottom", lambda: _floor_around_circle(a, b, ex, ey, hx, facet)))
+    else:
+        strips = [("bottom_s00", (-a, -b), (x0 + a, 2 * b)), ("bottom_s01", (x1, -b), (a - x1, 2 * b)),
+                  ("bottom_s02", (x0, -b), (x1 - x0, y0 + b)), ("bottom_s03", (x0, y1), (x1 - x0, b - y1))]
+        for name, (ox, oy), (lx, ly) in strips:
+            if lx > 1e-12 * a and ly > 1e-12 * b:        # a slot leaves no strip before or behind it
+                meshes.append(_wall(name, "bottom", lambda ox=ox, oy=oy, lx=lx, ly=ly: _balanced_rectangle(
+                    (ox, oy, 0.0), (lx, 0.0, 0.0), (0.0, ly, 0.0), _divisions(lx, facet), _divisions(ly, facet))))
+    if g.outlet == "slot":
+        # the slot's end walls go on below the floor to the counting plane: a grain leaving at an end of
+        # the slot falls between them, as it fell between the walls above
+        for side, y in ((2, -b), (3, b)):
+            meshes.append(_wall(f"slot_end_s{side:02d}", "hopper", lambda y=y: _balanced_rectangle(
+                (x0, y, outlet_z), (x1 - x0, 0.0, 0.0), (0.0, 0.0, -outlet_z), _divisions(x1 - x0, facet),
+                _divisions(-outlet_z, facet)), sector=side))
+    if g.outlet == "circle":
+        n = _circle_sides(a, b, hx, facet)
+        meshes.append(_wall("plate", "plate", lambda: _circle_fan(ex, ey, hx, 0.0, _circle_angles(a, b, ex, ey, n))))
+        grown = outlet_half + 0.0
+        meshes.append(_wall("outlet", "outlet", lambda: _circle_fan(ex, ey, grown, outlet_z,
+                                                                    _circle_angles(a, b, ex, ey, n))))
+    else:
+        meshes.append(_wall("plate", "plate", lambda: _balanced_rectangle(
+            (x0, y0, 0.0), (x1 - x0, 0.0, 0.0), (0.0, y1 - y0, 0.0), _divisions(x1 - x0, facet),
+            _divisions(y1 - y0, facet))))
+        grow = outlet_half - hx                          # the counting surface reaches past the outlet
+        cy0, cy1 = (y0 - grow, y1 + grow) if g.outlet != "slot" else (-b, b)
+        meshes.append(_wall("outlet", "outlet", lambda: _balanced_rectangle(
+            (x0 - grow, cy0, outlet_z), (x1 - x0 + 2 * grow, 0.0, 0.0), (0.0, cy1 - cy0, 0.0), 1, 1)))
+    return meshes
+
+
+def _circle_sides(a: float, b: float, radius: float, facet: float) -> int:
+    """Sides of a box floor's circular outlet polygon: about ``facet`` long on the box's scale,
+    at least 32, and a multiple of 4."""
+    return 4 * max(8, math.ceil(2 * math.pi * max(radius, 0.25 * min(a, b)) / facet / 4))
+
+
+def _circle_angles(a: float, b: float, ex: float, ey: float, n: int) -> np.ndarray:
+    """The polar angles about the circle's centre (ex, ey) of its polygon's vertices: n even ones
+    and the directions of the rectangle's four corners (so that the floor's outer ring has them)."""
+    corners = np.array([math.atan2(cy - ey, cx - ex) for cx, cy in ((a, b), (-a, b), (-a, -b), (a, -b))])
+    even = np.linspace(-math.pi, math.pi, n, endpoint=False)
+    gap = np.abs(np.mod(even[:, None] - corners[None, :] + math.pi, 2 * math.pi) - math.pi).min(axis=1)
+    return np.sort(np.concatenate([even[gap > 0.25 * (2 * math.pi / n)], corners]))
+
+
+def _circle_fan(ex: float, ey: float, radius: float, z: float, theta: np.ndarray) -> np.ndarray:
+    """A circle's polygon (vertices at ``theta`` about (ex, ey)) as a fan of triangles facing up."""
+    ring = np.column_stack([ex + radius * np.cos(theta), ey + radius * np.sin(theta), np.full(len(theta), z)])
+    centre = np.array([ex, ey, z])
+    return np.stack([np.broadcast_to(centre, ring.shape), ring, np.roll(ring, -1, axis=0)], axis=1)
+
+
+def _floor_around_circle(a: float, b: float, ex: float, ey: float, radius: float, facet: float) -> np.ndarray:
+    """The flat floor [-a, a] x [-b, b] (z = 0) around the circle of ``radius`` at (ex, ey): rings
+    from the circle's polygon (:func:`_circle_angles`) out to the rectangle along the same rays,
+    the rectangle's corners among them, as many rings as keep the facets near square."""
+    theta = _circle_angles(a, b, ex, ey, _circle_sides(a, b, radius, facet))
+    c, s_ = np.cos(theta), np.sin(theta)
+    with np.errstate(divide="ignore"):         # distance along each ray to the rectangle's side
+        tx = np.where(c > 0, (a - ex) / c, np.where(c < 0, (-a - ex) / c, np.inf))
+        ty = np.where(s_ > 0, (b - ey) / s_, np.where(s_ < 0, (-b - ey) / s_, np.inf))
+    far = np.minimum(tx, ty)
+    side = 2 * math.pi * radius / len(theta)
+    n_r = max(1, math.ceil(float((far - radius).max()) / max(side, 0.5 * facet)))
+    t = np.linspace(0.0, 1.0, n_r + 1)
+    rho = radius + t[:, None] * (far - radius)[None, :]                   # (rings, rays)
+    pts = np.stack([ex + rho * c, ey + rho * s_, np.zeros_like(rho)], axis=-1)
+    pts = np.concatenate([pts, pts[:, :1]], axis=1)                       # close the rings
+    return _grid_triangles(pts)

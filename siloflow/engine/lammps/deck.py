@@ -179,6 +179,10 @@ def walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
         out.append(LammpsWall("plate", [("plate", "block", [_n(ex - ro), _n(ex + ro), _n(-half_y - d), _n(half_y + d),
                                                                   _n(-thick), _n(0.0), "side", "out"])], plate=True))
         return out
+    if g.kind == "box":
+        if floor_dz:
+            raise ValueError("a box's floor does not move (fill.mobilise needs a flat-bottomed cylinder)")
+        return out + box_walls(g, d, thick)
     out.append(LammpsWall("side", [("side", "cylinder", ["z", _n(0.0), _n(0.0), _n(R), _n(hh), _n(top),
                                                                  "open", "1", "open", "2"])]))
     ex = g.outlet_offset                            # the orifice's centre at (ex, 0)
@@ -204,6 +208,64 @@ def walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
                              "open", "2", "side", "out"])]))
     out.append(LammpsWall("plate", [("plate", "cylinder", ["z", _n(ex), _n(0.0), _n(ro), _n(floor_dz - thick),
                                                                     _n(floor_dz), "side", "out"])], plate=True))
+    return out
+
+
+def box_walls(g, d: float, thick: float) -> list[LammpsWall]:
+    """A rectangular silo's walls (``g``: the plan's box, ``d`` a grain diameter, ``thick`` the
+    plate's thickness, m): the four vertical walls (a block open at top and bottom); a hopper's faces
+    (each a plane through an outlet edge joined with z < 0, so that it ends at the outlet; a slot's
+    end walls a block open along x, z); or a flat floor around the outlet (blocks beside a rectangle
+    or slot, touched from outside; around a circle the plane z = 0 joined with a sphere whose cap is
+    the circle, and the circle's edge); the orifice's edge and the plate."""
+    a, b, hh, top = g.half_width, 0.5 * g.depth, g.hopper_height, g.top
+    ex, ey, hx, hy = g.outlet_offset, g.outlet_offset_y, g.outlet_radius, g.outlet_half_y
+    x0, x1, y0, y1 = ex - hx, ex + hx, ey - hy, ey + hy
+    out = [LammpsWall("side", [("side", "block", [_n(-a), _n(a), _n(-b), _n(b), _n(hh), _n(top),
+                                                  "open", "5", "open", "6"])])]
+    if hh > 0:
+        # face through the outlet edge (px, py) at z = 0, rising to the wall at u = -a, a (x) or -b, b (y)
+        faces = [("xlo", (1.0, 0.0), x0, -a), ("xhi", (-1.0, 0.0), x1, a)]
+        if g.outlet != "slot":
+            faces += [("ylo", (0.0, 1.0), y0, -b), ("yhi", (0.0, -1.0), y1, b)]
+        for name, (ux, uy), edge, wall in faces:
+            run = abs(wall - edge)
+            length = math.hypot(run, hh)
+            n = (ux * hh / length, uy * hh / length, run / length)          # into the silo
+            point = (edge, 0.0, 0.0) if ux else (0.0, edge, 0.0)
+            rid = f"hopper_{name}"
+            out.append(LammpsWall("hopper", [
+                (f"{rid}_plane", "plane", [_n(point[0]), _n(point[1]), _n(0.0), _n(n[0]), _n(n[1]), _n(n[2])]),
+                (f"{rid}_below", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(-1.0)]),
+                (rid, "union", ["2", f"{rid}_plane", f"{rid}_below"])]))
+        out.append(LammpsWall("hopper", [("rim", "block", [_n(x0), _n(x1), _n(y0), _n(y1), _n(-RIM_THICKNESS * d),
+                                                           _n(0.0), "open", "5", "open", "6", "side", "out"])]))
+    elif g.outlet == "circle":
+        depth = HOLE_SPHERE_DEPTH * top
+        out.append(LammpsWall("bottom", [
+            ("bottom_plane", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(1.0)]),
+            ("bottom_hole", "sphere", [_n(ex), _n(ey), _n(-depth), _n(math.sqrt(depth * depth + hx * hx))]),
+            ("bottom", "union", ["2", "bottom_plane", "bottom_hole"])]))
+        out.append(LammpsWall("bottom", [("rim", "cylinder", ["z", _n(ex), _n(ey), _n(hx), _n(-RIM_THICKNESS * d),
+                                                               _n(0.0), "open", "1", "open", "2", "side", "out"])]))
+    else:
+        strips = [("floor_xlo", -a - d, x0, -b - d, b + d), ("floor_xhi", x1, a + d, -b - d, b + d),
+                  ("floor_ylo", x0, x1, -b - d, y0), ("floor_yhi", x0, x1, y1, b + d)]
+        for rid, xa, xb, ya, yb in strips:
+            if xb - xa > 1e-12 * a and yb - ya > 1e-12 * b and not (g.outlet == "slot" and rid[-3] == "y"):
+                out.append(LammpsWall("bottom", [(rid, "block", [_n(xa), _n(xb), _n(ya), _n(yb), _n(-thick), _n(0.0),
+                                                                 "side", "out"])]))
+    if g.outlet == "slot":              # a slot's end walls: the wedge's, on below the floor (a grain falls between them)
+        out.append(LammpsWall("hopper" if hh > 0 else "bottom", [("slot_ends", "block", [
+            _n(-a - d), _n(a + d), _n(-b), _n(b), _n(-10 * d), _n(hh), "open", "1", "open", "2", "open", "5",
+            "open", "6"])]))
+    if g.outlet == "circle":
+        out.append(LammpsWall("plate", [("plate", "cylinder", ["z", _n(ex), _n(ey), _n(hx), _n(-thick), _n(0.0),
+                                                               "side", "out"])], plate=True))
+    else:
+        out.append(LammpsWall("plate", [("plate", "block", [_n(x0), _n(x1), _n(y0 - (d if g.outlet == "slot" else 0)),
+                                                            _n(y1 + (d if g.outlet == "slot" else 0)), _n(-thick),
+                                                            _n(0.0), "side", "out"])], plate=True))
     return out
 
 
