@@ -42,6 +42,7 @@ class CgSetup:
     note: str | None = None                  # said in the cg summary
     clump_mass: str = "body"                 # how the dumps carry a clump's mass (clump_bodies.CLUMP_MASS)
     outlet_offset: float = 0.0               # an eccentric outlet's centre at x = outlet_offset, m
+    half_depth: float | None = None          # a box silo: the grid is Cartesian, y within -+ half_depth, m
 
 
 def setup_from_run(folder) -> CgSetup:
@@ -71,7 +72,8 @@ def setup_from_run(folder) -> CgSetup:
                    float(top), 0.0, g.outlet_radius, rho_p,
                    int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, layout.wall_contact_columns or None,
                    slab_thickness=g.thickness if g.kind == "planar" else None, note=note,
-                   clump_mass=layout.clump_mass, outlet_offset=getattr(g, "outlet_offset", 0.0))
+                   clump_mass=layout.clump_mass, outlet_offset=getattr(g, "outlet_offset", 0.0),
+                   half_depth=g.half_depth if g.kind == "box" else None)
 
 
 @dataclass
@@ -113,13 +115,15 @@ def analyse_cg(setup: CgSetup, kernel_name: str = "gaussian", width: float = 2.0
         t = 0.5 * setup.slab_thickness
         grid = CartesianGrid([-setup.r_max, -t, setup.z_lo], [setup.r_max, t, setup.z_hi], (nr, 1, nz), slab=True)
     elif grid_kind == "rz":
+        if setup.half_depth is not None:
+            raise ReadError("a rectangular silo has no axis: use --grid cartesian (an x-y-z grid)")
         if setup.outlet_offset:
             raise ReadError(f"the outlet is {setup.outlet_offset:g} m off the silo's axis: the flow has no axis to "
                             "average about; use --grid cartesian (an x-y-z grid)")
         grid = AxisymmetricGrid(setup.r_max, setup.z_lo, setup.z_hi, nr, nz, method=method, refine=refine)
     else:
-        grid = CartesianGrid([-setup.r_max, -setup.r_max, setup.z_lo], [setup.r_max, setup.r_max, setup.z_hi],
-                             (nr, nr, nz))
+        ry = setup.r_max if setup.half_depth is None else setup.half_depth
+        grid = CartesianGrid([-setup.r_max, -ry, setup.z_lo], [setup.r_max, ry, setup.z_hi], (nr, nr, nz))
     contacts = read_frames(setup.contacts, columns=setup.contact_columns) if setup.contacts else None
     walls = read_frames(setup.wall_contacts, columns=setup.wall_contact_columns) if setup.wall_contacts else None
     cg = CoarseGraining(grid, kernel, setup.particle_density, species, per_frame=per_frame,

@@ -57,7 +57,7 @@ def check_inside(silo: Silo, tris: np.ndarray) -> None:
     inside its box. Raises ``MeshError``."""
     g = silo
     p = tris.reshape(-1, 3)
-    if g.kind == "planar":
+    if g.kind in ("planar", "box"):
         inside = (np.abs(p[:, 0]) <= g.half_width) & (np.abs(p[:, 1]) <= g.half_depth)
     else:
         inside = np.hypot(p[:, 0], p[:, 1]) <= g.radius
