@@ -199,7 +199,7 @@ def test_example_lists_the_shipped_cases_and_refuses_an_unknown_one(tmp_path):
     assert listed.exit_code == 0, listed.output
     assert [x.split(":")[0] for x in listed.output.splitlines()] == sorted(p.stem for p in (ROOT / "decks").glob("*.yaml"))
     bad = runner.invoke(app, ["example", "nope", "-o", str(tmp_path / "x.yaml")])
-    assert bad.exit_code == 1 and "shipped: demo" in bad.output and not (tmp_path / "x.yaml").exists()
+    assert bad.exit_code == 1 and "shipped: box_quick, demo" in bad.output and not (tmp_path / "x.yaml").exists()
     out = tmp_path / "q.yaml"
     assert runner.invoke(app, ["example", "quick.yaml", "-o", str(out)]).exit_code == 0
     assert out.read_bytes() == (ROOT / "decks" / "quick.yaml").read_bytes()

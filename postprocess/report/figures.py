@@ -87,6 +87,25 @@ def line_plot(table, x: str, y, hue: str | None = None, xlabel: str = "", ylabel
     return fig
 
 
+def sector_plot(sectors: pd.DataFrame):
+    """Each band's dynamic mean wall pressure (Pa, with its batch-means error) against the sensor's
+    azimuth (deg; a box's walls at 180, 0, 270, 90): the circumferential variation an eccentric
+    outlet makes. ``sectors``: sectors.csv. Returns the Figure."""
+    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    for band, grp in sectors.groupby("band"):
+        if not (grp.dynamic_mean_pressure > 0).any():
+            continue
+        grp = grp.sort_values("azimuth_deg")
+        ax.errorbar(grp.azimuth_deg, grp.dynamic_mean_pressure, yerr=grp.dynamic_mean_stderr, marker="o", ms=3,
+                    lw=1, capsize=2, label=f"band {band} (z = {grp.z_mid.iloc[0]:.3g} m)")
+    ax.set(xlabel="sensor azimuth (deg; the outlet's side at 0 on a cylinder)",
+           ylabel="dynamic mean wall pressure (Pa)", title="Wall pressure around the silo during discharge")
+    ax.set_xticks(range(0, 361, 45))
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
 def line_figure(table, x: str, y, path, hue: str | None = None, xlabel: str = "", ylabel: str = "",
                 title: str = "", logy: bool = False):
     """:func:`line_plot` written to ``path``; returns the path."""

@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from siloflow.atomic_files import write_json, write_text
-from siloflow.run_folder import SUMMARY_NAME
+from siloflow.run_folder import RESULT_TABLES, SUMMARY_NAME
 
 from ..first_results import analyse_run
 from ..run_results import RunResults
-from .figures import design_plot, first_results_plot, force_chain_plot, analysis_figure, plt
+from .figures import analysis_figure, design_plot, first_results_plot, force_chain_plot, plt, sector_plot
 from .files import write_figures, write_tables
 from .html_page import report_html
 from .text import markdown, report_blocks
@@ -20,7 +20,8 @@ REPORT_MD, REPORT_HTML = "report.md", "report.html"
 
 def run_figures(results: RunResults) -> dict:
     """The figures of a run's results, drawn, by file name in report order: first_results.png,
-    each frame analysis' (``<name>.png``), the force chains, design_loads.png."""
+    each frame analysis' (``<name>.png``), the force chains, sectors.png (an eccentric outlet's),
+    design_loads.png."""
     figures: dict = {}
     try:
         figures["first_results.png"] = first_results_plot(results.bands, results.discharge, results.band_table,
@@ -31,6 +32,9 @@ def run_figures(results: RunResults) -> dict:
                 figures[f"{analysis.name}.png"] = fig
         for name, chains in results.force_chains.items():
             figures[name] = force_chain_plot(chains)
+        sectors = results.tables.get(RESULT_TABLES["sectors"])
+        if results.summary.get("eccentric_discharge") and sectors is not None:
+            figures["sectors.png"] = sector_plot(sectors)
         if results.design is not None:
             figures["design_loads.png"] = design_plot(results.design, results.band_table)
     except BaseException:

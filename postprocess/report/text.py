@@ -351,7 +351,7 @@ def _eccentric_blocks(summary: dict) -> list:
     where = f"x {_fmt(ecc['outlet_offset_m'], '.4g')} m" + (f", y {_fmt(ecc['outlet_offset_y_m'], '.4g')} m"
                                                              if "outlet_offset_y_m" in ecc else "")
     return [Text(f"Eccentric outlet (at {where} off the middle, towards sector "
-                 f"{ecc['near_sector']}): {ecc['what']}. Every sector: sectors.csv (Pa)."),
+                 f"{ecc['near_sector']}): {ecc['what']}. Every sector: sectors.csv (Pa), sectors.png."),
             Table(["band", "z (m)", "near (Pa)", "far (Pa)", "near - far (Pa)", "near / far"], rows)]
 
 

@@ -98,7 +98,28 @@ class HopperGeometry(Strict):
         return (self.radius - self.outlet_radius) / math.tan(math.radians(self.half_angle_deg))
 
 
-class PlanarGeometry(Strict):
+class _WalledAcrossX:
+    """What a slab and a box share: side walls at x = -+ width/2, a flat floor at ``half_angle_deg``
+    90, else a hopper whose walls facing x rise at that angle from the outlet's edges."""
+
+    @property
+    def half_width(self) -> float:
+        return 0.5 * self.width
+
+    @property
+    def flat_floor(self) -> bool:
+        """The outlet in a flat floor (``half_angle_deg`` 90): no hopper."""
+        return self.half_angle_deg == 90
+
+    @property
+    def hopper_height(self) -> float:
+        """Height of the hopper, m (0 on a flat floor)."""
+        if self.flat_floor:
+            return 0.0
+        return (self.width - 2 * self.outlet_radius) / 2.0 / math.tan(math.radians(self.half_angle_deg))
+
+
+class PlanarGeometry(_WalledAcrossX, Strict):
     """Quasi-2D slab silo (paper A): vertical side walls at x = +-width/2 on a wedge hopper of
     ``half_angle_deg`` from the vertical down to a slot of ``outlet_width`` at z = 0, closed by
     front and back faces at y = +-thickness/2 (about one grain apart). ``half_angle_deg: 90`` is a
@@ -146,24 +167,8 @@ class PlanarGeometry(Strict):
         """Half width of the outlet slot, m."""
         return 0.5 * self.outlet_width
 
-    @property
-    def half_width(self) -> float:
-        return 0.5 * self.width
 
-    @property
-    def flat_floor(self) -> bool:
-        """A slot in a flat floor (``half_angle_deg`` 90): no hopper."""
-        return self.half_angle_deg == 90
-
-    @property
-    def hopper_height(self) -> float:
-        """Height of the wedge hopper, m (0 on a flat floor)."""
-        if self.flat_floor:
-            return 0.0
-        return (self.width - self.outlet_width) / 2.0 / math.tan(math.radians(self.half_angle_deg))
-
-
-class BoxGeometry(Strict):
+class BoxGeometry(_WalledAcrossX, Strict):
     """Rectangular silo (bin): vertical walls at x = +-width/2 and y = +-depth/2, on a flat floor
     (``half_angle_deg`` 90, the default) or a hopper down to the outlet at z = 0. The outlet is a
     ``rectangle`` (``outlet_width`` along x by ``outlet_length`` along y: a pyramidal hopper), a
@@ -232,21 +237,6 @@ class BoxGeometry(Strict):
     def outlet_radius(self) -> float:
         """The outlet's half width along x (a circle's radius), m."""
         return self.outlet_half_sizes[0]
-
-    @property
-    def half_width(self) -> float:
-        return 0.5 * self.width
-
-    @property
-    def flat_floor(self) -> bool:
-        return self.half_angle_deg == 90
-
-    @property
-    def hopper_height(self) -> float:
-        """Height of the hopper, m (0 on a flat floor): the walls facing x at ``half_angle_deg``."""
-        if self.flat_floor:
-            return 0.0
-        return (0.5 * self.width - self.outlet_radius) / math.tan(math.radians(self.half_angle_deg))
 
 
 Geometry = Annotated[Union[CylinderGeometry, HopperGeometry, PlanarGeometry, BoxGeometry],
