@@ -256,7 +256,7 @@ def box_walls(g, d: float, thick: float) -> list[LammpsWall]:
                 out.append(LammpsWall("bottom", [(rid, "block", [_n(xa), _n(xb), _n(ya), _n(yb), _n(-thick), _n(0.0),
                                                                  "side", "out"])]))
     if g.outlet == "slot":              # a slot's end walls: the wedge's, on below the floor (a grain falls between them)
-        out.append(LammpsWall("hopper" if hh > 0 else "bottom", [("slot_ends", "block", [
+        out.append(LammpsWall("hopper", [("slot_ends", "block", [              # the plan's slot_end_* walls
             _n(-a - d), _n(a + d), _n(-b), _n(b), _n(-10 * d), _n(hh), "open", "1", "open", "2", "open", "5",
             "open", "6"])]))
     if g.outlet == "circle":
