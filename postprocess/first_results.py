@@ -66,6 +66,16 @@ def static_window(forces: pd.DataFrame, run: RunOutputs) -> pd.Series:
     return (forces.step > lo) & (forces.step <= hi)
 
 
+def dynamic_window(forces: pd.DataFrame, run: RunOutputs, window: dict | None) -> pd.Series:
+    """Samples averaged wholly after the opening and inside the discharge ``window`` ({t_start,
+    t_end}, s: :func:`pressure_window`); none without a window."""
+    after = forces.step > run.stage_steps["open"] + run.sample_steps
+    if not window:
+        return after & False
+    t = forces.step * run.dt
+    return after & (t >= window["t_start"]) & (t <= window["t_end"])
+
+
 def pressure_window(steady: dict | None, rate) -> dict | None:
     """The discharge window of the pressure statistics: the detected steady window when it is
     resolved, else the flow-rate fit's window; None if neither exists. {source, t_start, t_end} (s)."""
@@ -259,16 +269,10 @@ def analyse_run(folder, measured_pressure=None) -> RunResults:
             table["discharge_factor"] = table.max_dynamic_pressure / table.static_pressure
         # designer's statistics: dynamic pressure over the steady discharge, static mean's error
         window = pressure_window(steady, rate)
-        dyn_mask = bands.step > run.stage_steps["open"] + run.sample_steps
-        dyn_mask &= (bands.time >= window["t_start"]) & (bands.time <= window["t_end"]) if window else False
+        dyn_mask = dynamic_window(bands, run, window)
         sector_static = static_window(sectors, run)
         sector_means = sectors[sector_static].groupby(["band", "sector"]).pressure.mean()
-        sector_dynamic = sectors.step > run.stage_steps["open"] + run.sample_steps
-        if window:
-            sector_dynamic &= (sectors.step * run.dt >= window["t_start"]) & (sectors.step * run.dt <= window["t_end"])
-        else:
-            sector_dynamic &= False
-        sector_table = sector_statistics(sectors, run.walls, sector_static, sector_dynamic)
+        sector_table = sector_statistics(sectors, run.walls, sector_static, dynamic_window(sectors, run, window))
         table = table.join(band_statistics(bands, dyn_mask, static_mask, sector_means)).reset_index()
         n_dyn = int(table.dynamic_samples.min()) if len(table) else 0
         pressure_stats = {

@@ -233,6 +233,23 @@ def eccentric(meshes: list[WallMesh], silo: Silo, sectors: int, n_ring: int) -> 
         if m.normal is not None:
             tc = 0.5 * (m.theta0 + m.theta1)
             m.normal = (math.cos(tc), math.sin(tc))
+def side_pieces(piece, sides, band_bounds: Sequence[float], base: float, height: float) -> None:
+    """Cut flat side walls (a slab's or a box's) into their sensor bands and the unsensed rest:
+    ``piece(name, role, side, z_lo, z_hi, **fields)`` makes one, for each of ``sides``, the walls
+    standing on z = ``base`` (m) ``height`` (m) high, ``band_bounds`` above their base (m); in the
+    order the deck lists them (the pieces below the bands, the bands band by band, those above)."""
+    bounds = list(band_bounds)
+    if bounds[0] > 0:
+        for side in sides:
+            piece(f"wall_below_s{side:02d}", "wall", side, base, base + bounds[0])
+    for k, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
+        for side in sides:
+            piece(f"band{k:02d}_s{side:02d}", "band", side, base + lo, base + hi, band=k)
+    if bounds[-1] < height:
+        for side in sides:
+            piece(f"wall_above_s{side:02d}", "wall", side, base + bounds[-1], base + height)
+
+
 def slab_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outlet_half: float) -> list[WallMesh]:
     """Meshes of a quasi-2D slab silo (x across, y through the slab, z up; z = 0 the outlet):
     side walls cut into sensor sections (sector 0 at x = -width/2, sector 1 at +width/2),
@@ -258,16 +275,7 @@ def slab_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outle
             (x, -b, z_lo), (0.0, 2 * b, 0.0), (0.0, 0.0, z_hi - z_lo), 1, _divisions(z_hi - z_lo, long)),
             z0=z_lo, z1=z_hi, sector=side, **sensor, **kw))
 
-    bounds = list(band_bounds)
-    for side in (0, 1):
-        if bounds[0] > 0:
-            side_piece(f"wall_below_s{side:02d}", "wall", side, hh, hh + bounds[0])
-    for k, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
-        for side in (0, 1):
-            side_piece(f"band{k:02d}_s{side:02d}", "band", side, hh + lo, hh + hi, band=k)
-    for side in (0, 1):
-        if bounds[-1] < g.height:
-            side_piece(f"wall_above_s{side:02d}", "wall", side, hh + bounds[-1], top)
+    side_pieces(side_piece, (0, 1), band_bounds, hh, g.height)
     for side, sign in ((0, -1.0), (1, 1.0)):
         edge = e + sign * w0                        # the slot's edge on this side, x
         run = sign * a - edge                       # to the side wall's foot, along x
@@ -336,7 +344,7 @@ def box_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outlet
     the rectangle), the plate and the counting surface (the outlet grown by ``outlet_half`` - its
     half width, m, at ``outlet_z``)."""
     g = silo
-    a, b, hh, top = g.half_width, 0.5 * g.depth, g.hopper_height, g.hopper_height + g.height
+    a, b, hh = g.half_width, 0.5 * g.depth, g.hopper_height
     ex, ey, hx, hy = g.outlet_offset, g.outlet_offset_y, g.outlet_radius, g.outlet_half_y
     x0, x1, y0, y1 = ex - hx, ex + hx, ey - hy, ey + hy          # the outlet's extent (a circle's box)
     facet = max(min(a, b) / 2.0, 1e-9)                           # the walls' facets: few and large
@@ -353,17 +361,10 @@ def box_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outlet
             (ox, oy, z_lo), (ux, uy, 0.0), (0.0, 0.0, z_hi - z_lo), _divisions(length, facet),
             _divisions(z_hi - z_lo, facet)), z0=z_lo, z1=z_hi, sector=sector, **sensor, **kw))
 
-    bounds = list(band_bounds)
-    for side in range(4):
-        if bounds[0] > 0:
-            piece(f"wall_below_s{side:02d}", "wall", side, hh, hh + bounds[0])
-    for k, (lo, hi) in enumerate(zip(bounds, bounds[1:])):
-        for side in range(4):
-            piece(f"band{k:02d}_s{side:02d}", "band", side, hh + lo, hh + hi, band=k)
-    for side in range(4):
-        if bounds[-1] < g.height:
-            piece(f"wall_above_s{side:02d}", "wall", side, hh + bounds[-1], top)
+    side_pieces(piece, range(4), band_bounds, hh, g.height)
 
+    # a circle's polygon: the plate's, the counting disc's and the inner ring of the floor around it
+    theta = _circle_angles(a, b, ex, ey, _circle_sides(a, b, hx, facet)) if g.outlet == "circle" else None
     if hh > 0:
         # the hopper's faces from the outlet's edges (z = 0) to the walls' feet (z = hh); a slot's end
         # faces are vertical, in the end walls' planes
@@ -378,7 +379,7 @@ def box_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outlet
                                                         _divisions(along, facet), _divisions(slant, facet)),
                                 sector=side))
     elif g.outlet == "circle":
-        meshes.append(_wall("bottom", "bottom", lambda: _floor_around_circle(a, b, ex, ey, hx, facet)))
+        meshes.append(_wall("bottom", "bottom", lambda: _floor_around_circle(a, b, ex, ey, hx, theta, facet)))
     else:
         strips = [("bottom_s00", (-a, -b), (x0 + a, 2 * b)), ("bottom_s01", (x1, -b), (a - x1, 2 * b)),
                   ("bottom_s02", (x0, -b), (x1 - x0, y0 + b)), ("bottom_s03", (x0, y1), (x1 - x0, b - y1))]
@@ -394,11 +395,8 @@ def box_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outlet
                 (x0, y, outlet_z), (x1 - x0, 0.0, 0.0), (0.0, 0.0, -outlet_z), _divisions(x1 - x0, facet),
                 _divisions(-outlet_z, facet)), sector=side))
     if g.outlet == "circle":
-        n = _circle_sides(a, b, hx, facet)
-        meshes.append(_wall("plate", "plate", lambda: _circle_fan(ex, ey, hx, 0.0, _circle_angles(a, b, ex, ey, n))))
-        grown = outlet_half + 0.0
-        meshes.append(_wall("outlet", "outlet", lambda: _circle_fan(ex, ey, grown, outlet_z,
-                                                                    _circle_angles(a, b, ex, ey, n))))
+        meshes.append(_wall("plate", "plate", lambda: _circle_fan(ex, ey, hx, 0.0, theta)))
+        meshes.append(_wall("outlet", "outlet", lambda: _circle_fan(ex, ey, outlet_half, outlet_z, theta)))
     else:
         meshes.append(_wall("plate", "plate", lambda: _balanced_rectangle(
             (x0, y0, 0.0), (x1 - x0, 0.0, 0.0), (0.0, y1 - y0, 0.0), _divisions(x1 - x0, facet),
@@ -432,11 +430,12 @@ def _circle_fan(ex: float, ey: float, radius: float, z: float, theta: np.ndarray
     return np.stack([np.broadcast_to(centre, ring.shape), ring, np.roll(ring, -1, axis=0)], axis=1)
 
 
-def _floor_around_circle(a: float, b: float, ex: float, ey: float, radius: float, facet: float) -> np.ndarray:
-    """The flat floor [-a, a] x [-b, b] (z = 0) around the circle of ``radius`` at (ex, ey): rings
-    from the circle's polygon (:func:`_circle_angles`) out to the rectangle along the same rays,
-    the rectangle's corners among them, as many rings as keep the facets near square."""
-    theta = _circle_angles(a, b, ex, ey, _circle_sides(a, b, radius, facet))
+def _floor_around_circle(a: float, b: float, ex: float, ey: float, radius: float, theta: np.ndarray,
+                         facet: float) -> np.ndarray:
+    """The flat floor [-a, a] x [-b, b] (z = 0) around the circle of ``radius`` at (ex, ey) whose
+    polygon has its vertices at ``theta`` (:func:`_circle_angles`, the rectangle's corners among
+    them): rings out to the rectangle along the same rays, as many as keep the facets near square
+    (no wider than ``facet``, m)."""
     c, s_ = np.cos(theta), np.sin(theta)
     with np.errstate(divide="ignore"):         # distance along each ray to the rectangle's side
         tx = np.where(c > 0, (a - ex) / c, np.where(c < 0, (-a - ex) / c, np.inf))

@@ -119,6 +119,46 @@ class LammpsWall:
         return self.regions[-1][0]
 
 
+def hopper_face(rid: str, point, normal) -> LammpsWall:
+    """An inclined hopper wall: the plane through ``point`` (m, on the outlet's edge at z = 0) with
+    ``normal`` (into the silo), joined with the half-space z < 0 so that it ends at the outlet."""
+    return LammpsWall("hopper", [
+        (f"{rid}_plane", "plane", [_n(point[0]), _n(point[1]), _n(0.0), _n(normal[0]), _n(normal[1]), _n(normal[2])]),
+        (f"{rid}_below", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(-1.0)]),
+        (rid, "union", ["2", f"{rid}_plane", f"{rid}_below"])])
+
+
+def round_hole(x: float, y: float, radius: float, top: float, d: float, floor_dz: float = 0.0,
+               rim_kind: str = "bottom") -> list[LammpsWall]:
+    """A flat floor at z = ``floor_dz`` with a circular hole of ``radius`` at (x, y) (m): the plane
+    joined with a sphere far below whose cap is the hole, and the hole's edge (the side of a
+    vanishingly thin cylinder, touched from outside; ``rim_kind`` the wall carrying it). ``top``:
+    the silo's top, which sets how deep the sphere lies; ``d`` a grain diameter."""
+    depth = HOLE_SPHERE_DEPTH * top
+    return [LammpsWall("bottom", [
+                ("bottom_plane", "plane", [_n(0.0), _n(0.0), _n(floor_dz), _n(0.0), _n(0.0), _n(1.0)]),
+                # the sphere's cap at the floor is the hole whatever the floor's height: its centre moves
+                # with the floor, its radius stays
+                ("bottom_hole", "sphere", [_n(x), _n(y), _n(floor_dz - depth),
+                                           _n(math.sqrt(depth * depth + radius * radius))]),
+                ("bottom", "union", ["2", "bottom_plane", "bottom_hole"])]),
+            rim(rim_kind, x, y, radius, d, floor_dz)]
+
+
+def rim(kind: str, x: float, y: float, radius: float, d: float, z: float = 0.0) -> LammpsWall:
+    """A round outlet's edge at height ``z`` (a union keeps faces, not the edges where they meet): the
+    side of a vanishingly thin cylinder in the outlet, open above and below, touched from outside."""
+    return LammpsWall(kind, [("rim", "cylinder", ["z", _n(x), _n(y), _n(radius), _n(z - RIM_THICKNESS * d), _n(z),
+                                                  "open", "1", "open", "2", "side", "out"])])
+
+
+def round_plate(x: float, y: float, radius: float, thick: float, floor_dz: float = 0.0) -> LammpsWall:
+    """The plate closing a round outlet at (x, y): a solid disc ``thick`` (m) under the floor at
+    z = ``floor_dz``, grains on its outside."""
+    return LammpsWall("plate", [("plate", "cylinder", ["z", _n(x), _n(y), _n(radius), _n(floor_dz - thick),
+                                                       _n(floor_dz), "side", "out"])], plate=True)
+
+
 def wall_kind(role: str) -> str:
     """The LAMMPS wall carrying a plan wall of ``role`` (sensor pieces of one surface share it)."""
     return {"band": "side", "wall": "side", "cone": "hopper", "hopper": "hopper", "bottom": "bottom",
@@ -165,10 +205,7 @@ def walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
             run = R - sign * ex - ro                    # from it to the side wall's foot, along x
             length = math.hypot(run, hh)
             nx, nz = hh / length, run / length          # the wall's normal into the silo: (-sign nx, 0, nz)
-            out.append(LammpsWall("hopper", [
-                (f"{rid}_plane", "plane", [_n(edge), _n(0.0), _n(0.0), _n(-sign * nx), _n(0.0), _n(nz)]),
-                (f"{rid}_below", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(-1.0)]),
-                (rid, "union", ["2", f"{rid}_plane", f"{rid}_below"])]))
+            out.append(hopper_face(rid, (edge, 0.0), (-sign * nx, 0.0, nz)))
         if hh > 0:
             # the orifice's edges (a union keeps faces, not the edges where they meet): the two sides of a
             # vanishingly thin block across the orifice, open above and below, touched from outside
@@ -193,21 +230,10 @@ def walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
             raise ValueError("LAMMPS' cone region is a right cone: no eccentric hopper outlet (Engine.check refuses it)")
         out.append(LammpsWall("hopper", [("cone", "cone", ["z", _n(0.0), _n(0.0), _n(ro), _n(R), _n(0.0),
                                                                    _n(hh), "open", "1", "open", "2"])]))
+        out.append(rim("hopper", ex, 0.0, ro, d))
     else:
-        depth = HOLE_SPHERE_DEPTH * top
-        out.append(LammpsWall("bottom", [
-            ("bottom_plane", "plane", [_n(0.0), _n(0.0), _n(floor_dz), _n(0.0), _n(0.0), _n(1.0)]),
-            # the sphere's cap at the floor is the orifice whatever the floor's height: its centre moves
-            # with the floor, its radius stays
-            ("bottom_hole", "sphere", [_n(ex), _n(0.0), _n(floor_dz - depth), _n(math.sqrt(depth * depth + ro * ro))]),
-            ("bottom", "union", ["2", "bottom_plane", "bottom_hole"])]))
-    # the orifice's edge (a union keeps faces, not the edges where they meet): the side of a vanishingly
-    # thin cylinder in the orifice, open above and below, touched from outside
-    out.append(LammpsWall("bottom" if g.kind == "cylinder" else "hopper", [
-        ("rim", "cylinder", ["z", _n(ex), _n(0.0), _n(ro), _n(floor_dz - RIM_THICKNESS * d), _n(floor_dz), "open", "1",
-                             "open", "2", "side", "out"])]))
-    out.append(LammpsWall("plate", [("plate", "cylinder", ["z", _n(ex), _n(0.0), _n(ro), _n(floor_dz - thick),
-                                                                    _n(floor_dz), "side", "out"])], plate=True))
+        out += round_hole(ex, 0.0, ro, top, d, floor_dz)
+    out.append(round_plate(ex, 0.0, ro, thick, floor_dz))
     return out
 
 
@@ -231,40 +257,28 @@ def box_walls(g, d: float, thick: float) -> list[LammpsWall]:
         for name, (ux, uy), edge, wall in faces:
             run = abs(wall - edge)
             length = math.hypot(run, hh)
-            n = (ux * hh / length, uy * hh / length, run / length)          # into the silo
-            point = (edge, 0.0, 0.0) if ux else (0.0, edge, 0.0)
-            rid = f"hopper_{name}"
-            out.append(LammpsWall("hopper", [
-                (f"{rid}_plane", "plane", [_n(point[0]), _n(point[1]), _n(0.0), _n(n[0]), _n(n[1]), _n(n[2])]),
-                (f"{rid}_below", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(-1.0)]),
-                (rid, "union", ["2", f"{rid}_plane", f"{rid}_below"])]))
+            out.append(hopper_face(f"hopper_{name}", (edge, 0.0) if ux else (0.0, edge),
+                                   (ux * hh / length, uy * hh / length, run / length)))     # normal into the silo
         out.append(LammpsWall("hopper", [("rim", "block", [_n(x0), _n(x1), _n(y0), _n(y1), _n(-RIM_THICKNESS * d),
                                                            _n(0.0), "open", "5", "open", "6", "side", "out"])]))
     elif g.outlet == "circle":
-        depth = HOLE_SPHERE_DEPTH * top
-        out.append(LammpsWall("bottom", [
-            ("bottom_plane", "plane", [_n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(0.0), _n(1.0)]),
-            ("bottom_hole", "sphere", [_n(ex), _n(ey), _n(-depth), _n(math.sqrt(depth * depth + hx * hx))]),
-            ("bottom", "union", ["2", "bottom_plane", "bottom_hole"])]))
-        out.append(LammpsWall("bottom", [("rim", "cylinder", ["z", _n(ex), _n(ey), _n(hx), _n(-RIM_THICKNESS * d),
-                                                               _n(0.0), "open", "1", "open", "2", "side", "out"])]))
+        out += round_hole(ex, ey, hx, top, d)
     else:
-        strips = [("floor_xlo", -a - d, x0, -b - d, b + d), ("floor_xhi", x1, a + d, -b - d, b + d),
-                  ("floor_ylo", x0, x1, -b - d, y0), ("floor_yhi", x0, x1, y1, b + d)]
-        for rid, xa, xb, ya, yb in strips:
-            if xb - xa > 1e-12 * a and yb - ya > 1e-12 * b and not (g.outlet == "slot" and rid[-3] == "y"):
-                out.append(LammpsWall("bottom", [(rid, "block", [_n(xa), _n(xb), _n(ya), _n(yb), _n(-thick), _n(0.0),
-                                                                 "side", "out"])]))
+        strips = [("floor_xlo", -a - d, x0, -b - d, b + d), ("floor_xhi", x1, a + d, -b - d, b + d)]
+        if g.outlet != "slot":            # a slot spans the depth: nothing before or behind it
+            strips += [("floor_ylo", x0, x1, -b - d, y0), ("floor_yhi", x0, x1, y1, b + d)]
+        for rid, xa, xb, ya, yb in strips:          # each reaches a diameter past the walls: none is empty
+            out.append(LammpsWall("bottom", [(rid, "block", [_n(xa), _n(xb), _n(ya), _n(yb), _n(-thick), _n(0.0),
+                                                             "side", "out"])]))
     if g.outlet == "slot":              # a slot's end walls: the wedge's, on below the floor (a grain falls between them)
         out.append(LammpsWall("hopper", [("slot_ends", "block", [              # the plan's slot_end_* walls
             _n(-a - d), _n(a + d), _n(-b), _n(b), _n(-10 * d), _n(hh), "open", "1", "open", "2", "open", "5",
             "open", "6"])]))
     if g.outlet == "circle":
-        out.append(LammpsWall("plate", [("plate", "cylinder", ["z", _n(ex), _n(ey), _n(hx), _n(-thick), _n(0.0),
-                                                               "side", "out"])], plate=True))
+        out.append(round_plate(ex, ey, hx, thick))
     else:
-        out.append(LammpsWall("plate", [("plate", "block", [_n(x0), _n(x1), _n(y0 - (d if g.outlet == "slot" else 0)),
-                                                            _n(y1 + (d if g.outlet == "slot" else 0)), _n(-thick),
+        past = d if g.outlet == "slot" else 0          # a slot's plate reaches into its end walls
+        out.append(LammpsWall("plate", [("plate", "block", [_n(x0), _n(x1), _n(y0 - past), _n(y1 + past), _n(-thick),
                                                             _n(0.0), "side", "out"])], plate=True))
     return out
 
