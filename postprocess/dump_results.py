@@ -104,7 +104,10 @@ def bed_regions(g, surface: float, d: float) -> list[MeasureRegion]:
 def janssen_diameter(g) -> float:
     """The D of Janssen's p = rho g D / (4 mu K) (1 - exp(-4 mu K z / D)), m: the diameter of a
     cylinder; for a slab 4 A / P with P the perimeter that carries wall friction (the side
-    walls, and the faces only when they have friction); for a box 4 A / P of its four walls."""
+    walls, and the faces only when they have friction); for a box 4 A / P of its four walls; for a
+    silo from STL 4 A / P of its vertical walls' section half way up."""
+    if g.kind == "mesh":
+        return g.hydraulic_diameter
     if g.kind == "box":
         return 4.0 * g.width * g.depth / (2.0 * (g.width + g.depth))
     if g.kind != "planar":
@@ -243,7 +246,7 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
         return summary
 
     # Wr (free-surface speed) against Wf (outlet count) in Wf's steady window
-    area = surface.area
+    area = g.section_area if g.kind == "mesh" else surface.area     # the bed's whole cross-section
     st = surface.table
     in_window = (st.time >= flow_rate.t_start) & (st.time <= flow_rate.t_end) & (st.surface_height > g.hopper_height + 3 * d)
     wr = surface_flow_rate(st.time[in_window], st.surface_height[in_window], area, rho_section)

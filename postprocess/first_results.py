@@ -183,7 +183,8 @@ def eccentric_discharge(table: pd.DataFrame, sectors: int, offset: float, kind: 
     else:
         near = 0
         far = [sectors // 2] if sectors % 2 == 0 else [sectors // 2, sectors // 2 + 1]
-        pairs = [(k, sectors - k) for k in range(1, (sectors + 1) // 2) if k != sectors - k]
+        # mirror pairs: equal by symmetry on a cylinder; a silo from STL need not be symmetric
+        pairs = [(k, sectors - k) for k in range(1, (sectors + 1) // 2) if k != sectors - k] if kind != "mesh" else []
     excess = []
     by_band = {band: grp.set_index("sector") for band, grp in table.groupby("band")}
     for by in by_band.values():

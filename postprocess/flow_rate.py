@@ -211,7 +211,8 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=No
 def beverloo_table(folders) -> pd.DataFrame:
     """One row per analysed run folder: orifice diameter D0 (a slab's slot width), grain diameter d,
     outlet length L (a slab's depth, a box's rectangle or slot; NaN for a round orifice) (m), L_ends (the
-    outlet's length ends at walls or edges: Beverloo's L - k d), bulk density
+    outlet's length ends at walls or edges: Beverloo's L - k d), D0_is (what D0 is: a silo from STL
+    with a polygon outlet gives its hydraulic diameter 4 A / P, the round law approximated), bulk density
     rho_b (kg/m3, measured in the settled bed when dumps exist, else packing fraction x rho_p),
     steady flow rate W and its standard error (kg/s), gravity (m/s2)."""
     rows = []
@@ -232,6 +233,8 @@ def beverloo_table(folders) -> pd.DataFrame:
             else np.nan
         rows.append({"run": str(folder), "D0": 2 * g.outlet_radius, "d": 2 * grains[0].radius,
                      "L": L, "L_ends": g.kind == "box",
+                     "D0_is": "hydraulic diameter 4A/P of a polygon outlet (the round law approximated)"
+                     if g.kind == "mesh" and g.outlet == "polygon" else "outlet width or diameter",
                      "rho_b": float(rho_b), "W": rate["rate"], "W_stderr": rate.get("stderr", np.nan), "g": plan.gravity,
                      "rho_b_source": "measured" if fa.get("bulk_density_kg_m3") else "case packing fraction"})
     return pd.DataFrame(rows)

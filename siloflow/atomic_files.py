@@ -56,6 +56,12 @@ def write_text(path, text: str) -> None:
         tmp.write_text(text, encoding="utf-8")
 
 
+def write_bytes(path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (:func:`atomic_path`)."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+
+
 def read_regular_bytes(path, limit: int, what: str = "the file") -> bytes:
     """The bytes of a regular file, at most ``limit``: a FIFO, a device such as /dev/zero or a
     directory is refused before it is read; the file is opened non-blocking (a FIFO swapped in

@@ -134,15 +134,19 @@ def validate_case(schema, data, source: str = "case"):
 
 
 def locate_inserts(case, base: Path):
-    """The case (a validated ``Case``) with its inserts' files as absolute paths, relative ones taken from ``base`` (the
-    case file's folder). The files are read and checked when the walls are made."""
-    if not case.inserts:
-        return case
-    resolved = []
-    for ins in case.inserts:
-        path = Path(ins.file)
-        resolved.append(ins.model_copy(update={"file": str((path if path.is_absolute() else base / path).resolve())}))
-    return case.model_copy(update={"inserts": resolved})
+    """The case (a validated ``Case``) with its inserts' files, and a mesh silo's (``geometry.files``),
+    as absolute paths, relative ones taken from ``base`` (the case file's folder). The files are read
+    and checked when the run is planned."""
+    def located(file: str) -> str:
+        path = Path(file)
+        return str((path if path.is_absolute() else base / path).resolve())
+
+    update = {}
+    if case.inserts:
+        update["inserts"] = [ins.model_copy(update={"file": located(ins.file)}) for ins in case.inserts]
+    if case.geometry.kind == "mesh":
+        update["geometry"] = case.geometry.model_copy(update={"files": [located(f) for f in case.geometry.files]})
+    return case.model_copy(update=update) if update else case
 
 
 def read_case_bytes(path) -> bytes:

@@ -92,6 +92,24 @@ def write_manifest(folder: Path) -> None:
                                         "files": {f: sha256(folder / f) for f in files}})
 
 
+def stored_container(case: Case, folder: Path):
+    """A mesh silo's walls copied into the run folder (``meshes/container.stl``, in metres, in the
+    files' frame) and the case's geometry naming that copy, every length in metres (scale 1), so
+    that the folder's case renders the same deck without the user's files."""
+    from .derived import measured
+    from .geometry import WallMesh, write_stl
+    g = measured(case).geometry
+    write_stl(WallMesh("container", "wall", g.container.source), folder / "meshes" / "container.stl")
+    s, o = g.scale, g.outlet
+    outlet = {"z": o.z * s}
+    if o.radius is not None:
+        outlet.update(center=(o.center[0] * s, o.center[1] * s), radius=o.radius * s)
+    else:
+        outlet["polygon"] = o.scaled_polygon(s)
+    return g.model_copy(update={"files": ["meshes/container.stl"], "scale": 1.0,
+                                "outlet": o.model_copy(update=outlet), "axis": g.origin[:2]})
+
+
 def write_run_folder(case: Case, plan, engine, folder: Path) -> None:
     """Write the files of a run folder into the existing, empty ``folder``: the validated case (its
     inserts naming the folder's own mesh copies, in metres), the plan, and the engine's deck."""
@@ -99,6 +117,8 @@ def write_run_folder(case: Case, plan, engine, folder: Path) -> None:
     engine.write_deck(plan, folder)
     stored = case.model_copy(update={"inserts": [
         ins.model_copy(update={"file": f"meshes/{ins.mesh_name}.stl", "scale": 1.0}) for ins in case.inserts]})
+    if case.geometry.kind == "mesh":
+        stored = stored.model_copy(update={"geometry": stored_container(case, folder)})
     write_text(folder / CASE_NAME, case_to_yaml(stored))
     RunFolder(folder).write_plan(plan)
 
@@ -139,7 +159,7 @@ def render(case: Case, folder, force: bool = False, keep=(), plan=None, *, engin
     from .derived import derive
     folder = Path(folder)
     plan = plan if plan is not None else derive(case)
-    keep = list(keep) + [ins.file for ins in case.inserts]
+    keep = list(keep) + [ins.file for ins in case.inserts] + list(getattr(case.geometry, "files", []))
     with new_folder(folder, force=force, keep=keep) as tmp:
         write_run_folder(case, plan, engine, tmp)
         write_manifest(tmp)

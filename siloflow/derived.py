@@ -10,7 +10,7 @@ import math
 
 from . import contact_physics as cp
 from ._version import __version__
-from .case import BoxGeometry, Case, HopperGeometry, PlanarGeometry
+from .case import BoxGeometry, Case, HopperGeometry, MeshGeometry, PlanarGeometry
 from .errors import CaseError, SetupError
 from .plan import (
     FACES,
@@ -59,9 +59,42 @@ AIR_DENSITY, AIR_VISCOSITY = 1.2, 1.8e-5
 DRAG_WARNING = 0.1
 
 
+def measured(case: Case, container=None) -> Case:
+    """The case with its mesh silo's walls read and checked (``geometry.kind: mesh``; any other case
+    as it is): the files located as the case file gave them, the container measured
+    (``siloflow.geometry.read_container``; ``container`` when already read), and the case's checks
+    that need the silo's size run. A problem is a ``CaseError`` naming the field."""
+    g = case.geometry
+    if not isinstance(g, MeshGeometry):
+        return case
+    from .case.model import shape_problems
+    from .geometry import MeshError, Outline, read_container
+    if container is None:
+        o = g.outlet
+        origin = g.origin
+        if o.radius is not None:
+            outline = Outline((g.outlet_offset, g.outlet_offset_y), radius=o.radius * g.scale)
+        else:
+            outline = Outline((g.outlet_offset, g.outlet_offset_y),
+                              polygon=tuple((x - origin[0], y - origin[1]) for x, y in o.scaled_polygon(g.scale)))
+        try:
+            container = read_container(g.files, g.scale, outline, origin)
+        except MeshError as exc:
+            raise CaseError([("geometry.files", str(exc))], case.name) from None
+    geometry = g.model_copy()
+    geometry._container = container
+    case = case.model_copy(update={"geometry": geometry})
+    problems = shape_problems(case)
+    if problems:
+        raise CaseError([("geometry", p) for p in problems], case.name)
+    return case
+
+
 def bed_volume(case: Case, height: float) -> float:
     """Volume of the silo below ``height`` (m above the outlet), m3."""
     g = case.geometry
+    if isinstance(g, MeshGeometry):
+        return g.container.volume_below(height)
     if isinstance(g, BoxGeometry):          # the hopper's frustum (a pyramid's or a wedge's), then the box
         hh, (hx, hy) = g.hopper_height, g.outlet_half_sizes
         h_w = min(height, hh)
@@ -254,6 +287,9 @@ def bed_pressure(case: Case, bulk_density: float, depth: float) -> float:
     if isinstance(g, BoxGeometry):
         area = g.width * g.depth
         grip = 2 * (g.width + g.depth) * m.particle_wall.friction
+    elif isinstance(g, MeshGeometry):        # the vertical walls' section half way up
+        area, perimeter = g.section
+        grip = perimeter * m.particle_wall.friction
     elif isinstance(g, PlanarGeometry):
         area = g.width * g.thickness
         grip = 2 * g.thickness * m.particle_wall.friction + 2 * g.width * g.face_friction
@@ -349,8 +385,10 @@ def derive(case: Case) -> RunPlan:
         for the insertion region, opening too slow, ...), naming the field.
     """
     from .profiles import effective_case, profile_settings
+    case = measured(case)                  # a mesh silo's walls read once, here
     settings = profile_settings(case)
-    case = effective_case(case, settings)  # the profile's time step and stiffness, applied once here
+    # the profile's time step and stiffness, applied once here (a changed case is validated anew)
+    case = measured(effective_case(case, settings), getattr(case.geometry, "_container", None))
     g = case.geometry
     planar = isinstance(g, PlanarGeometry)
     box = isinstance(g, BoxGeometry)
@@ -494,14 +532,19 @@ def derive(case: Case) -> RunPlan:
         raise CaseError([("fill.settle.static_window", f"{static_steps} steps hold fewer than two samples of "
                           f"{sample_freq} steps (outputs.sample_interval): no static wall-load sample")])
     round_silo = not (planar or box)
+    mesh = isinstance(g, MeshGeometry)
     silo = Silo(kind=g.kind, half_width=g.half_width, height=g.height, hopper_height=g.hopper_height,
                 outlet_radius=g.outlet_radius, radius=g.radius if round_silo else None,
                 width=None if round_silo else g.width, thickness=g.thickness if planar else None,
                 face_friction=g.face_friction if planar else None,
-                mesh_segments=g.mesh_segments if round_silo else None,
+                mesh_segments=g.mesh_segments if round_silo and not mesh else None,
                 outlet_offset=g.outlet_offset, periodic_depth=planar and g.periodic_depth,
                 **({"depth": g.depth, "outlet": g.outlet, "outlet_half_y": g.outlet_half_sizes[1],
-                    "outlet_offset_y": g.outlet_offset_y} if box else {}))
+                    "outlet_offset_y": g.outlet_offset_y} if box else {}),
+                **({"outlet_offset_y": g.outlet_offset_y,
+                    "outer_radius": g.container.outer_radius, "section_area": g.section[0],
+                    "section_perimeter": g.section[1], "outlet": "circle" if g.outlet.radius is not None else "polygon"}
+                   if mesh else {}))
     materials = {"particle": Material(youngs_modulus=_modulus_of(case, "particle")[0],
                                       poisson_ratio=_modulus_of(case, "particle")[1]),
                  "wall": Material(youngs_modulus=_modulus_of(case, None)[0], poisson_ratio=_modulus_of(case, None)[1])}
@@ -534,7 +577,7 @@ def derive(case: Case) -> RunPlan:
         discharge=Discharge(chunk_steps=d_chunk, max_chunks=d_chunks, until_empty=dis.until_empty, steady=steady,
                             empty_mass=dis.empty_fraction * (count * final_mass + (dust_count * dust.mass if dust
                                                                                    is not None else 0.0))),
-        outlet=Outlet(z=outlet_z, radius=g.outlet_radius + 2 * d),
+        outlet=Outlet(z=outlet_z, radius=(g.container.outline.size if mesh else g.outlet_radius) + 2 * d),
         sensors=Sensors(bands=0, sectors=2 if planar else 4 if box else case.sensors.sectors),
         outputs=Outputs(thermo_every=thermo_every, sample_steps=sample_freq, samples_per_average=sample_repeat,
                         dump_every=dump_every, vtk=bool(dump_every and needs["vtk"]),
@@ -576,8 +619,13 @@ def wall_meshes(case: Case, plan: RunPlan, sensors: bool) -> list:
     )
     s = case.sensors
     bounds = band_boundaries(case.geometry.height, s.bands, s.heights)
+    container = case.geometry.container if plan.geometry.kind == "mesh" else None
     try:
-        meshes = silo_meshes(plan.geometry, bounds, plan.sensors.sectors, plan.outlet.z, plan.outlet.radius, sensors)
+        meshes = silo_meshes(plan.geometry, bounds, plan.sensors.sectors, plan.outlet.z, plan.outlet.radius, sensors,
+                             container)
+    except MeshError as exc:            # a mesh silo's walls that cannot be cut into sensors
+        raise CaseError([("sensors", f"the walls of geometry.files cannot be cut into sensors: {exc}")],
+                        case.name) from None
     except MeshQualityError as exc:
         fields = shaping_fields(case, exc.role, exc.kind)
         raise CaseError([(fields[0], f"the wall mesh '{exc.wall}' cannot be triangulated for LIGGGHTS: "
@@ -598,6 +646,9 @@ def shaping_fields(case: Case, role: str, kind: str = "angle") -> list[str]:
     'edge', a too short edge: the outlet's size, which sets the hopper's shortest sides)."""
     g = case.geometry
     sensors = "sensors.heights" if case.sensors.heights is not None else "sensors.bands"
+    if isinstance(g, MeshGeometry):      # the user's triangles, cut at the bands and sectors
+        return {"band": [sensors, "sensors.sectors", "geometry.files"], "wall": [sensors, "geometry.files"],
+                "outlet": ["geometry.outlet"]}.get(role, ["geometry.files", "geometry.scale"])
     offset = ["geometry.outlet_offset"] if getattr(g, "outlet_offset", 0.0) else []
     if kind == "edge" and role in ("hopper", "cone", "bottom", "plate", "outlet"):
         if isinstance(g, PlanarGeometry):
@@ -648,7 +699,8 @@ def guard_limits(case: Case, species: list, v_open: float, z_lowest: float) -> G
                  max_overlap=gs.max_overlap * r_min + max(map(own_overlap, species)),
                  max_overlap_fraction=gs.max_overlap, grain_radius=r_min,
                  energy_growth=gs.energy_growth,
-                 escape_radius=None if planar or box else g.half_width + margin,
+                 escape_radius=None if planar or box else (g.container.outer_radius if isinstance(g, MeshGeometry)
+                                                           else g.half_width) + margin,
                  escape_half_x=g.half_width + margin if planar or box else None,
                  escape_half_y=(0.5 * g.thickness if planar else 0.5 * g.depth) + margin if planar or box else None,
                  escape_z=top + margin)

@@ -55,7 +55,8 @@ def default_root() -> Path:
 #: the plan silo's fields that place or shape its outlet (a flat floor's plate closes it for the fill)
 OUTLET_PLACE = ("outlet_offset", "outlet", "outlet_half_y", "outlet_offset_y")
 #: the plan silo's fields added after fills were first cached: left out of the key while unset
-LATER_SILO_FIELDS = ("outlet_offset", "periodic_depth", "depth", "outlet", "outlet_half_y", "outlet_offset_y")
+LATER_SILO_FIELDS = ("outlet_offset", "periodic_depth", "depth", "outlet", "outlet_half_y", "outlet_offset_y",
+                     "outer_radius", "section_area", "section_perimeter")
 
 
 def walls_digest(plan) -> str:

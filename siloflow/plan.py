@@ -191,11 +191,13 @@ class Outlet(Frozen):
 
 
 class Silo(Frozen):
-    """The silo's shape as post-processing and engines need it (m): ``kind`` cylinder, hopper or
-    planar (a slab, ``thickness`` deep along y); ``half_width`` is the radius or half the width;
+    """The silo's shape as post-processing and engines need it (m): ``kind`` cylinder, hopper,
+    planar (a slab, ``thickness`` deep along y), box or mesh (the user's STL container: ``radius``
+    and ``half_width`` the circle about its axis inside its vertical walls, ``outer_radius`` the
+    farthest point of its walls); ``half_width`` is the radius or half the width;
     the outlet's centre is at (``outlet_offset``, 0, 0)."""
 
-    kind: Literal["cylinder", "hopper", "planar", "box"]
+    kind: Literal["cylinder", "hopper", "planar", "box", "mesh"]
     half_width: float
     height: float                   # of the vertical part
     hopper_height: float            # 0 without a hopper
@@ -208,9 +210,12 @@ class Silo(Frozen):
     outlet_offset: float = 0.0            # the outlet's centre at x = outlet_offset (an eccentric outlet)
     periodic_depth: bool = False          # a slab periodic along y over its thickness (no faces)
     depth: Optional[float] = None         # a box's inner extent along y
-    outlet: Optional[str] = None          # a box's outlet: rectangle, slot or circle
+    outlet: Optional[str] = None          # a box's outlet: rectangle, slot or circle (a mesh silo's: circle or polygon)
     outlet_half_y: Optional[float] = None  # a box's outlet half extent along y (a slot's: half the depth)
-    outlet_offset_y: float = 0.0          # a box's outlet centre's y
+    outlet_offset_y: float = 0.0          # a box's (or mesh silo's) outlet centre's y
+    outer_radius: Optional[float] = None  # a mesh silo's farthest wall point from the axis (half_width: the nearest)
+    section_area: Optional[float] = None       # a mesh silo's vertical walls' cross-section half way up, m2
+    section_perimeter: Optional[float] = None  # and its perimeter, m
 
     @property
     def top(self) -> float:
@@ -221,7 +226,19 @@ class Silo(Frozen):
         """Half the extent along y, m."""
         if self.kind == "box":
             return 0.5 * self.depth
-        return 0.5 * self.thickness if self.kind == "planar" else self.half_width
+        return 0.5 * self.thickness if self.kind == "planar" else self.reach
+
+    @property
+    def hydraulic_diameter(self) -> Optional[float]:
+        """A mesh silo's 4 A / P of its vertical walls' cross-section (Janssen's D), m."""
+        if self.section_area is None:
+            return None
+        return 4.0 * self.section_area / self.section_perimeter
+
+    @property
+    def reach(self) -> float:
+        """Half the extent along x about the axis, m: the half width, or a mesh silo's outer radius."""
+        return self.outer_radius if self.outer_radius is not None else self.half_width
 
 
 class Wall(Frozen):

@@ -56,6 +56,19 @@ def example_case(name: str) -> Traversable:
     return resources.files(DECKS) / f"{stem}.yaml"
 
 
+def example_companions(name: str) -> list[str]:
+    """The files a shipped example reads beside it (a silo from STL: its ``geometry.files``)."""
+    import yaml
+    data = yaml.safe_load(example_text(name))
+    geometry = data.get("geometry", {}) if isinstance(data, dict) else {}
+    return list(geometry.get("files", [])) if geometry.get("kind") == "mesh" else []
+
+
+def example_file(name: str) -> bytes:
+    """The bytes of a file shipped beside the examples (``decks/NAME``)."""
+    return (resources.files(DECKS) / name).read_bytes()
+
+
 def example_text(name: str) -> str:
     """The YAML text of a shipped example case (:func:`example_case`)."""
     return example_case(name).read_text(encoding="utf-8")

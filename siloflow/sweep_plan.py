@@ -9,6 +9,7 @@ computes the fill and publishes it in the fill cache, the others start from it.
 from __future__ import annotations
 
 import copy
+import hashlib
 import itertools
 import json
 import math
@@ -234,17 +235,18 @@ def sweep_engine(variants: list[Variant], need_binary: bool = True):
 def _shared_meshes():
     """Within the block, ``derive`` computes the walls of each distinct silo once: it takes
     ``siloflow.geometry.silo_meshes`` when called, here memoised by what shapes the walls (the
-    plan's silo, the band boundaries and sectors, the counting disc and whether the side walls
-    are sensors). Most of a plan's time is its meshes, the same for every variant of a silo."""
+    plan's silo, the band boundaries and sectors, the counting disc, whether the side walls
+    are sensors, and a silo from STL's walls). Most of a plan's time is its meshes, the same for every variant of a silo."""
     from . import geometry as meshes
     original = meshes.silo_meshes
     memo: dict[str, list] = {}
 
-    def shared(silo, band_bounds, sectors, outlet_z, outlet_radius, sensors=True):
-        key = json.dumps([silo.model_dump(mode="json"), list(band_bounds), sectors, outlet_z, outlet_radius, sensors],
-                         sort_keys=True)
+    def shared(silo, band_bounds, sectors, outlet_z, outlet_radius, sensors=True, container=None):
+        walls = hashlib.sha256(container.triangles.tobytes()).hexdigest() if container is not None else None
+        key = json.dumps([silo.model_dump(mode="json"), list(band_bounds), sectors, outlet_z, outlet_radius, sensors,
+                          walls], sort_keys=True)
         if key not in memo:
-            memo[key] = original(silo, band_bounds, sectors, outlet_z, outlet_radius, sensors)
+            memo[key] = original(silo, band_bounds, sectors, outlet_z, outlet_radius, sensors, container)
         return list(memo[key])
 
     meshes.silo_meshes = shared

@@ -290,6 +290,8 @@ def test_existing_cases_keep_their_meshes_and_all_are_good():
     byte-identical tests rely on it) and pass the same checks."""
     for path in sorted(list((ROOT / "decks").glob("*.yaml")) + list((ROOT / "tests" / "data").glob("*.yaml"))):
         case = load_case(path)
+        if case.geometry.kind == "mesh":      # the user's own triangles: tests/test_mesh_silo.py
+            continue
         walls = walls_of(case)
         check_walls(case, walls)
         if case.geometry.kind in ("cylinder", "hopper"):

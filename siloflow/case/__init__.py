@@ -52,6 +52,8 @@ from .geometry import (  # noqa: F401
     CylinderGeometry,
     Geometry,
     HopperGeometry,
+    MeshGeometry,
+    MeshOutlet,
     PlanarGeometry,
     WallSensors,
     _smaller,
@@ -93,4 +95,4 @@ from .stages import (  # noqa: F401
     Settle,
 )
 
-__all__ = ['Analysis', 'BenchQuantity', 'BoxGeometry', 'Case', 'ClumpSphere', 'Clumps', 'CylinderGeometry', 'DEFAULT_TIMESTEP_FRACTION', 'DESIGN_RANGES', 'DesignSettings', 'Discharge', 'Dust', 'EngineSettings', 'Fill', 'FiniteFloat', 'Fraction', 'Geometry', 'GrainRadius', 'Guard', 'HopperGeometry', 'Int', 'MAX_HOPPER_HEIGHT', 'MAX_STAGE_TIME', 'MAX_YOUNGS_MODULUS', 'MIN_DENSITY', 'MIN_GRAIN_RADIUS', 'MIN_TIMESTEP_FRACTION', 'MIN_YOUNGS_MODULUS', 'Materials', 'MeasurementRegion', 'Mobilise', 'MonodisperseSpheres', 'NonNegative', 'Opening', 'Outputs', 'PROFILE_FIELDS', 'PROFILE_NAMES', 'PairContact', 'ParticleMaterial', 'Particles', 'PinnedProfile', 'PlanarGeometry', 'PolydisperseSpheres', 'Positive', 'RESULTS', 'Real', 'SAFE_NAME_PATTERN', 'STATIC_WINDOW_SAMPLES', 'SafeName', 'Settle', 'Strict', 'TimestepFraction', 'WallInsert', 'WallMaterial', 'WallSensors', 'default_static_window', 'paper_b_radii']
+__all__ = ['Analysis', 'BenchQuantity', 'BoxGeometry', 'Case', 'ClumpSphere', 'Clumps', 'CylinderGeometry', 'DEFAULT_TIMESTEP_FRACTION', 'DESIGN_RANGES', 'DesignSettings', 'Discharge', 'Dust', 'EngineSettings', 'Fill', 'FiniteFloat', 'Fraction', 'Geometry', 'GrainRadius', 'Guard', 'HopperGeometry', 'Int', 'MAX_HOPPER_HEIGHT', 'MAX_STAGE_TIME', 'MAX_YOUNGS_MODULUS', 'MIN_DENSITY', 'MIN_GRAIN_RADIUS', 'MIN_TIMESTEP_FRACTION', 'MIN_YOUNGS_MODULUS', 'Materials', 'MeasurementRegion', 'MeshGeometry', 'MeshOutlet', 'Mobilise', 'MonodisperseSpheres', 'NonNegative', 'Opening', 'Outputs', 'PROFILE_FIELDS', 'PROFILE_NAMES', 'PairContact', 'ParticleMaterial', 'Particles', 'PinnedProfile', 'PlanarGeometry', 'PolydisperseSpheres', 'Positive', 'RESULTS', 'Real', 'SAFE_NAME_PATTERN', 'STATIC_WINDOW_SAMPLES', 'SafeName', 'Settle', 'Strict', 'TimestepFraction', 'WallInsert', 'WallMaterial', 'WallSensors', 'default_static_window', 'paper_b_radii']

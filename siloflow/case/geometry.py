@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal, Optional, Union
 
-from pydantic import ConfigDict, Field, ValidationInfo, field_validator, model_validator
+from pydantic import ConfigDict, Field, PrivateAttr, ValidationInfo, field_validator, model_validator
 
 from .fields import Int, NonNegative, Positive, Real, Strict
 
@@ -239,7 +239,156 @@ class BoxGeometry(_WalledAcrossX, Strict):
         return self.outlet_half_sizes[0]
 
 
-Geometry = Annotated[Union[CylinderGeometry, HopperGeometry, PlanarGeometry, BoxGeometry],
+class MeshOutlet(Strict):
+    """Where the user's silo opens (in the STL files' units, times ``scale``): the horizontal plane
+    z = ``z`` and in it a circle (``center``, ``radius``) or a convex ``polygon``. The walls must
+    have this opening, and nothing below it; siloflow closes it with a plate for the fill."""
+
+    z: Real = Field(allow_inf_nan=False, ge=-1e6, le=1e6, description="height of the outlet's plane, file units")
+    center: Optional[tuple[Real, Real]] = Field(None, description="circle: its centre (x, y), file units")
+    radius: Optional[Positive] = Field(None, le=1e6, description="circle: its radius, file units")
+    polygon: Optional[list[tuple[Real, Real]]] = Field(None, min_length=3, max_length=1000,
+                                                       description="convex polygon: its corners (x, y), file units")
+
+    @model_validator(mode="after")
+    def _one_shape(self):
+        if (self.radius is None) == (self.polygon is None):
+            raise ValueError("give either radius (with center) for a circle or polygon for a polygon")
+        if self.radius is not None and self.center is None:
+            raise ValueError("a circular outlet needs its center (x, y)")
+        if self.polygon is not None:
+            if self.center is not None:
+                raise ValueError("a polygon outlet takes no center (its centroid is used)")
+            p = self.polygon
+            cross = [(p[(i + 1) % len(p)][0] - p[i][0]) * (p[(i + 2) % len(p)][1] - p[(i + 1) % len(p)][1])
+                     - (p[(i + 1) % len(p)][1] - p[i][1]) * (p[(i + 2) % len(p)][0] - p[(i + 1) % len(p)][0])
+                     for i in range(len(p))]
+            if not (all(c > 0 for c in cross) or all(c < 0 for c in cross)):
+                raise ValueError("polygon: the corners must make a convex polygon, in order, without repeats "
+                                 "or three in a line")
+        return self
+
+    def scaled_polygon(self, scale: float) -> list[tuple[float, float]]:
+        """The polygon's corners times ``scale``, counter-clockwise."""
+        p = [(x * scale, y * scale) for x, y in self.polygon]
+        area = sum(p[i][0] * p[(i + 1) % len(p)][1] - p[(i + 1) % len(p)][0] * p[i][1] for i in range(len(p)))
+        return p if area > 0 else p[::-1]
+
+    def scaled_center(self, scale: float) -> tuple[float, float]:
+        """The circle's centre, or the polygon's centroid, times ``scale``."""
+        if self.center is not None:
+            return self.center[0] * scale, self.center[1] * scale
+        p = self.scaled_polygon(scale)
+        a = cx = cy = 0.0
+        for (x0, y0), (x1, y1) in zip(p, p[1:] + p[:1]):
+            w = x0 * y1 - x1 * y0
+            a, cx, cy = a + w, cx + (x0 + x1) * w, cy + (y0 + y1) * w
+        return cx / (3 * a), cy / (3 * a)
+
+
+class MeshGeometry(Strict):
+    """The user's own silo from STL files (ASCII or binary; relative paths from the case file), in
+    any unit times ``scale`` (0.001 for mm). The walls are checked as a container: closed apart
+    from the top and the ``outlet``, normals consistent, no duplicate or degenerate triangle.
+    Above its floor or hopper the container must have vertical walls: siloflow cuts them into the
+    sensor bands (``sensors``, heights above the top of the floor or hopper, as for a cylinder) and
+    sectors about the vertical ``axis`` (x, y in file units; default the outlet's centre; sector 0
+    faces an outlet off the axis). Height, hopper height and volume come from the mesh when the
+    run is planned (``siloflow.derived.measured``)."""
+
+    kind: Literal["mesh"]
+    files: list[str] = Field(min_length=1, max_length=20, description="STL files of the container's walls")
+    scale: Positive = Field(1.0, le=1000.0, description="factor from the files' units to m (0.001 for mm)")
+    outlet: MeshOutlet
+    axis: Optional[tuple[Real, Real]] = Field(None, description="the sectors' vertical axis (x, y), file units "
+                                              "(default: the outlet's centre)")
+
+    _container: object = PrivateAttr(None)
+
+    @field_validator("files")
+    @classmethod
+    def _named(cls, files):
+        if any(not f or len(f) > 4096 for f in files):
+            raise ValueError("each file is a path of 1 to 4096 characters")
+        return files
+
+    @property
+    def origin(self) -> tuple[float, float, float]:
+        """The silo frame's origin in the files' frame, m: the axis' x, y and the outlet's z."""
+        ax = self.outlet.scaled_center(self.scale) if self.axis is None else \
+            (self.axis[0] * self.scale, self.axis[1] * self.scale)
+        return ax[0], ax[1], self.outlet.z * self.scale
+
+    @property
+    def outlet_center(self) -> tuple[float, float]:
+        """The outlet's centre in the silo frame, m."""
+        cx, cy = self.outlet.scaled_center(self.scale)
+        ox, oy, _ = self.origin
+        return cx - ox, cy - oy
+
+    @property
+    def outlet_offset(self) -> float:
+        return self.outlet_center[0]
+
+    @property
+    def outlet_offset_y(self) -> float:
+        return self.outlet_center[1]
+
+    @property
+    def outlet_radius(self) -> float:
+        """The circle's radius; a polygon's half hydraulic diameter 2 A / P, m."""
+        if self.outlet.radius is not None:
+            return self.outlet.radius * self.scale
+        p = self.outlet.scaled_polygon(self.scale)
+        area = 0.5 * sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(p, p[1:] + p[:1]))
+        perimeter = sum(math.hypot(x1 - x0, y1 - y0) for (x0, y0), (x1, y1) in zip(p, p[1:] + p[:1]))
+        return 2 * area / perimeter
+
+    @property
+    def measured(self) -> bool:
+        """Whether the mesh has been read (``siloflow.derived.measured``)."""
+        return self._container is not None
+
+    @property
+    def container(self):
+        """The checked container (``siloflow.geometry.Container``) once measured."""
+        if self._container is None:
+            raise RuntimeError("the mesh silo's walls are read when the run is planned (siloflow.derived.measured)")
+        return self._container
+
+    @property
+    def height(self) -> float:
+        """Height of the vertical walls above the floor or hopper, m."""
+        return self.container.height
+
+    @property
+    def hopper_height(self) -> float:
+        """Height of the floor or hopper's top above the outlet, m (0: a flat floor)."""
+        return self.container.base
+
+    @property
+    def radius(self) -> float:
+        """The largest circle about the axis inside the vertical walls, m."""
+        return self.container.inscribed_radius
+
+    @property
+    def half_width(self) -> float:
+        return self.radius
+
+    @property
+    def section(self) -> tuple[float, float]:
+        """Area (m2) and perimeter (m) of the vertical walls' cross-section half way up."""
+        return self.container.section(self.hopper_height + 0.5 * self.height)
+
+    @property
+    def hydraulic_diameter(self) -> float:
+        """4 A / P of that cross-section, m (Janssen's D)."""
+        area, perimeter = self.section
+        return 4.0 * area / perimeter
+
+
+Geometry = Annotated[Union[CylinderGeometry, HopperGeometry, PlanarGeometry, BoxGeometry,
+                           MeshGeometry],
                      Field(discriminator="kind")]
 
 

@@ -118,9 +118,6 @@ class Case(Strict):
         if p.max_radius >= g.outlet_radius:
             problems.append(f"{field} ({p.max_radius:.6g} m) must be smaller than the {outlet} "
                             f"(half width {g.outlet_radius} m): nothing could leave")
-        if 3 * d > g.half_width:
-            problems.append(f"{field} ({p.max_radius:.6g} m) is too large for a silo of half width "
-                            f"{g.half_width} m (need >= 3 particle diameters)")
         if g.kind == "planar":
             # the grains' thickness across the slab: spheres their diameter, wheat lies flat in it
             across = p.width if p.kind == "clumps" and p.shape == "wheat" else 2 * p.max_radius
@@ -140,33 +137,50 @@ class Case(Strict):
         if g.kind == "box" and (p.kind == "clumps" or getattr(p, "dust", None) is not None):
             problems.append("geometry.kind box: a rectangular silo takes spheres (monodisperse or polydisperse) "
                             "without dust for now; clumps and dust: kind cylinder, hopper or planar")
-        top = g.hopper_height + g.height
         if f.mobilise is not None and g.kind != "cylinder":
             problems.append(f"fill.mobilise lowers a flat floor: it needs geometry.kind cylinder, not {g.kind} "
                             "(a hopper or slab floor cannot move down without opening a gap at its walls)")
-        if f.height is not None and f.height >= top:
-            problems.append(f"fill.height ({f.height} m) must be below the top of the silo ({top:.6g} m)")
         zmin, zmax = f.insertion_z_min, f.insertion_z_max
-        if zmax is not None and zmax > top:
-            problems.append(f"fill.insertion_z_max ({zmax} m) is above the top of the silo ({top:.6g} m)")
-        if zmin is not None and zmin < g.hopper_height:
-            problems.append(f"fill.insertion_z_min ({zmin} m) must be above the hopper "
-                            f"({g.hopper_height:.6g} m)")
         if zmin is not None and zmax is not None and zmax - zmin < 2 * d:
             problems.append("fill.insertion_z_max must exceed insertion_z_min by 2 particle diameters")
-        if f.pour_radius is not None and not 2 * d <= f.pour_radius <= g.half_width:
-            problems.append(f"fill.pour_radius ({f.pour_radius} m) must be between two grain diameters "
-                            f"({2 * d:.6g} m) and the silo's half width ({g.half_width} m)")
+        if g.kind != "mesh" or g.measured:      # a mesh silo's size is known once its files are read
+            problems += shape_problems(self)
         names = [i.name for i in self.inserts]
         if len(set(names)) != len(names):
             problems.append("inserts: names must be unique")
-        if self.sensors.heights is not None and self.sensors.heights[-1] > g.height:
-            problems.append(f"sensors.heights: last boundary ({self.sensors.heights[-1]} m) is above "
-                            f"the vertical wall ({g.height} m)")
         problems += _sampling_problems(self)
         if problems:
             raise ValueError("; ".join(problems))
         return self
+
+
+def shape_problems(case: "Case") -> list[str]:
+    """The checks that need the silo's size (its half width, hopper and wall heights): of a mesh
+    silo, once its files are read (``siloflow.derived.measured``)."""
+    g, p, f = case.geometry, case.particles, case.fill
+    d = 2 * p.max_radius
+    field = {"spheres": "particles.radius", "clumps": "particles.length"}.get(p.kind, "particles.radii")
+    problems = []
+    if 3 * d > g.half_width:
+        problems.append(f"{field} ({p.max_radius:.6g} m) is too large for a silo of half width "
+                        f"{g.half_width:.6g} m (need >= 3 particle diameters)")
+    top = g.hopper_height + g.height
+    if f.height is not None and f.height >= top:
+        problems.append(f"fill.height ({f.height} m) must be below the top of the silo ({top:.6g} m)")
+    zmin, zmax = f.insertion_z_min, f.insertion_z_max
+    if zmax is not None and zmax > top:
+        problems.append(f"fill.insertion_z_max ({zmax} m) is above the top of the silo ({top:.6g} m)")
+    if zmin is not None and zmin < g.hopper_height:
+        problems.append(f"fill.insertion_z_min ({zmin} m) must be above the hopper "
+                        f"({g.hopper_height:.6g} m)")
+    if f.pour_radius is not None and not 2 * d <= f.pour_radius <= g.half_width:
+        problems.append(f"fill.pour_radius ({f.pour_radius} m) must be between two grain diameters "
+                        f"({2 * d:.6g} m) and the silo's half width ({g.half_width:.6g} m)")
+    # (a mesh silo's height holds its STL's float32 rounding: 1e-6 of it is not above)
+    if case.sensors.heights is not None and case.sensors.heights[-1] > g.height * (1 + 1e-6):
+        problems.append(f"sensors.heights: last boundary ({case.sensors.heights[-1]} m) is above "
+                        f"the vertical wall ({g.height:.6g} m)")
+    return problems
 
 
 def _set_path(data: dict, path, value) -> None:

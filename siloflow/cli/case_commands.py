@@ -91,8 +91,8 @@ def example(name: Optional[str] = typer.Argument(None, help="example case to cop
             force: bool = typer.Option(False, "--force", help="replace an existing file")) -> None:
     """List the example cases siloflow ships (the demo, the quick case, the papers' cases), or copy one
     out to edit, render or run (they are installed with siloflow: decks/ in the repository)."""
-    from ..atomic_files import write_text
-    from ..resources import example_case, example_names
+    from ..atomic_files import write_bytes, write_text
+    from ..resources import example_case, example_companions, example_file, example_names
     try:
         if name is None:
             for stem in example_names():
@@ -107,11 +107,17 @@ def example(name: Optional[str] = typer.Argument(None, help="example case to cop
         print(text, end="")
         return
     target = output or Path(Path(name).stem + ".yaml")
-    if target.exists() and not force:
-        err.print(printable(f"siloflow: {target} exists (--force replaces it)"), markup=False, highlight=False)
-        raise typer.Exit(1)
+    # a silo from STL ships its walls beside the case: they go beside the copy, under the same names
+    companions = {target.parent / f: example_file(f) for f in example_companions(name)}
+    for path in [target, *companions]:
+        if path.exists() and not force:
+            err.print(printable(f"siloflow: {path} exists (--force replaces it)"), markup=False, highlight=False)
+            raise typer.Exit(1)
+    for path, data in companions.items():
+        write_bytes(path, data)
     write_text(target, text)
-    out.print(printable(f"example case {Path(name).stem} written to {target}"), markup=False, highlight=False)
+    also = f" (and {', '.join(str(p) for p in companions)})" if companions else ""
+    out.print(printable(f"example case {Path(name).stem} written to {target}{also}"), markup=False, highlight=False)
 
 
 def profile_note(p) -> str:

@@ -17,10 +17,17 @@ geometry fields that shape the wall.
 
 The package: ``quality`` (LIGGGHTS' limits and the measures), ``wall_mesh`` (one wall and its STL),
 ``triangulation`` (surfaces), ``silo_walls`` (the container's walls and sensors), ``user_meshes``
-(the user's STL inserts). Every public name is importable from ``siloflow.geometry``.
+(the user's STL inserts), ``container`` (the user's own silo from STL: checked, measured, cut into
+sensors). Every public name is importable from ``siloflow.geometry``.
 """
 from __future__ import annotations
 
+from .container import (  # noqa: F401
+    Container,
+    Outline,
+    container_meshes,
+    read_container,
+)
 from .quality import (  # noqa: F401
     GRADING,
     LIGGGHTS_CURVATURE_DEG,
@@ -69,4 +76,4 @@ from .wall_mesh import (  # noqa: F401
     write_stl,
 )
 
-__all__ = ['GRADING', 'LIGGGHTS_CURVATURE_DEG', 'LIGGGHTS_MIN_MESH_EXTENT', 'LIGGGHTS_PRECISION', 'LIGGGHTS_SKEWED_DEG', 'MAX_FACET_ASPECT', 'MAX_MESH_TRIANGLES', 'MAX_USER_MESH_BYTES', 'MIN_ANGLE_DEG', 'MIN_EDGE', 'MIN_RING_POINTS', 'MeshError', 'MeshQuality', 'MeshQualityError', 'REFINE_ANGLE_DEG', 'ROW_ASPECT', 'WallMesh', 'as_written', 'aspect_ratios', 'band_boundaries', 'check_inside', 'check_wall', 'cylinder_meshes', 'disc', 'graded_disc', 'merge_side_walls', 'mesh_quality', 'min_angles', 'read_user_mesh', 'rectangle', 'revolution_rows', 'silo_meshes', 'slab_meshes', 'surface_of_revolution', 'triangle_angles', 'user_wall', 'write_stl']
+__all__ = ['Container', 'GRADING', 'LIGGGHTS_CURVATURE_DEG', 'LIGGGHTS_MIN_MESH_EXTENT', 'LIGGGHTS_PRECISION', 'LIGGGHTS_SKEWED_DEG', 'MAX_FACET_ASPECT', 'MAX_MESH_TRIANGLES', 'MAX_USER_MESH_BYTES', 'MIN_ANGLE_DEG', 'MIN_EDGE', 'MIN_RING_POINTS', 'MeshError', 'MeshQuality', 'MeshQualityError', 'Outline', 'REFINE_ANGLE_DEG', 'ROW_ASPECT', 'WallMesh', 'as_written', 'aspect_ratios', 'band_boundaries', 'check_inside', 'check_wall', 'container_meshes', 'cylinder_meshes', 'disc', 'graded_disc', 'merge_side_walls', 'mesh_quality', 'min_angles', 'read_container', 'read_user_mesh', 'rectangle', 'revolution_rows', 'silo_meshes', 'slab_meshes', 'surface_of_revolution', 'triangle_angles', 'user_wall', 'write_stl']

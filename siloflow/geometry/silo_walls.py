@@ -7,7 +7,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..plan import Silo
+from .container import container_meshes
 from .quality import (
+    LIGGGHTS_CURVATURE_DEG,
     LIGGGHTS_MIN_MESH_EXTENT,
     LIGGGHTS_PRECISION,
     MAX_FACET_ASPECT,
@@ -43,7 +45,7 @@ def band_boundaries(height: float, bands: int, heights: Sequence[float] | None =
 
 
 def silo_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outlet_z: float, outlet_radius: float,
-                sensors: bool = True) -> list[WallMesh]:
+                sensors: bool = True, container=None) -> list[WallMesh]:
     """The generated meshes of a silo (cylinder, hopper or slab, the run plan's ``geometry``), in the
     order the deck lists them, the counting mesh last.
 
@@ -53,9 +55,16 @@ def silo_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outlet_z
     ``sensors`` the side walls' pieces (bands and the rest) are one mesh ``wall`` of the same
     facets: no result reads their pressure. Every wall is checked (:func:`check_wall`); one that
     cannot be triangulated well raises ``MeshQualityError`` naming the wall, its role and the kind
-    of defect (the plan's maker names the case fields that shape it).
+    of defect (the plan's maker names the case fields that shape it). A user's silo (kind ``mesh``)
+    is cut from its ``container`` (``siloflow.geometry.container``); its pieces keep the user's
+    triangles, so they are held to LIGGGHTS' own limits instead of siloflow's.
     """
-    if silo.kind == "planar":
+    min_angle, min_edge = MIN_ANGLE_DEG, MIN_EDGE
+    if silo.kind == "mesh":
+        meshes = container_meshes(container, band_bounds, sectors, (silo.outlet_offset, silo.outlet_offset_y),
+                                  outlet_z, outlet_radius)
+        min_angle, min_edge = LIGGGHTS_CURVATURE_DEG, LIGGGHTS_PRECISION
+    elif silo.kind == "planar":
         meshes = slab_meshes(silo, band_bounds, outlet_z, outlet_radius)
     elif silo.kind == "box":
         meshes = box_meshes(silo, band_bounds, outlet_z, outlet_radius)
@@ -66,7 +75,7 @@ def silo_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outlet_z
     if not sensors:
         meshes = merge_side_walls(meshes)
     for w in meshes:
-        check_wall(w)
+        check_wall(w, min_angle, min_edge)
     return meshes
 
 
@@ -82,13 +91,13 @@ def merge_side_walls(meshes: list[WallMesh]) -> list[WallMesh]:
     return rest[:first] + [merged] + rest[first:]
 
 
-def check_wall(wall: WallMesh) -> None:
-    """Raise ``MeshQualityError`` if a generated wall, as written (float32), has a triangle with an
-    angle below ``MIN_ANGLE_DEG`` or an edge shorter than ``MIN_EDGE``."""
+def check_wall(wall: WallMesh, min_angle: float = MIN_ANGLE_DEG, min_edge: float = MIN_EDGE) -> None:
+    """Raise ``MeshQualityError`` if a wall, as written (float32), has a triangle with an angle
+    below ``min_angle`` (deg) or an edge shorter than ``min_edge`` (m)."""
     quality = mesh_quality(as_written(wall.triangles))
-    problem = quality.problem()
+    problem = quality.problem(min_angle, min_edge)
     if problem:
-        kind = "edge" if quality.n_triangles and quality.min_angle >= MIN_ANGLE_DEG else "angle"
+        kind = "edge" if quality.n_triangles and quality.min_angle >= min_angle else "angle"
         raise MeshQualityError(problem, wall.name, wall.role, kind)
     points = np.asarray(wall.triangles).reshape(-1, 3)
     extent = float((points.max(axis=0) - points.min(axis=0)).max())

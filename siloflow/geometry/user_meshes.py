@@ -36,13 +36,16 @@ def read_user_mesh(path, scale: float = 1.0) -> np.ndarray:
     if tris.ndim != 3 or len(tris) == 0:
         raise MeshError(f"{path} holds no triangles")
     tris = tris * scale
-    if not np.all(np.isfinite(tris)):
-        raise MeshError(f"{path} has non-finite vertex coordinates")
+    finite = np.isfinite(tris).all(axis=(1, 2))
+    if not finite.all():
+        raise MeshError(f"{path} has non-finite vertex coordinates (NaN or infinite) in {int((~finite).sum())} "
+                        f"triangle(s), the first triangle {int(np.argmin(finite))} (from 0): re-export the file")
     area = 0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
     extent = float(np.ptp(tris.reshape(-1, 3), axis=0).max())
-    bad = int((area <= 1e-12 * extent * extent).sum())
-    if bad:
-        raise MeshError(f"{path} has {bad} degenerate (zero-area) triangle(s) of {len(tris)}")
+    degenerate = area <= 1e-12 * extent * extent
+    if degenerate.any():
+        raise MeshError(f"{path} has {int(degenerate.sum())} degenerate (zero-area) triangle(s) of {len(tris)}, the "
+                        f"first triangle {int(np.argmax(degenerate))} (from 0): remove them")
     angles = min_angles(tris)
     bad = int((angles < LIGGGHTS_CURVATURE_DEG).sum())
     if bad:

@@ -49,9 +49,13 @@ class LammpsEngine(Engine):
             lmp.close()
 
     def check(self, case: Case, plan: Optional[RunPlan] = None) -> list[tuple[str, str]]:
-        """What this engine cannot do: STL inserts (LAMMPS has no mesh walls for grains), clumps in a
-        slab (rigid/small bodies cannot be held to a plane), an eccentric hopper (a cone region is a right cone)."""
+        """What this engine cannot do: STL inserts and a silo from STL (LAMMPS has no mesh walls for
+        grains), clumps in a slab (rigid/small bodies cannot be held to a plane), an eccentric hopper
+        (a cone region is a right cone)."""
         problems = []
+        if case.geometry.kind == "mesh":
+            problems.append(("geometry.kind", "LAMMPS has no STL walls for grains (no mesh region), so it cannot "
+                                              "run a silo from STL files: use engine.name: liggghts"))
         if case.inserts:
             problems.append(("inserts", "LAMMPS has no STL walls for grains (no mesh region): remove the "
                                         "inserts or use engine.name: liggghts"))

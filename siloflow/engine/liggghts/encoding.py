@@ -132,8 +132,8 @@ def encode(plan: RunPlan) -> LiggghtsEncoding:
     plate_velocity = (v * plate_shift / path, 0.0, -v * travel / path)
     margin = 2 * d
     half_y = g.half_depth
-    box = {"xlo": -g.half_width - margin,
-           "xhi": max(g.half_width, g.outlet_offset + plate_shift + g.outlet_radius) + margin,
+    box = {"xlo": -g.reach - margin,
+           "xhi": max(g.reach, g.outlet_offset + plate_shift + g.outlet_radius) + margin,
            "ylo": -half_y - (0.0 if g.periodic_depth else margin), "yhi": half_y + (0.0 if g.periodic_depth else margin),
            "zlo": plan.outlet.z - travel - margin, "zhi": g.top + margin}
     skin = 0.5 * r
