@@ -240,6 +240,9 @@ def study_record(scale: Scale, folders: list[Path], tables: dict, cg_scaling: di
         if steps and rec.get("wall_time"):
             ps += float(r.particles) * steps
             secs += float(rec["wall_time"])
+    if cg_scaling:      # the committed record names the runs from the checkout, not this machine's path
+        cg_scaling = {**cg_scaling, "runs": [{**r, "folder": _from_root(r["folder"])}
+                                             for r in cg_scaling.get("runs", [])]}
     data = yaml.safe_load((ROOT / scale.deck).read_text())
     ranks = (scale.engine or {}).get("ranks", data.get("engine", {}).get("ranks", 2))
     return {"scale": scale.name, "deck": scale.deck, "why": scale.why, "apertures_rb": list(scale.apertures_rb),
@@ -247,6 +250,12 @@ def study_record(scale: Scale, folders: list[Path], tables: dict, cg_scaling: di
             "throughput": {"particle_steps_per_s": float(f"{ps / secs:.3g}") if secs else None, "ranks": ranks,
                            "note": "particles inserted x steps run / engine wall time, summed over the runs, "
                                    "on a machine shared with other jobs"}}
+
+
+def _from_root(path) -> str:
+    """``path`` relative to the checkout when it is inside it (as committed), else as it is."""
+    p = Path(path).absolute()
+    return p.relative_to(ROOT).as_posix() if p.is_relative_to(ROOT) else str(path)
 
 
 def pd_read_steps(folder: Path) -> int | None:

@@ -9,6 +9,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 from conftest import SMALL, needs_liggghts
@@ -299,6 +300,11 @@ def test_schema_refuses_half_outlets():
         MeshOutlet(z=0.0, radius=1.0)
     with pytest.raises(ValidationError, match="convex"):
         MeshOutlet(z=0.0, polygon=[(0, 0), (2, 0), (1, 0.2), (2, 2), (0, 2)])
+    star = [(math.cos(4 * math.pi * k / 5), math.sin(4 * math.pi * k / 5)) for k in range(5)]
+    with pytest.raises(ValidationError, match="convex"):
+        MeshOutlet(z=0.0, polygon=star)
+    clockwise = MeshOutlet(z=0.0, polygon=[(0, 0), (0, 1), (1, 1), (1, 0)])
+    assert clockwise.scaled_polygon(2.0) == [(2, 0), (2, 2), (0, 2), (0, 0)]          # counter-clockwise
 
 
 # --------------------------------------------------------------------------- cutting
@@ -351,8 +357,8 @@ def test_run_folder_holds_the_walls_and_renders_again(tmp_path):
 @needs_liggghts
 def test_cylinder_as_mesh_runs_like_the_cylinder(small_run, tmp_path):
     """tests/data/small_silo.yaml's walls exported to STL (mm) and run as ``kind: mesh``, against the
-    same case as ``kind: cylinder`` (the ``small_run`` fixture): the settled bed's weight carried
-    within 2 %, the outlet-counted mass what left, each band's static pressure within three times
+    same case as ``kind: cylinder`` (the ``small_run`` fixture; the same seed): the settled bed's
+    weight carried within 2 %, the outlet-counted mass what left, each band's static pressure within three times
     the two runs' errors (the spread over the band's sectors: the packing, which differs from
     fill to fill), and the steady flow rate within 5 % plus three of the runs' errors."""
     import siloflow
@@ -360,8 +366,12 @@ def test_cylinder_as_mesh_runs_like_the_cylinder(small_run, tmp_path):
     run = siloflow.run(mesh_case(SMALL, tmp_path, SMALL_OUTLET), tmp_path / "run")
     mesh = run.summary
     assert abs(mesh["force_balance"]["ratio"] - 1.0) < 0.02
-    assert mesh["discharged_mass_kg"] + mesh["mass_in_silo_end_kg"] == pytest.approx(mesh["initial_mass_kg"],
-                                                                                       rel=1e-6)
+    # the mass counted at the outlet is what left the box, give or take the grains still falling
+    dis = pd.read_csv(run.folder / "results" / "discharge.csv")
+    end, m0 = dis.iloc[-1], mesh["initial_mass_kg"]
+    m_p = m0 / 2500
+    assert -0.5 * m_p <= end.outlet_mass - (m0 - end.mass_total) <= end.mass_total - end.mass_in_silo + 0.5 * m_p
+    assert end.outlet_mass > 100 * m_p
     a = {b["band"]: b for b in cyl["bands"]}
     for b in mesh["bands"]:
         c = a[b["band"]]

@@ -259,11 +259,13 @@ class MeshOutlet(Strict):
         if self.polygon is not None:
             if self.center is not None:
                 raise ValueError("a polygon outlet takes no center (its centroid is used)")
-            p = self.polygon
-            cross = [(p[(i + 1) % len(p)][0] - p[i][0]) * (p[(i + 2) % len(p)][1] - p[(i + 1) % len(p)][1])
-                     - (p[(i + 1) % len(p)][1] - p[i][1]) * (p[(i + 2) % len(p)][0] - p[(i + 1) % len(p)][0])
-                     for i in range(len(p))]
-            if not (all(c > 0 for c in cross) or all(c < 0 for c in cross)):
+            p, n = self.polygon, len(self.polygon)
+            sides = [(p[(i + 1) % n][0] - p[i][0], p[(i + 1) % n][1] - p[i][1]) for i in range(n)]
+            turns = [math.atan2(a[0] * b[1] - a[1] * b[0], a[0] * b[0] + a[1] * b[1])
+                     for a, b in zip(sides, sides[1:] + sides[:1])]
+            # convex: every corner turns the same way, once round in all (a star turns more)
+            one_way = all(x > 0 for x in turns) or all(x < 0 for x in turns)
+            if not one_way or abs(abs(sum(turns)) - 2 * math.pi) > 1e-6:
                 raise ValueError("polygon: the corners must make a convex polygon, in order, without repeats "
                                  "or three in a line")
         return self
