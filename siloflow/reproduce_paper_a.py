@@ -13,7 +13,7 @@ from typing import Callable, Optional
 import yaml
 
 from .case_file import case_from_dict
-from .errors import SetupError
+from .errors import SetupError, SiloflowError
 from .resources import example_text
 from .run_folder import STATUS_NAME, RunFolder, run_state
 
@@ -65,7 +65,7 @@ def finished(folder: Path) -> bool:
     """Whether a run folder holds a complete, post-processed run."""
     try:
         return run_state(folder).get("state") == "complete" and RunFolder(folder).summary_file.is_file()
-    except Exception:              # a missing or unreadable folder is not finished
+    except (OSError, ValueError, SiloflowError):      # a missing or unreadable folder is not finished
         return False
 
 
@@ -97,7 +97,7 @@ def measured_rate(runs: Path, model: str) -> Optional[float]:
             try:
                 steps = int(run.flow().step.max())
                 return run.plan.expected_atoms * steps / run.record.wall_time if run.record.wall_time > 0 else None
-            except Exception:      # an unreadable record or table: no measurement
+            except (OSError, ValueError, KeyError, AttributeError, SiloflowError):   # unreadable: no measurement
                 continue
     return None
 

@@ -171,3 +171,14 @@ def test_the_paper_scale_is_refused_without_confirmation(tmp_path):
         run_paper_a("paper", 1, None, tmp_path / "runs", tmp_path / "out", say=said.append)
     assert "core-hours" in said[0] and "GB of disk" in said[0]
     assert not (tmp_path / "runs").exists() and not (tmp_path / "out").exists()
+
+
+def test_an_unreadable_run_is_neither_finished_nor_measured(tmp_path):
+    """A missing folder, or one whose status is not JSON, is not a finished run and gives no engine
+    rate; only the errors of reading are taken so (a bug elsewhere is not hidden as 'not finished')."""
+    from siloflow.reproduce_paper_a import finished, measured_rate
+    broken = tmp_path / "spheres-seed1"
+    broken.mkdir()
+    (broken / "status.json").write_text("{not json")
+    assert not finished(tmp_path / "missing") and not finished(broken)
+    assert measured_rate(tmp_path, "spheres") is None
