@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal, Optional, Union
 
-from pydantic import ConfigDict, Field, PrivateAttr, ValidationInfo, field_validator, model_validator
+from pydantic import ConfigDict, Field, PrivateAttr, StringConstraints, ValidationInfo, field_validator, model_validator
 
 from .fields import Int, NonNegative, Positive, Real, Strict
 
@@ -273,19 +273,25 @@ class MeshOutlet(Strict):
     def scaled_polygon(self, scale: float) -> list[tuple[float, float]]:
         """The polygon's corners times ``scale``, counter-clockwise."""
         p = [(x * scale, y * scale) for x, y in self.polygon]
-        area = sum(p[i][0] * p[(i + 1) % len(p)][1] - p[(i + 1) % len(p)][0] * p[i][1] for i in range(len(p)))
-        return p if area > 0 else p[::-1]
+        return p if _polygon_sums(p)[0] > 0 else p[::-1]
 
     def scaled_center(self, scale: float) -> tuple[float, float]:
         """The circle's centre, or the polygon's centroid, times ``scale``."""
         if self.center is not None:
             return self.center[0] * scale, self.center[1] * scale
-        p = self.scaled_polygon(scale)
-        a = cx = cy = 0.0
-        for (x0, y0), (x1, y1) in zip(p, p[1:] + p[:1]):
-            w = x0 * y1 - x1 * y0
-            a, cx, cy = a + w, cx + (x0 + x1) * w, cy + (y0 + y1) * w
+        a, cx, cy, _ = _polygon_sums(self.scaled_polygon(scale))
         return cx / (3 * a), cy / (3 * a)
+
+
+def _polygon_sums(p: list[tuple[float, float]]) -> tuple[float, float, float, float]:
+    """Of a closed polygon's corners ``p``: twice its signed area (positive counter-clockwise), six
+    times its area's first moments about x = 0 and y = 0, and its perimeter (the shoelace sums)."""
+    a = cx = cy = perimeter = 0.0
+    for (x0, y0), (x1, y1) in zip(p, p[1:] + p[:1]):
+        w = x0 * y1 - x1 * y0
+        a, cx, cy = a + w, cx + (x0 + x1) * w, cy + (y0 + y1) * w
+        perimeter += math.hypot(x1 - x0, y1 - y0)
+    return a, cx, cy, perimeter
 
 
 class MeshGeometry(Strict):
@@ -299,20 +305,14 @@ class MeshGeometry(Strict):
     run is planned (``siloflow.derived.measured``)."""
 
     kind: Literal["mesh"]
-    files: list[str] = Field(min_length=1, max_length=20, description="STL files of the container's walls")
+    files: list[Annotated[str, StringConstraints(min_length=1, max_length=4096)]] = Field(
+        min_length=1, max_length=20, description="STL files of the container's walls (paths of 1 to 4096 characters)")
     scale: Positive = Field(1.0, le=1000.0, description="factor from the files' units to m (0.001 for mm)")
     outlet: MeshOutlet
     axis: Optional[tuple[Real, Real]] = Field(None, description="the sectors' vertical axis (x, y), file units "
                                               "(default: the outlet's centre)")
 
     _container: object = PrivateAttr(None)
-
-    @field_validator("files")
-    @classmethod
-    def _named(cls, files):
-        if any(not f or len(f) > 4096 for f in files):
-            raise ValueError("each file is a path of 1 to 4096 characters")
-        return files
 
     @property
     def origin(self) -> tuple[float, float, float]:
@@ -341,10 +341,8 @@ class MeshGeometry(Strict):
         """The circle's radius; a polygon's half hydraulic diameter 2 A / P, m."""
         if self.outlet.radius is not None:
             return self.outlet.radius * self.scale
-        p = self.outlet.scaled_polygon(self.scale)
-        area = 0.5 * sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in zip(p, p[1:] + p[:1]))
-        perimeter = sum(math.hypot(x1 - x0, y1 - y0) for (x0, y0), (x1, y1) in zip(p, p[1:] + p[:1]))
-        return 2 * area / perimeter
+        twice_area, _, _, perimeter = _polygon_sums(self.outlet.scaled_polygon(self.scale))
+        return twice_area / perimeter
 
     @property
     def measured(self) -> bool:
@@ -380,7 +378,7 @@ class MeshGeometry(Strict):
     @property
     def section(self) -> tuple[float, float]:
         """Area (m2) and perimeter (m) of the vertical walls' cross-section half way up."""
-        return self.container.section(self.hopper_height + 0.5 * self.height)
+        return self.container.mid_section
 
     @property
     def hydraulic_diameter(self) -> float:

@@ -15,8 +15,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 from scipy.spatial import cKDTree
 
-from .quality import LIGGGHTS_CURVATURE_DEG, LIGGGHTS_PRECISION, as_written, min_angles
+from .quality import LIGGGHTS_PRECISION, as_written, min_angles
+from .triangulation import disc
 from .user_meshes import MeshError, read_user_mesh
+from .wall_mesh import WallMesh
 
 #: |n_z| below which a triangle counts as a vertical wall (n its unit normal; 0.006 deg of tilt)
 VERTICAL_TOLERANCE = 1e-4
@@ -98,7 +100,8 @@ class Container:
     ``top`` its highest point; ``base`` the top of its floor or hopper (the walls above are
     vertical); ``inscribed_radius`` the smallest horizontal distance from the axis to the vertical
     walls; ``outer_radius`` the largest from the axis to any vertex; ``rim`` the outlet's rim
-    (k, 2), in order; ``outline`` the outlet as given."""
+    (k, 2), in order; ``outline`` the outlet as given; ``mid_section`` the vertical walls'
+    cross-section half way up (:func:`section`)."""
 
     triangles: np.ndarray = field(repr=False)
     top: float
@@ -108,6 +111,7 @@ class Container:
     rim: np.ndarray = field(repr=False)
     outline: Outline
     source: np.ndarray = field(repr=False)     # the files' triangles as read, times scale (m, float32 values)
+    mid_section: tuple[float, float]          # area (m2) and perimeter (m) of the section half way up the walls
 
     @property
     def height(self) -> float:
@@ -125,11 +129,13 @@ class Container:
         below, _ = split(self.triangles, self.triangles[..., 2] - h)
         return enclosed_volume(below)
 
-    def section(self, z: float) -> tuple[float, float]:
-        """Area (m2) and perimeter (m) of the horizontal cross-section at ``z`` (in the vertical part)."""
-        p, q = slice_at(self.triangles, z)
-        area = 0.5 * float((p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]).sum())
-        return area, float(np.hypot(*(q - p).T).sum())
+
+
+def section(tris: np.ndarray, z: float) -> tuple[float, float]:
+    """Area (m2) and perimeter (m) of the horizontal cross-section at ``z`` of outward triangles."""
+    p, q = slice_at(tris, z)
+    area = 0.5 * float((p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]).sum())
+    return area, float(np.hypot(*(q - p).T).sum())
 
 
 def slice_at(tris: np.ndarray, z: float) -> tuple[np.ndarray, np.ndarray]:
@@ -252,12 +258,12 @@ def read_container(files, scale: float, outline: Outline, origin: tuple[float, f
     walls = tris[vertical]
     xy = np.concatenate([walls[:, [0, 1]], walls[:, [1, 2]], walls[:, [2, 0]]])[..., :2]
     inscribed = float(_segment_distance(xy).min())
-    container = Container(tris, top, base, inscribed, float(np.hypot(verts[:, 0], verts[:, 1]).max()),
-                          rim, outline, source_tris)
-    area, _ = container.section(base + 0.5 * (top - base))
-    if not area > 0 or not _inside(container, base + 0.5 * (top - base)):
+    mid = base + 0.5 * (top - base)
+    mid_section = section(tris, mid)
+    if not mid_section[0] > 0 or not _inside(tris, mid):
         raise MeshError("the sectors' axis (geometry.axis, default the outlet's centre) is not inside the walls")
-    return container
+    return Container(tris, top, base, inscribed, float(np.hypot(verts[:, 0], verts[:, 1]).max()),
+                     rim, outline, source_tris, mid_section)
 
 
 def _xyz(p) -> str:
@@ -389,10 +395,10 @@ def _segment_distance(seg: np.ndarray) -> np.ndarray:
     return np.hypot(*(a + t[:, None] * ab).T)
 
 
-def _inside(container: Container, z: float) -> bool:
-    """Whether the axis is inside the cross-section at ``z``: a ray along +x crosses it an odd
-    number of times."""
-    p, q = slice_at(container.triangles, z)
+def _inside(tris: np.ndarray, z: float) -> bool:
+    """Whether the axis is inside the cross-section at ``z`` of triangles: a ray along +x crosses
+    it an odd number of times."""
+    p, q = slice_at(tris, z)
     spans = (p[:, 1] > 0) != (q[:, 1] > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         x = p[:, 0] - p[:, 1] * (q[:, 0] - p[:, 0]) / (q[:, 1] - p[:, 1])
@@ -452,15 +458,6 @@ def plate(rim: np.ndarray) -> np.ndarray:
     return tris
 
 
-def check_user_walls(tris: np.ndarray) -> float:
-    """The smallest angle (deg) of user-derived triangles; ``MeshError`` below LIGGGHTS' curvature."""
-    angles = min_angles(as_written(tris))
-    if len(angles) and angles.min() < LIGGGHTS_CURVATURE_DEG:
-        raise MeshError(f"a triangle has an angle of {angles.min():.3g} deg, below the {LIGGGHTS_CURVATURE_DEG:.3g} "
-                        "deg LIGGGHTS accepts")
-    return float(angles.min()) if len(angles) else 180.0
-
-
 def sector_phase(offset_x: float, offset_y: float, sectors: int) -> float:
     """Where sector 0 starts, rad: at 0 for an outlet on the axis (as a cylinder's); else half a
     sector before the outlet's azimuth, so that sector 0 faces it."""
@@ -479,8 +476,6 @@ def container_meshes(container: Container, band_bounds, sectors: int, outlet_cen
     counting disc of ``outlet_radius`` at ``outlet_z`` under the outlet's centre (m). Every wall is
     written facing the grains, as siloflow's own walls are (the container's triangles face out: each
     is turned, back to the file's order when the file faced in)."""
-    from .triangulation import disc
-    from .wall_mesh import WallMesh
     c = container
     lower, walls = split(c.triangles, c.triangles[..., 2] - c.base)
     heights = [c.base + b for b in band_bounds]
