@@ -315,7 +315,8 @@ class EngineChoice(Frozen):
 
 class Profile(Frozen):
     """The numerical profile the run used (``siloflow.profiles``): its settings, and for ``fast``
-    the accuracy benchmark's speed-up and 95 % error bounds {quantity: relative bound}."""
+    the accuracy benchmark's speed-up and 95 % error bounds {quantity: relative bound}, the question
+    it was proven for and what the case asks beyond it."""
 
     name: Literal["custom", "reference", "fast"] = "custom"
     timestep_fraction: float = DEFAULT_TIMESTEP_FRACTION
@@ -325,6 +326,9 @@ class Profile(Frozen):
     error_bounds: dict[str, float] = {}
     tolerances: dict[str, float] = {}
     benchmark: str = ""
+    question: Optional[str] = None            # fast: the question it was proven for (siloflow.packaged_profile)
+    unbounded: list[str] = []                  # fast: benchmarked quantities the case asks that it does not bound
+    measured: dict[str, list[float]] = {}     # fast: [relative error, 95 % low, high] measured at it, per quantity
 
 
 class Guard(Frozen):

@@ -6,9 +6,11 @@
   (default 1);
 - ``reference``: the papers' numerical settings: dt = t_c/50 (paper B), full stiffness, the dust at
   its true density;
-- ``fast``: the setting ``siloflow bench`` recommended, with the 95 % error bounds it was proven to
-  (``fast_profile.json``, read by :mod:`siloflow.packaged_profile`, written from the committed
-  benchmark by ``benchmarks/publish_fast_profile.py``). It is a time-step fraction and a softness: the contacts
+- ``fast``: the setting ``siloflow bench`` recommended for the results the case asks
+  (``outputs.results``: the flow rate alone, with the static wall pressure, everything), with the
+  95 % error bounds it was proven to (``fast_profile.json``, read by :mod:`siloflow.packaged_profile`,
+  written from the committed benchmark by ``benchmarks/publish_fast_profile.py``); what the case asks
+  that the profile does not bound is recorded as unbounded, with the error the benchmark measured. It is a time-step fraction and a softness: the contacts
   are softened until two of the smallest grains meeting at the fill's impact speed overlap by
   ``overlap_ratio`` of their radius, as the benchmark's recommended stiffness did in its case. A
   case already that soft keeps its stiffness: the profile never stiffens, and never softens a soft
@@ -24,7 +26,7 @@ import math
 
 from .case import DEFAULT_TIMESTEP_FRACTION, PROFILE_NAMES, Case
 from .errors import CaseError
-from .packaged_profile import FAST_PROFILE_FILE, PINNED, fast_profile, packaged_fast_profile  # noqa: F401 (their old home)
+from .packaged_profile import FAST_PROFILE_FILE, PINNED, asked_quantities, fast_profile, packaged_fast_profile  # noqa: F401 (their old home)
 
 #: the papers' numerical settings: paper B's dt = t_c/50, full stiffness, true dust density
 REFERENCE = {"timestep_fraction": 0.02, "stiffness_scale": 1.0}
@@ -68,7 +70,8 @@ def softening_for(case: Case, overlap_ratio: float) -> float:
 def profile_settings(case: Case) -> dict:
     """The numerical settings a case runs with: ``profile``, ``timestep_fraction``,
     ``stiffness_scale``, and for ``fast`` its ``overlap_ratio``, ``speedup``, ``error_bounds``,
-    ``tolerances`` and ``benchmark``."""
+    ``tolerances``, ``benchmark``, the ``question`` it was proven for, the benchmarked quantities the
+    case asks that it does not bound (``unbounded``) and the errors measured at it (``measured``)."""
     e = case.engine
     if e.profile == "custom":
         return {"profile": "custom",
@@ -80,7 +83,23 @@ def profile_settings(case: Case) -> dict:
     return {"profile": "fast", "timestep_fraction": fast.timestep_fraction,
             "stiffness_scale": softening_for(case, fast.overlap_ratio), "overlap_ratio": fast.overlap_ratio,
             "speedup": fast.speedup, "error_bounds": dict(fast.error_bounds), "tolerances": dict(fast.tolerances),
-            "benchmark": fast.benchmark}
+            "benchmark": fast.benchmark, "question": fast.question,
+            "unbounded": [q for q in asked_quantities(case.outputs.results) if q not in fast.error_bounds],
+            "measured": {q: list(v) for q, v in fast.measured.items()}}
+
+
+def unbounded_note(unbounded, measured: dict) -> str:
+    """What a fast profile leaves unbounded of what a case asks (empty when nothing): each quantity
+    with the relative error and 95 % interval the benchmark measured at the profile (``measured``:
+    {quantity: [error, low, high]}), and where to get it bounded."""
+    if not unbounded:
+        return ""
+    said = []
+    for q in unbounded:
+        m = measured.get(q)
+        said.append(f"{q} (measured {m[0]:+.1%} [{m[1]:+.1%}, {m[2]:+.1%}] there)" if m else f"{q} (not measured)")
+    return ("; not bounded by this profile: " + ", ".join(said)
+            + ": for a bounded value run profile reference, or measure this case with siloflow bench")
 
 
 def _scaled(section, keys: tuple[str, ...], scale: float) -> None:

@@ -13,7 +13,9 @@ from siloflow import contact_physics as cp
 from siloflow.case_file import case_from_dict
 from siloflow.derived import derive
 from siloflow.errors import CaseError
+from siloflow.packaged_profile import QUESTIONS
 from siloflow.profiles import (FAST_PROFILE_FILE, REFERENCE, effective_case, fast_profile, impact_overlap_ratio,
+                               packaged_fast_profile,
                                profile_settings, with_profile)
 
 from conftest import ROOT
@@ -50,8 +52,8 @@ def test_fast_profile_softens_a_stiff_case_to_the_benchmarked_impact_overlap():
     """The accuracy benchmark's own case at paper B's stiffness (hooke, Y 1.2e11 Pa) is stiffer than the
     profile's softness: its moduli are lowered until the impact overlap is the profile's overlap_ratio;
     the time step is the profile's."""
-    fast = fast_profile()
     data = yaml.safe_load((ROOT / "benchmarks" / "cases" / "accuracy_small.yaml").read_text())
+    fast = packaged_fast_profile(data.get("outputs", {}).get("results"))
     data["engine"] = {k: v for k, v in data["engine"].items() if k not in ("profile", "timestep_fraction")}
     case = case_from_dict(data)
     assert impact_overlap_ratio(case) < fast["overlap_ratio"]
@@ -83,7 +85,8 @@ def test_a_fast_case_carries_its_profile_and_keeps_it(quick_dict):
     """The validated case holds a copy of the fast profile (its run folder resumes with it); a copy
     given in the case wins over what this siloflow packages."""
     case = case_from_dict(with_engine(quick_dict, profile="fast"))
-    assert case.engine.fast_profile.overlap_ratio == fast_profile()["overlap_ratio"]
+    fast = packaged_fast_profile(quick_dict.get("outputs", {}).get("results"))
+    assert case.engine.fast_profile.overlap_ratio == fast["overlap_ratio"]
     pinned = case.model_dump(mode="json")
     pinned["engine"]["fast_profile"]["timestep_fraction"] = 0.123
     again = case_from_dict(pinned)
@@ -187,15 +190,18 @@ def test_the_report_names_the_profile_and_its_bounds():
 
 
 def test_the_run_line_says_the_bounds_are_the_benchmark_cases():
-    from types import SimpleNamespace
     from siloflow.cli import profile_note
-    fast = SimpleNamespace(name="fast", timestep_fraction=0.1, stiffness_scale=0.1, overlap_ratio=0.026,
-                           error_bounds={"flow_rate": 0.03}, speedup=11.2, benchmark="accuracy_small.yaml")
+    from siloflow.plan import Profile
+    fast = Profile(name="fast", timestep_fraction=0.1, stiffness_scale=0.1, overlap_ratio=0.026,
+                   error_bounds={"flow_rate": 0.03}, speedup=11.2, benchmark="accuracy_small.yaml",
+                   question="flow_rate", unbounded=["coordination"], measured={"coordination": [0.053, 0.033, 0.074]})
     line = profile_note(fast)
     assert "flow_rate within 3.0%" in line and "measured on the benchmark's case" in line
+    assert "proven for flow rate" in line
+    assert "not bounded by this profile: coordination (measured +5.3% [+3.3%, +7.4%] there)" in line
     assert "another case's own error is not measured" in line
     assert "11.2x faster there: accuracy_small.yaml" in line
-    assert "not measured yet" in profile_note(SimpleNamespace(**{**vars(fast), "error_bounds": {}}))
+    assert "not measured yet" in profile_note(fast.model_copy(update={"error_bounds": {}}))
 
 
 def test_the_packaged_fast_profile_is_the_committed_benchmarks_proven_recommendation():
@@ -205,10 +211,19 @@ def test_the_packaged_fast_profile_is_the_committed_benchmarks_proven_recommenda
     if not committed.is_file():
         pytest.fail(f"{committed} is missing: the fast profile must come from a committed benchmark")
     rec = json.loads(committed.read_text())
-    fast = fast_profile()
-    assert (fast["timestep_fraction"], fast["overlap_ratio"]) == (rec["timestep_fraction"], rec["overlap_ratio"])
-    assert fast["error_bounds"] == rec["error_bounds"] and rec["meets_tolerances"] is True
-    assert all(rec["error_bounds"][q] <= rec["tolerances"][q] for q in rec["tolerances"])
+    published = fast_profile()["profiles"]
+    assert "flow_rate_and_static_pressure" in published
+    for question, fast in published.items():
+        r = rec["questions"][question]
+        assert (fast["candidate"], fast["timestep_fraction"], fast["overlap_ratio"]) == (
+            r["candidate"], r["timestep_fraction"], r["overlap_ratio"])
+        assert fast["error_bounds"] == r["error_bounds"] and r["meets_tolerances"] is True
+        assert set(r["error_bounds"]) == set(QUESTIONS[question])
+        assert all(r["error_bounds"][q] <= r["tolerances"][q] for q in r["tolerances"])
+        assert {c["quantity"] for c in r["validation"] if c["inside"]} == set(r["error_bounds"])
+    for question, r in rec["questions"].items():       # a question left out has nothing faster proven
+        assert question in published or r["candidate"] == "reference" or not all(
+            c["inside"] for c in r["validation"])
 
 
 @pytest.mark.engine
@@ -234,10 +249,11 @@ def test_siloflow_run_profile_fast_runs_and_says_what_it_ran(tmp_path):
     run = RunFolder(tmp_path / "run")
     plan = run.plan
     assert plan.profile.name == "fast" and plan.profile.stiffness_scale == 1.0
-    assert plan.timestep.fraction == fast_profile()["timestep_fraction"]
+    fast = packaged_fast_profile(["flow_rate", "force_balance"])
+    assert plan.timestep.fraction == fast["timestep_fraction"]
     report = (run.results / "report.md").read_text()
     assert "numerical profile fast" in report and "95 % error bounds" in report
-    assert run.read_summary()["numerical_profile"]["error_bounds"] == fast_profile()["error_bounds"]
+    assert run.read_summary()["numerical_profile"]["error_bounds"] == fast["error_bounds"]
     from siloflow.case_file import load_case
     again = derive(load_case(run.case_file))
     assert again.to_json() == plan.to_json()
@@ -257,8 +273,9 @@ def test_a_bed_settled_without_the_guard_is_not_taken_from_the_cache_by_a_guarde
 
 
 def test_publishing_needs_every_bounded_quantity_checked_inside_its_bound(tmp_path, monkeypatch):
-    """benchmarks/publish_fast_profile.py writes the profile only when the new seeds' check put each
-    bounded quantity's error inside its bound; a missing or outside check refuses, writing nothing."""
+    """benchmarks/publish_fast_profile.py writes a question's profile only when the new seeds' check put
+    each bounded quantity's error inside its bound; a missing or outside check refuses the flow rate and
+    static pressure's profile (writing nothing) and leaves out another question's."""
     import importlib.util
     spec = importlib.util.spec_from_file_location("publish", ROOT / "benchmarks" / "publish_fast_profile.py")
     publish = importlib.util.module_from_spec(spec)
@@ -267,23 +284,78 @@ def test_publishing_needs_every_bounded_quantity_checked_inside_its_bound(tmp_pa
     monkeypatch.setattr(publish, "SOURCE", source)
     monkeypatch.setattr(publish, "TARGET", target)
     check = dict(rel_error=0.004, ci_lo=-0.03, ci_hi=0.04, bound=0.03, inside=True, consistent=True, n=10)
-    rec = {"candidate": "E1e-1_dt0.1", "meets_tolerances": True, "timestep_fraction": 0.1, "overlap_ratio": 0.026,
-           "error_bounds": {"flow_rate": 0.03, "static_pressure": 0.038},
-           "validation": [dict(check, quantity="flow_rate")]}
-    source.write_text(json.dumps(rec))
+    both = {"candidate": "E1e-1_dt0.1", "meets_tolerances": True, "timestep_fraction": 0.1, "overlap_ratio": 0.026,
+            "speedup": 11.0, "error_bounds": {"flow_rate": 0.03, "static_pressure": 0.038},
+            "validation": [dict(check, quantity="flow_rate")]}
+    flow = {**both, "candidate": "E1e-2_dt0.1", "speedup": 27.0, "error_bounds": {"flow_rate": 0.03},
+            "validation": [dict(check, quantity="flow_rate", inside=False, rel_error=0.031)]}
+    rec = {**both, "questions": {"flow_rate": flow, "flow_rate_and_static_pressure": both,
+                                 "everything": {"candidate": "reference"}}}
+
+    def write():
+        source.write_text(json.dumps(rec))
+    write()
     with pytest.raises(SystemExit, match="not confirmed"):         # static pressure not checked
         publish.main()
-    rec["validation"].append(dict(check, quantity="static_pressure", inside=False, rel_error=0.05, bound=0.038))
-    source.write_text(json.dumps(rec))
+    both["validation"].append(dict(check, quantity="static_pressure", inside=False, rel_error=0.05, bound=0.038))
+    write()
     with pytest.raises(SystemExit, match="not confirmed"):         # outside its bound, though consistent
         publish.main()
     assert not target.exists()
-    rec["validation"][1].update(inside=True, rel_error=0.0, failed=1)
-    source.write_text(json.dumps(rec))
+    both["validation"][1].update(inside=True, rel_error=0.0, failed=1)
+    write()
     with pytest.raises(SystemExit, match="new seeds failed"):     # inside, but a new seed's run failed
         publish.main()
     assert not target.exists()
-    rec["validation"][1].update(failed=0)
-    source.write_text(json.dumps(rec))
+    both["validation"][1].update(failed=0)
+    write()
+    publish.main()                                                 # the flow-only one outside its bound: left out
+    assert list(json.loads(target.read_text())["profiles"]) == ["flow_rate_and_static_pressure"]
+    flow["validation"][0].update(inside=True, rel_error=0.01)
+    write()
     publish.main()
-    assert json.loads(target.read_text())["candidate"] == "E1e-1_dt0.1"
+    profiles = json.loads(target.read_text())["profiles"]
+    assert {q: p["candidate"] for q, p in profiles.items()} == {"flow_rate": "E1e-2_dt0.1",
+                                                                 "flow_rate_and_static_pressure": "E1e-1_dt0.1"}
+    del rec["questions"]
+    write()
+    with pytest.raises(SystemExit, match="no recommendation for flow_rate_and_static_pressure"):
+        publish.main()
+
+
+def test_a_fast_case_runs_the_profile_proven_for_what_it_asks(quick_dict):
+    """profile: fast applies the fastest published profile that bounds every benchmarked quantity the
+    case's outputs.results ask (the flow rate alone: the flow-only profile); a case asking more than any
+    profile bounds runs the one bounding the most, and its plan names the rest as unbounded with the
+    errors measured at the profile; the report says so."""
+    from postprocess.report.text import profile_line
+    from siloflow.packaged_profile import asked_quantities, choose_profile
+    published = fast_profile()["profiles"]
+    assert asked_quantities(["porosity"]) == ("flow_rate", "solid_fraction")
+    assert asked_quantities(None) == QUESTIONS["everything"]
+    assert asked_quantities(["wall_pressure", "vtk"]) == ("flow_rate", "static_pressure", "dynamic_pressure_max")
+    flow_only = plan_of(with_engine({**quick_dict, "outputs": {**quick_dict.get("outputs", {}),
+                                                                 "results": ["flow_rate"]}}, profile="fast"))
+    assert flow_only.profile.question == choose_profile(["flow_rate"])[0]
+    assert flow_only.profile.unbounded == []
+    assert flow_only.profile.speedup == max(p["speedup"] for p in published.values())
+    static = plan_of(with_engine({**quick_dict, "outputs": {**quick_dict.get("outputs", {}),
+                                                              "results": ["flow_rate", "force_balance"]}},
+                                 profile="fast"))
+    assert static.profile.question == "flow_rate_and_static_pressure" and static.profile.unbounded == []
+    everything = plan_of(with_engine({k: v for k, v in quick_dict.items() if k != "outputs"}, profile="fast"))
+    if "everything" not in published:
+        assert everything.profile.question == "flow_rate_and_static_pressure"
+        assert everything.profile.unbounded == ["dynamic_pressure_max", "solid_fraction", "coordination"]
+        assert set(everything.profile.measured) >= set(everything.profile.unbounded)
+        line = profile_line(everything.profile.model_dump(mode="json"))
+        assert "not bounded by this profile: dynamic_pressure_max (measured" in line and "profile reference" in line
+    # a choice among made-up profiles: the fastest covering wins; none covering: the most covered
+    made = {"a": {"error_bounds": {"flow_rate": 0.03}, "speedup": 50.0},
+            "b": {"error_bounds": {"flow_rate": 0.03, "static_pressure": 0.05}, "speedup": 10.0},
+            "c": {"error_bounds": {"flow_rate": 0.03, "coordination": 0.05}, "speedup": 5.0}}
+    assert choose_profile(["flow_rate"], made)[0] == "a"
+    assert choose_profile(["force_balance"], made)[0] == "b"
+    assert choose_profile(["coordination"], made)[0] == "c"
+    assert choose_profile(["porosity"], made)[0] == "a"            # none bounds it: the fastest of the most
+    assert choose_profile(None, made)[0] == "b"                    # two bounded each: the faster

@@ -282,6 +282,35 @@ def _identical_runs(walls: dict, seeds: int) -> list[dict]:
             for c, w in walls.items() for k in range(seeds)]
 
 
+def test_each_question_gets_the_fastest_candidate_proven_for_its_quantities(tmp_path):
+    """A candidate whose static pressure is off but whose flow rate is not is the flow-only question's
+    profile and nobody else's; the question "everything" also needs the coordination, which only the
+    reference has right here; recommended_candidates lists what --validate checks, each once."""
+    import numpy as np
+    rng = np.random.default_rng(5)
+    rows = []
+    for cand, (static_bias, coord_bias, wall) in {"reference": (0, 0, 100.0), "E1e-4_dt0.2": (0.2, 0.2, 1.0),
+                                                  "E1e-3_dt0.2": (0.0, 0.2, 4.0)}.items():
+        for seed in range(4):
+            rows.append({"candidate": cand, "seed": seed, "state": "complete", "reason": "", "timestep_fraction": 0.2,
+                         "stiffness_scale": 1e-3, "ranks": 2, "wall_s": wall,
+                         "flow_rate": 0.01 * (1 + 0.001 * rng.standard_normal()),
+                         "static_pressure": 500 * (1 + static_bias + 0.001 * rng.standard_normal()),
+                         "dynamic_pressure_max": 600.0, "solid_fraction": 0.6, "coordination": 5.0 * (1 + coord_bias)})
+    pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)
+    table, rec = ab.conclude(tmp_path)
+    picked = {q: r["candidate"] for q, r in rec["questions"].items()}
+    assert picked == {"flow_rate": "E1e-4_dt0.2", "flow_rate_and_static_pressure": "E1e-3_dt0.2",
+                      "everything": "reference"}
+    assert rec["candidate"] == "E1e-3_dt0.2"
+    flow = rec["questions"]["flow_rate"]
+    assert set(flow["error_bounds"]) == {"flow_rate"} and flow["tolerances"] == {"flow_rate": 0.03}
+    assert flow["measured"]["static_pressure"][0] == pytest.approx(0.2, abs=0.01)     # measured, not bounded
+    assert set(rec["questions"]["everything"]["tolerances"]) == set(ab.QUANTITIES)
+    assert ab.recommended_candidates(rec) == ["E1e-3_dt0.2", "E1e-4_dt0.2"]
+    assert json.loads((tmp_path / "recommended_profile.json").read_text())["questions"]["flow_rate"] == flow
+
+
 def test_candidates_that_are_not_profiles_are_never_recommended(tmp_path):
     rows = _identical_runs({"reference": 100.0, "E1e-4_dt0.2_1rank": 1.0, "E1e-4_dt0.2": 2.0}, 3)
     pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)

@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 from typing import NamedTuple
 
+from siloflow.profiles import unbounded_note
 from siloflow.run_folder import SUMMARY_NAME
 
 from ..numbers import mass_rate, pressure
@@ -112,9 +113,11 @@ def profile_line(p: dict | None) -> str:
             f"stiffness x {_fmt(p['stiffness_scale'], 'g')}")
     if p["name"] == "fast":
         bounds = ", ".join(f"{q} {b:.1%}" for q, b in (p.get("error_bounds") or {}).items())
-        line += (f"; 95 % error bounds against the papers' settings: {bounds}, measured on the benchmark's case "
-                 f"(siloflow bench, {p.get('benchmark')}); another case's own error is not measured" if bounds
-                 else "; its error bounds are not measured yet")
+        question = f" (proven for {p['question'].replace('_', ' ')})" if p.get("question") else ""
+        line += (f"; 95 % error bounds against the papers' settings{question}: {bounds}, measured on the benchmark's "
+                 f"case (siloflow bench, {p.get('benchmark')})"
+                 f"{unbounded_note(p.get('unbounded') or [], p.get('measured') or {})}; another case's own error "
+                 "is not measured" if bounds else "; its error bounds are not measured yet")
     return line
 
 

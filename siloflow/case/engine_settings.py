@@ -6,6 +6,7 @@ from typing import Annotated, Literal, Optional
 from pydantic import Field, model_validator
 
 from ..engines import ENGINES
+from ..packaged_profile import BENCH_QUANTITIES, QUESTIONS, packaged_fast_profile
 from .fields import MIN_TIMESTEP_FRACTION, Int, Positive, Real, Strict
 from .outputs import Guard
 
@@ -15,15 +16,18 @@ PROFILE_FIELDS = ("profile", "timestep_fraction", "stiffness_scale", "fast_profi
 #: time-step fraction of the custom profile when the case gives none
 DEFAULT_TIMESTEP_FRACTION = 0.15
 #: the quantities the accuracy benchmark bounds (``siloflow.accuracy_bench.QUANTITIES``)
-BenchQuantity = Literal["flow_rate", "static_pressure", "dynamic_pressure_max", "solid_fraction", "coordination"]
+BenchQuantity = Literal[BENCH_QUANTITIES]
 TimestepFraction = Annotated[Real, Field(ge=MIN_TIMESTEP_FRACTION, le=1, allow_inf_nan=False)]
 
 
 class PinnedProfile(Strict):
-    """The fast profile as this case runs it: copied from siloflow's benchmarked profile
-    (``siloflow/fast_profile.json``) when a case asking for ``profile: fast`` is read, and kept in
-    the run folder's case.yaml, so a run resumes with the profile it started with."""
+    """The fast profile as this case runs it: copied from siloflow's benchmarked profiles
+    (``siloflow/fast_profile.json``) when a case asking for ``profile: fast`` is read (the one for
+    the results it asks, ``siloflow.packaged_profile.choose_profile``), and kept in the run folder's
+    case.yaml, so a run resumes with the profile it started with."""
 
+    question: Optional[Literal[tuple(QUESTIONS)]] = Field(None, description="the question the profile was proven "
+                                                          "for (none: pinned by a siloflow with one fast profile)")
     timestep_fraction: TimestepFraction
     overlap_ratio: Real = Field(gt=0, le=1, allow_inf_nan=False,
                                 description="the contacts are softened until two of the smallest grains meeting "
@@ -32,6 +36,10 @@ class PinnedProfile(Strict):
     error_bounds: dict[BenchQuantity, Annotated[Real, Field(ge=0, le=1e3, allow_inf_nan=False)]] = {}
     tolerances: dict[BenchQuantity, Annotated[Real, Field(ge=0, le=1e3, allow_inf_nan=False)]] = {}
     speedup: Optional[Positive] = None
+    measured: dict[BenchQuantity, Annotated[list[Annotated[Real, Field(ge=-1e3, le=1e3, allow_inf_nan=False)]],
+                                            Field(min_length=3, max_length=3)]] = Field(
+        {}, description="relative error and its 95 % interval [error, low, high] the benchmark measured at this "
+        "profile for each quantity, bounded or not")
     benchmark: str = Field("", max_length=500, description="where the bounds were measured (never reaches a deck)")
 
 
@@ -62,9 +70,9 @@ class EngineSettings(Strict):
     @model_validator(mode="before")
     @classmethod
     def _pin_fast_profile(cls, data):
-        """``profile: fast`` runs the benchmarked profile of this siloflow, copied into the case."""
+        """``profile: fast`` runs a benchmarked profile of this siloflow, copied into the case: the
+        case's own (``Case``) picks it by its results; settings read alone get everything's."""
         if isinstance(data, dict) and data.get("profile") == "fast" and data.get("fast_profile") is None:
-            from ..packaged_profile import packaged_fast_profile
             data = {**data, "fast_profile": packaged_fast_profile()}
         return data
 

@@ -6,12 +6,13 @@ from typing import Optional
 
 from pydantic import Field, model_validator
 
+from ..packaged_profile import packaged_fast_profile
 from .analysis import Analysis, DesignSettings, WallInsert
 from .engine_settings import EngineSettings
 from .fields import Int, Positive, SafeName, Strict
 from .geometry import Geometry, WallSensors
 from .materials import Materials, _contact_problems
-from .outputs import Outputs
+from .outputs import RESULTS, Outputs
 from .particles import Particles
 from .stages import Discharge, Fill, Settle
 
@@ -47,13 +48,28 @@ def _with_static_window(data):
     return {**data, "fill": fill}
 
 
+def _with_fast_profile(data):
+    """A case asking for ``engine.profile: fast`` without a pinned one gets the packaged profile
+    proven for what its ``outputs.results`` ask (``siloflow.packaged_profile.choose_profile``); a
+    results list the schema will refuse picks none here (the schema names the field)."""
+    if not isinstance(data, dict):
+        return data
+    engine, outputs = data.get("engine"), data.get("outputs")
+    if not isinstance(engine, dict) or engine.get("profile") != "fast" or engine.get("fast_profile") is not None:
+        return data
+    results = outputs.get("results") if isinstance(outputs, dict) else None
+    if results is not None and not (isinstance(results, list) and all(r in RESULTS for r in results)):
+        return data
+    return {**data, "engine": {**engine, "fast_profile": packaged_fast_profile(results)}}
+
+
 class Case(Strict):
     """A complete, validated silo case (``Case.from_yaml(path)``, ``Case.model_validate(dict)``)."""
 
     @model_validator(mode="before")
     @classmethod
     def _default_static_window(cls, data):
-        return _with_static_window(data)
+        return _with_fast_profile(_with_static_window(data))
 
     @classmethod
     def from_yaml(cls, path) -> "Case":

@@ -11,6 +11,7 @@ import typer
 from ..case import Case
 from ..case_file import load_case
 from ..errors import CaseError, SiloflowError
+from ..profiles import unbounded_note
 from .app import _fail, app, err, out, printable
 
 
@@ -131,8 +132,10 @@ def profile_note(p) -> str:
         if p.error_bounds:
             bounds = ", ".join(f"{q} within {b:.1%}" for q, b in p.error_bounds.items())
             # proven on the benchmark's case: another case's error is its own (siloflow bench measures it)
+            what += f"; proven for {p.question.replace('_', ' ')}" if p.question else ""
             what += f"; against the reference, 95 % bounds measured on the benchmark's case: {bounds}"
             what += f" ({p.speedup:.3g}x faster there: {p.benchmark})" if p.speedup else ""
+            what += unbounded_note(p.unbounded, p.measured)
             what += "; another case's own error is not measured (siloflow bench measures it)"
         else:
             what += "; its error bounds are not measured yet (siloflow bench)"

@@ -135,6 +135,8 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
         choose_candidates,
         conclude,
         failing_candidates,
+        question_tolerances,
+        recommended_candidates,
         run_bench,
         validate,
     )
@@ -154,9 +156,9 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
             run_bench(case_file, output, seeds, chosen, report=_note, fill_only_seeds=fill_only_seeds)
         table, rec = conclude(output, tolerances, case_file=case_file)
         checking = (validate_seeds or validate_fill_only) and not conclude_only
-        if rec is not None and checking and rec["candidate"] != REFERENCE.name:
-            validate(case_file, output, rec["candidate"], validate_seeds, report=_note,
-                     fill_only_seeds=validate_fill_only)
+        if checking and recommended_candidates(rec):
+            for name in recommended_candidates(rec):     # the recommendation's, then each question's
+                validate(case_file, output, name, validate_seeds, report=_note, fill_only_seeds=validate_fill_only)
             table, rec = conclude(output, tolerances, case_file=case_file)
     cols = ["candidate", "quantity", "n_cand", "speedup", "rel_error", "ci_lo", "ci_hi", "verdict"]
     out.print(printable(table[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}")), markup=False,
@@ -189,7 +191,21 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
                    if c.get("consistent") else f"OUTSIDE {bound}, the whole interval: the new seeds contradict it")
         out.print(printable(f"new seeds ({c['n']} runs): {c['quantity']} error {c['rel_error']:+.1%} [{c['ci_lo']:+.1%}, "
                             f"{c['ci_hi']:+.1%}]: {verdict}"), markup=False, highlight=False)
+    for question, r in ((rec or {}).get("questions") or {}).items():
+        if r is None or r["candidate"] == REFERENCE.name:
+            out.print(printable(f"question {question}: nothing faster than the reference is proven within "
+                                f"{_tolerance_text(question_tolerances(tolerances)[question])}"),
+                      markup=False, highlight=False)
+            continue
+        checked = {c["quantity"]: c for c in r.get("validation") or []}
+        out.print(printable(f"question {question}: {r['candidate']}, {r['speedup']:.3g}x; 95 % bounds "
+                            + ", ".join(f"{q} {b:.1%}" + ("" if q in checked else " (no new seeds yet)")
+                                        for q, b in r["error_bounds"].items())), markup=False, highlight=False)
     out.print(f"tables and figure: {output} (comparison.csv, pareto.png, recommended_profile.json)")
+
+
+def _tolerance_text(tolerances: dict) -> str:
+    return ", ".join(f"{q} {t:.0%}" for q, t in tolerances.items())
 
 
 def _fills_note(table, candidate: str, quantity: str) -> str:
