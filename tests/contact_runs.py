@@ -211,13 +211,13 @@ def _liggghts(folder: Path, name: str, decks: list) -> str | None:
 LAMMPS_ATOMS = "atom_style      sphere\natom_modify     map array sort 0 0.0\ncomm_modify     vel yes"
 
 def lammps_contact_lines(plan) -> tuple[int, list[str], dict]:
-    """Of the case's LAMMPS deck: its atom types' count, its ``pair_coeff`` lines (the fill's,
-    then those restoring friction) and each species' wall model text (``fix ...
+    """Of the case's LAMMPS deck: its atom types' count, its ``pair_style`` and ``pair_coeff`` lines
+    (the fill's, then those restoring friction) and each species' wall model text (``fix ...
     wall/gran/region granular <text> region side``, the side wall's)."""
     from siloflow.engine.lammps import deck
     parts = deck.sections(rendered(deck, plan))
     n_types = int(next(ln for ln in parts["box"] if ln.startswith("create_box")).split()[1])
-    pairs = [ln for ln in parts["model"] + parts.get("restore_friction", []) if ln.startswith("pair_coeff")]
+    pairs = [ln for ln in parts["model"] + parts.get("restore_friction", []) if ln.startswith(("pair_style", "pair_coeff"))]
     groups = {"all": [k + 1 for k in range(len(plan.species))]}
     for ln in parts["model"]:
         words = ln.split()
@@ -235,7 +235,7 @@ def lammps_contact_lines(plan) -> tuple[int, list[str], dict]:
 def _run_lammps(plan, setup: Setup, dump: Path) -> None:
     from siloflow.engine.lammps.module import load_lammps
     n_types, pairs, walls = lammps_contact_lines(plan)
-    deck = _head(plan, setup, LAMMPS_ATOMS, n_types) + "pair_style      granular\n" + "\n".join(pairs) + "\n"
+    deck = _head(plan, setup, LAMMPS_ATOMS, n_types) + "\n".join(pairs) + "\n"
     if setup.floor:
         (name,) = {b.species for b in setup.bodies}
         deck += ("region          floor plane 0.0 0.0 0.0 0.0 0.0 1.0 side in units box\n"

@@ -137,6 +137,36 @@ def test_each_silo_shape_carries_the_bed(tmp_path, geometry):
     assert after.discharged_mass.iloc[-1] > 0
 
 
+@pytest.mark.engine
+def test_a_linear_law_of_one_species_runs_on_the_classic_style_and_resumes(tmp_path):
+    """One species of spheres with a linear law (paper A's, softer) and paper A's frictionless fill: the
+    deck runs gran/hooke/history (siloflow.engine.lammps.contact_law.classic_args), restoring friction by
+    issuing it again; interrupted at the opening and resumed from the settled bed's restart file, the run
+    finishes with the static load on the walls within 2 % of the bed's weight and every grain counted."""
+    linear = {"model": "linear", "particle": {"density": 2500.0},
+              "particle_particle": {"friction": 0.43, "restitution": 0.855, "kn": 2.0e4, "kt": 1.0e4},
+              "particle_wall": {"friction": 0.62, "restitution": 0.855, "kn": 4.0e4, "kt": 2.0e4}}
+    data = tiny(materials=None, fill={"frictionless": True})
+    data["materials"] = linear
+    eng = engine()
+    folder = eng.prepare(case_from_dict(data), tmp_path / "run")
+    deck = (folder / DECK_NAME).read_text()
+    assert "pair_style      gran/hooke/history" in deck and "pair_style      granular" not in deck
+    interrupt_at(eng, folder, "open")
+    record = eng.resume(folder)
+    assert record.completed
+    run = RunFolder(folder)
+    forces, flow = run.wall_forces(), run.flow()
+    st = record.stage_steps
+    static = forces[(forces.step > st["static"]) & (forces.step <= st["open"])]
+    load = -static.groupby("step").fz.sum().iloc[-1]
+    weight = float(flow[flow.step <= st["open"]].mass_total.iloc[-1]) * run.plan.gravity
+    assert load == pytest.approx(weight, rel=0.02)
+    after = flow[flow.step > st["settle"]]
+    assert np.allclose(after.mass_total + after.discharged_mass, after.mass_total.iloc[0], rtol=1e-12)
+    assert after.discharged_mass.iloc[-1] > 0
+
+
 def interrupt_at(eng, folder, stage: str) -> None:
     """Run the rendered ``folder`` on ``eng`` until ``stage`` begins and stop it there, as a Ctrl-C
     would: the folder is left interrupted."""

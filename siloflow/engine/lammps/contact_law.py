@@ -1,4 +1,5 @@
-"""The plan's contact laws as LAMMPS ``pair_style granular`` coefficients (LAMMPS 2025.7.22).
+"""The plan's contact laws as LAMMPS ``pair_style granular`` coefficients (LAMMPS 2025.7.22), or as
+the classic ``gran/hooke/history`` where that style runs the same law (:func:`classic_args`).
 
 :func:`pair_coeff_args` gives the model text after ``pair_coeff i j`` and :func:`wall_args` the
 same text for ``fix ID group wall/gran/region granular <text> region R``: LAMMPS' wall fix parses
@@ -197,6 +198,40 @@ def pair_coeff_args(plan: RunPlan, pair: PairParameters, frictionless: bool = Fa
     if pair.b in WALL_SIDES or pair.a in WALL_SIDES:
         raise ValueError(f"pair {pair.name} is a wall contact: use wall_args")
     return _model_text(plan, pair, 0.0 if frictionless else pair.friction)
+
+
+#: LAMMPS' classic pair style siloflow writes where it runs the plan's law exactly (:func:`classic_args`)
+CLASSIC_STYLE = "gran/hooke/history"
+
+
+def classic_args(plan: RunPlan, frictionless: bool = False) -> str | None:
+    """The arguments of ``pair_style gran/hooke/history`` (Kn Kt gamma_n gamma_t xmu dampflag
+    limit_damping; SI) that run the plan's grain contacts as ``pair_style granular`` with
+    :func:`pair_coeff_args` does, or None where the classic style cannot:
+
+    - a linear law (hooke, linear): LAMMPS' classic Hertz style scales its damping with the contact
+      radius (granular's ``viscoelastic``), not as LIGGGHTS' Hertz law does;
+    - one species of spheres: a classic style takes one set of coefficients for every pair (no
+      dust, no size classes, no clumps);
+    - no rolling friction: the classic styles have none.
+
+    Term by term (LAMMPS ``pair_gran_hooke_history.cpp``): F_n = kn d - m* gamman v_n, set to 0
+    below 0 (``limit_damping``); F_t = -(kt xi + m* gammat v_t), capped at mu |F_n| with the
+    displacement rescaled: granular's ``hooke ... damping mass_velocity``, ``linear_history`` with
+    x_gammat = gammat / gamman, ``limit_damping``. The tangential displacement is projected onto the
+    tangent plane each step, as LIGGGHTS does (granular rotates it, keeping its length), and the
+    torque's lever is the radius (granular: R - d/2): differences of order d/R, as between the
+    engines (module docstring). The wall fixes keep their ``granular`` keywords (:func:`wall_args`)."""
+    if plan.contact_model not in ("hooke", "linear") or len(plan.species) != 1 or plan.species[0].kind == "clump":
+        return None
+    pair = plan.pair(plan.species[0].name, plan.species[0].name)
+    if pair.rolling_friction > 0 or None in (pair.kn, pair.kt, pair.gamman, pair.gammat):
+        return None
+    if pair.gamman == 0 and pair.gammat > 0:
+        return None
+    friction = 0.0 if frictionless else pair.friction
+    return (f"{number(pair.kn)} {number(pair.kt)} {number(pair.gamman)} {number(pair.gammat)} {number(friction)} "
+            f"{1 if pair.gammat > 0 else 0} limit_damping")
 
 
 def wall_args(plan: RunPlan, pair: PairParameters) -> str:

@@ -50,7 +50,7 @@ from ...engines import ENGINE_FILES
 from ...geometry import write_stl
 from ...plan import FACES, WALL, RunPlan
 from ...run_folder import RESTART_FILE, DumpLayout, RunFolder
-from .contact_law import pair_coeff_args, wall_args
+from .contact_law import CLASSIC_STYLE, classic_args, pair_coeff_args, wall_args
 
 DECK_NAME = "in.lammps"
 LOG_NAME = ENGINE_FILES["lammps"].names["log"]
@@ -407,6 +407,8 @@ def deck_context(plan: RunPlan) -> dict:
         "name": plan.name, "planar": plan.planar, "box": box(plan, every), "n_types": n_types,
         "boundary_y": "p" if plan.geometry.periodic_depth else "f",     # a slab periodic along y
         "skin": 0.5 * plan.particle_radius, "pairs": pairs, "timestep": plan.dt, "gravity": plan.gravity,
+        "classic": classic_args(plan), "classic_fill": classic_args(plan, frictionless=f.frictionless),
+        "classic_style": CLASSIC_STYLE,
         "groups": [{"name": k, "types": v} for k, v in groups.items()], "regions": regions,
         "wall_fixes": fixes, "dust_in_plane": dust is not None and plan.planar, "dust_group": "dust",
         "outlet_z": plan.outlet.z, "dump_every": plan.outputs.dump_every, "restart_file": RESTART_FILE,
