@@ -20,6 +20,7 @@ Writes benchmarks/results/engines/throughput.csv and throughput.png.
 from __future__ import annotations
 
 import copy
+import re
 import shutil
 import subprocess
 import sys
@@ -41,14 +42,30 @@ CHUTE_ANCHOR = 2.06e7
 VARIANTS = [("liggghts", 1, "mesh walls"), ("liggghts", 2, "mesh walls"),
             ("lammps", 1, "granular"), ("lammps", 2, "granular"),
             ("lammps", 1, "gran/hertz/history"), ("lammps", 2, "gran/hertz/history"),
-            ("lammps-chute", 1, "gran/hooke/history"), ("lammps-chute", 2, "gran/hooke/history")]
+            ("lammps-chute", 1, "gran/hooke/history"), ("lammps-chute", 2, "gran/hooke/history"),
+            # the quick case with a linear law (LINEAR_LAW): siloflow's LAMMPS deck runs it on gran/hooke/history
+            # (contact_law.classic_args), against the same law forced onto pair_style granular
+            ("lammps", 2, "linear: gran/hooke/history"), ("lammps", 2, "linear: granular"),
+            ("liggghts", 2, "linear: mesh walls"),
+            # the neighbour skin (siloflow writes half the mean grain radius) at a quarter and a whole radius
+            ("liggghts", 2, "mesh walls, skin 0.25 r"), ("liggghts", 2, "mesh walls, skin 1 r"),
+            ("lammps", 2, "granular, skin 0.25 r"), ("lammps", 2, "granular, skin 1 r")]
+#: a linear law for the quick case's 3 mm glass beads with the Hertz law's contact time at the fill's
+#: impact speed (t_c = pi sqrt(m*/kn): kn = 1.2e3 N/m gives about 0.5 ms), walls twice as stiff
+LINEAR_LAW = {"model": "linear", "particle": {"density": 2500.0},
+              "particle_particle": {"friction": 0.5, "restitution": 0.5, "kn": 1.2e3, "kt": 0.6e3},
+              "particle_wall": {"friction": 0.5, "restitution": 0.5, "kn": 2.4e3, "kt": 1.2e3}}
+#: skin variants: the skin as a multiple of the grain radius
+SKINS = {"skin 0.25 r": 0.25, "skin 1 r": 1.0}
 #: steps of the chute benchmark here (its input runs 100)
 CHUTE_STEPS = 1000
 
 
-def case(engine: str, ranks: int) -> dict:
+def case(engine: str, ranks: int, linear: bool = False) -> dict:
     data = yaml.safe_load((ROOT / "decks" / "quick.yaml").read_text())
     data = copy.deepcopy(data)
+    if linear:
+        data["materials"] = copy.deepcopy(LINEAR_LAW)
     data["fill"]["count"] = 3000
     data["discharge"] = {"duration": 0.3}
     data["outputs"] = {"sample_interval": 0.005}
@@ -78,6 +95,43 @@ def classic_pair(folder: Path, plan) -> None:
             line = "pair_coeff      * *"
         lines.append(line)
     deck.write_text("\n".join(lines) + "\n")
+
+
+def granular_pair(folder: Path, plan) -> None:
+    """Swap the deck's classic ``gran/hooke/history`` (one species, a linear law) for ``pair_style
+    granular`` with the same law (contact_law.pair_coeff_args), as siloflow wrote it before."""
+    from siloflow.engine.lammps.contact_law import pair_coeff_args
+    pair = plan.pair(plan.species[0].name, plan.species[0].name)
+    deck = folder / "in.lammps"
+    lines, seen = [], 0
+    for line in deck.read_text().splitlines():
+        if line.startswith("pair_style"):
+            frictionless = seen == 0 and plan.fill.frictionless
+            line = ("pair_style      granular\n" if seen == 0 else "") + \
+                f"pair_coeff      1 1 {pair_coeff_args(plan, pair, frictionless=frictionless)}"
+            seen += 1
+        elif line.startswith("pair_coeff"):
+            continue
+        lines.append(line)
+    deck.write_text("\n".join(lines) + "\n")
+
+
+def neighbour_skin(folder: Path, engine: str, skin: float) -> None:
+    """Set the deck's neighbour skin (m) and, on LIGGGHTS, the bin size that follows it (half the
+    cut-off, 2 r_max + skin, as the deck sets it)."""
+    deck = folder / ("in.liggghts" if engine == "liggghts" else "in.lammps")
+    lines = []
+    for line in deck.read_text().splitlines():
+        words = line.split()
+        if words[:1] == ["neighbor"]:
+            old = float(words[1])
+            line = f"neighbor        {skin!r} bin"
+        lines.append(line)
+    text = "\n".join(lines) + "\n"
+    if engine == "liggghts":
+        text = re.sub(r"^neigh_modify    binsize (\S+)$",
+                      lambda m: f"neigh_modify    binsize {float(m.group(1)) + 0.5 * (skin - old)!r}", text, flags=re.M)
+    deck.write_text(text)
 
 
 def loop_rate(log_text: str) -> tuple[float, float]:
@@ -114,20 +168,29 @@ def run_chute(ranks: int) -> dict:
             "loop_rate": atom_steps / loop, "wall_rate": atom_steps / wall, "version": lammps.__version__}
 
 
+def variant_name(engine: str, ranks: int, pair: str) -> str:
+    return f"{engine}_{ranks}_" + re.sub(r"[^A-Za-z0-9.]+", "-", pair).strip("-")
+
+
 def run_variant(engine: str, ranks: int, pair: str) -> dict:
     if engine == "lammps-chute":
         return run_chute(ranks)
     from siloflow.case_file import case_from_dict
     from siloflow.derived import derive
     from siloflow.engine import get_engine
-    name = f"{engine}_{ranks}_{pair.replace('/', '-').replace(' ', '-')}"
+    name = variant_name(engine, ranks, pair)
     folder = WORK / name
-    c = case_from_dict(case(engine, ranks))
+    c = case_from_dict(case(engine, ranks, linear=pair.startswith("linear")))
     plan = derive(c)
     eng = get_engine(engine)
     eng.prepare(c, folder, force=True, plan=plan)
     if pair == "gran/hertz/history":
         classic_pair(folder, plan)
+    if pair == "linear: granular":
+        granular_pair(folder, plan)
+    for tag, radii in SKINS.items():
+        if pair.endswith(tag):
+            neighbour_skin(folder, engine, radii * plan.particle_radius)
     record = eng.execute(folder)
     eng.collect(folder)
     log = "log.liggghts" if engine == "liggghts" else "log.lammps"
@@ -142,7 +205,7 @@ def figure(table: pd.DataFrame) -> None:
     import matplotlib.ticker
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(7, 3.8))
+    fig, ax = plt.subplots(figsize=(7.5, 1.5 + 0.32 * len(table)))
     y = range(len(table))
     ax.barh([k + 0.2 for k in y], table.loop_rate, height=0.4, label="engine loop")
     ax.barh([k - 0.2 for k in y], table.wall_rate, height=0.4, label="whole run (wall time)")
@@ -163,7 +226,7 @@ def main() -> None:
     path = OUT / "throughput.csv"
     table = pd.read_csv(path) if path.is_file() else pd.DataFrame()
     for engine, ranks, pair in VARIANTS:
-        key = f"{engine}_{ranks}_{pair.replace('/', '-').replace(' ', '-')}"
+        key = variant_name(engine, ranks, pair)
         if len(table) and key in set(table.variant):
             continue
         row = run_variant(engine, ranks, pair)
