@@ -167,6 +167,36 @@ def test_a_linear_law_of_one_species_runs_on_the_classic_style_and_resumes(tmp_p
     assert after.discharged_mass.iloc[-1] > 0
 
 
+@pytest.mark.engine
+def test_chunks_that_need_only_the_walls_gather_no_atoms_and_change_nothing(tmp_path, monkeypatch):
+    """The driver gathers every atom after a chunk only when a check needs them (a flow row, the guard,
+    an advance's end) or one may have left (the deck's lowest-z compute, the atom count): on one rank
+    the run writes byte for byte the flow, wall forces and state of a run that gathers after every
+    chunk, with fewer gathers."""
+    from siloflow.engine.lammps import driver
+    gathers = {}
+    real = driver.Driver.atoms
+
+    def counted(self):
+        gathers[key] = gathers.get(key, 0) + 1
+        return real(self)
+    monkeypatch.setattr(driver.Driver, "atoms", counted)
+    data = tiny(discharge={"duration": 0.15})
+    outputs = {}
+    for key in ("every", "needed"):
+        if key == "every":
+            monkeypatch.setattr(driver.Driver, "_quiet", lambda self, last: False)
+        else:
+            monkeypatch.undo()
+            monkeypatch.setattr(driver.Driver, "atoms", counted)
+        folder = tmp_path / key
+        get_engine("lammps").run(case_from_dict(data), folder)
+        outputs[key] = [(folder / f).read_bytes() for f in ("output/flow.txt", "output/wall_forces.txt",
+                                                            "output/lammps_state.json")]
+    assert outputs["every"] == outputs["needed"]
+    assert gathers["needed"] < 0.5 * gathers["every"], gathers
+
+
 def interrupt_at(eng, folder, stage: str) -> None:
     """Run the rendered ``folder`` on ``eng`` until ``stage`` begins and stop it there, as a Ctrl-C
     would: the folder is left interrupted."""

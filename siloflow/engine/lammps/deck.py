@@ -63,6 +63,9 @@ neighbor neigh_modify pair_style pair_coeff timestep fix group variable thermo_s
 dump dump_modify set write_restart delete_atoms unfix molecule compute
 """.split())
 
+#: the deck's compute of the lowest atom's height (m): the driver gathers the atoms after a chunk only
+#: when a check needs them, or when one may have passed the outlet
+LOWEST_Z = "siloflow_zmin"
 #: what the deck's ``rigid/local`` compute reports of the clumps' bodies (kg, kg m2)
 BODY_QUANTITIES = ("mass", "inertiax", "inertiay", "inertiaz")
 _SECTION = re.compile(r"^# SILOFLOW_SECTION (\w+)\s*$")
@@ -408,7 +411,7 @@ def deck_context(plan: RunPlan) -> dict:
         "boundary_y": "p" if plan.geometry.periodic_depth else "f",     # a slab periodic along y
         "skin": 0.5 * plan.particle_radius, "pairs": pairs, "timestep": plan.dt, "gravity": plan.gravity,
         "classic": classic_args(plan), "classic_fill": classic_args(plan, frictionless=f.frictionless),
-        "classic_style": CLASSIC_STYLE,
+        "classic_style": CLASSIC_STYLE, "lowest_z": LOWEST_Z,
         "groups": [{"name": k, "types": v} for k, v in groups.items()], "regions": regions,
         "wall_fixes": fixes, "dust_in_plane": dust is not None and plan.planar, "dust_group": "dust",
         "outlet_z": plan.outlet.z, "dump_every": plan.outputs.dump_every, "restart_file": RESTART_FILE,

@@ -34,6 +34,7 @@ from ...plan import RunPlan
 from ..tables import FLOW_COLUMNS, wall_force_columns
 from .deck import (
     BODY_QUANTITIES,
+    LOWEST_Z,
     deck_context,
     floor_commands,
     mobilise_jumps,
@@ -165,11 +166,35 @@ class Driver:
             self.state.step += n
             # fix rigid/small loses track of its bodies' atoms across runs without set-up ("Rigid
             # body atoms missing", measured after fix pour inserted bodies): clumps always get it
-            setup = self.look() or self.clumps
+            setup = self.look(last=self.state.step >= end) or self.clumps
 
-    def look(self) -> bool:
-        """After a chunk: count and delete at the outlet, sample the walls, guard, report. Returns
-        whether atoms were deleted (the next run needs its set-up)."""
+    def _quiet(self, last: bool) -> bool:
+        """Whether this look needs nothing of the atoms but the walls' sample: not the end of an
+        advance, no flow row, no guard, no pour, the atoms all there and none below the outlet
+        (``siloflow_zmin``, a reduce compute: no gather)."""
+        step, out = self.state.step, self.plan.outputs
+        if last or self.pouring or step % out.sample_steps == 0 or step % out.thermo_every == 0:
+            return False
+        if int(self.lmp.get_natoms()) != self.expected_atoms:
+            return False
+        return not float(self.lmp.extract_compute(LOWEST_Z, 0, 0)) < self.plan.outlet.z
+
+    def _sample_walls(self) -> None:
+        step, out = self.state.step, self.plan.outputs
+        if self.sensors is not None and step % self.sample_every == 0:
+            self.samples.append(self.sensors.sample(self))
+            if step % out.sample_steps == 0:
+                self.sensors.write(self, step, np.mean(self.samples[-out.samples_per_average:], axis=0))
+                self.samples = []
+
+    def look(self, last: bool = True) -> bool:
+        """After a chunk: count and delete at the outlet, sample the walls, guard, report (``last``:
+        the advance's last chunk, whose energies and silo mass the stages read). A chunk that needs
+        only the walls' sample gathers no atoms (:meth:`_quiet`). Returns whether atoms were deleted
+        (the next run needs its set-up)."""
+        if self._quiet(last):
+            self._sample_walls()
+            return False
         if self.pouring:                 # bodies the pour added join their species' groups (wall fixes)
             self.section("regroup")
         step, out = self.state.step, self.plan.outputs
@@ -194,11 +219,7 @@ class Driver:
         if lost > 0:                       # gone through the box walls (lost ignore): recorded, guarded
             self.state.lost += lost
             self.expected_atoms = n_now
-        if self.sensors is not None and step % self.sample_every == 0:
-            self.samples.append(self.sensors.sample(self))
-            if step % out.sample_steps == 0:
-                self.sensors.write(self, step, np.mean(self.samples[-out.samples_per_average:], axis=0))
-                self.samples = []
+        self._sample_walls()
         m, x, v = atoms["m"], atoms["x"], atoms["v"]
         ke = float(0.5 * (m * (v * v).sum(axis=1)).sum()) if n_now else 0.0
         pe = float((m * self.plan.gravity * x[:, 2]).sum()) if n_now else 0.0
