@@ -331,6 +331,20 @@ class Profile(Frozen):
     measured: dict[str, list[float]] = {}     # fast: [relative error, 95 % low, high] measured at it, per quantity
 
 
+def unbounded_note(unbounded, measured: dict) -> str:
+    """What a fast profile leaves unbounded of what a case asks (empty when nothing): each quantity
+    with the relative error and 95 % interval the benchmark measured at the profile (``measured``:
+    {quantity: [error, low, high]}), and where to get it bounded."""
+    if not unbounded:
+        return ""
+    said = []
+    for q in unbounded:
+        m = measured.get(q)
+        said.append(f"{q} (measured {m[0]:+.1%} [{m[1]:+.1%}, {m[2]:+.1%}] there)" if m else f"{q} (not measured)")
+    return ("; not bounded by this profile: " + ", ".join(said)
+            + ": for a bounded value run profile reference, or measure this case with siloflow bench")
+
+
 class Guard(Frozen):
     """The instability guard's limits (``siloflow.guard``), SI. The engine reports, at each thermo
     output, the fastest grain's speed, the deepest pair overlap and the grains outside the walls;

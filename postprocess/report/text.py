@@ -11,7 +11,7 @@ import math
 from pathlib import Path
 from typing import NamedTuple
 
-from siloflow.profiles import unbounded_note
+from siloflow.plan import unbounded_note
 from siloflow.run_folder import SUMMARY_NAME
 
 from ..numbers import mass_rate, pressure

@@ -11,7 +11,7 @@ import typer
 from ..case import Case
 from ..case_file import load_case
 from ..errors import CaseError, SiloflowError
-from ..profiles import unbounded_note
+from ..plan import unbounded_note
 from .app import _fail, app, err, out, printable
 
 
