@@ -103,6 +103,21 @@ def test_the_guard_stops_a_time_step_far_too_large_in_seconds(tmp_path):
     assert record.guard["stage"] == "fill" and record.wall_time < 30
 
 
+def assert_the_bed_is_carried_and_counted(folder: RunFolder, st: dict):
+    """The static load on the walls within 2 % of the settled bed's weight, every grain after the
+    settling either in the box or counted at the outlet, and some discharged; returns the static
+    stage's wall forces."""
+    forces, flow = folder.wall_forces(), folder.flow()
+    static = forces[(forces.step > st["static"]) & (forces.step <= st["open"])]
+    load = -static.groupby("step").fz.sum().iloc[-1]
+    weight = float(flow[flow.step <= st["open"]].mass_total.iloc[-1]) * folder.plan.gravity
+    assert load == pytest.approx(weight, rel=0.02)
+    after = flow[flow.step > st["settle"]]
+    assert np.allclose(after.mass_total + after.discharged_mass, after.mass_total.iloc[0], rtol=1e-12)
+    assert after.discharged_mass.iloc[-1] > 0
+    return static
+
+
 # ---------------------------------------------------------------- runs
 @pytest.mark.engine
 @pytest.mark.parametrize("geometry", [
@@ -119,12 +134,7 @@ def test_each_silo_shape_carries_the_bed(tmp_path, geometry):
     data["geometry"] = geometry
     run = get_engine("lammps").run(case_from_dict(data), tmp_path / "run")
     folder = RunFolder(tmp_path / "run")
-    forces, flow = folder.wall_forces(), folder.flow()
-    st = run.stage_steps
-    static = forces[(forces.step > st["static"]) & (forces.step <= st["open"])]
-    load = -static.groupby("step").fz.sum().iloc[-1]
-    weight = float(flow[flow.step <= st["open"]].mass_total.iloc[-1]) * folder.plan.gravity
-    assert load == pytest.approx(weight, rel=0.02)
+    static = assert_the_bed_is_carried_and_counted(folder, run.stage_steps)
     # every loaded sensor is pushed outward, along its own facing direction: contacts went to the
     # right band and sector, with the right sign
     last = static[static.step == static.step.max()].set_index("wall")
@@ -132,9 +142,7 @@ def test_each_silo_shape_carries_the_bed(tmp_path, geometry):
     pushes = [last.loc[w.name, "fx"] * w.normal[0] + last.loc[w.name, "fy"] * w.normal[1] for w in sensors]
     loaded = [p for p in pushes if abs(p) > 1e-9]
     assert len(loaded) >= 2 and all(p > 0 for p in loaded), pushes
-    after = flow[flow.step > st["settle"]]
-    assert np.allclose(after.mass_total + after.discharged_mass, after.mass_total.iloc[0], rtol=1e-12)
-    assert after.discharged_mass.iloc[-1] > 0
+
 
 
 @pytest.mark.engine
@@ -155,16 +163,7 @@ def test_a_linear_law_of_one_species_runs_on_the_classic_style_and_resumes(tmp_p
     interrupt_at(eng, folder, "open")
     record = eng.resume(folder)
     assert record.completed
-    run = RunFolder(folder)
-    forces, flow = run.wall_forces(), run.flow()
-    st = record.stage_steps
-    static = forces[(forces.step > st["static"]) & (forces.step <= st["open"])]
-    load = -static.groupby("step").fz.sum().iloc[-1]
-    weight = float(flow[flow.step <= st["open"]].mass_total.iloc[-1]) * run.plan.gravity
-    assert load == pytest.approx(weight, rel=0.02)
-    after = flow[flow.step > st["settle"]]
-    assert np.allclose(after.mass_total + after.discharged_mass, after.mass_total.iloc[0], rtol=1e-12)
-    assert after.discharged_mass.iloc[-1] > 0
+    assert_the_bed_is_carried_and_counted(RunFolder(folder), record.stage_steps)
 
 
 @pytest.mark.engine
