@@ -14,10 +14,10 @@ ROOT = Path(__file__).resolve().parents[1]
 LOOP = re.compile(r"^Loop time of (\S+) on (\d+) procs for (\d+) steps with (\d+) atoms", re.M)
 
 
-def run_case(data: dict, work: Path, force: bool = False) -> tuple[Path, float]:
+def run_case(data: dict, work: Path, force: bool = False, cache: Path | None = None) -> tuple[Path, float]:
     """``siloflow.run`` of the case ``data`` (named by its ``name``) into ``work/runs/<name>``, its
     case file beside it in ``work`` (``force``: replace a folder siloflow made): (run folder, wall
-    time s of the whole pipeline, render to first results). A refused or failed run stops the
+    time s of the whole pipeline, render to first results); ``cache``: a fill cache folder. A refused or failed run stops the
     benchmark with siloflow's message."""
     from siloflow.errors import SiloflowError
     from siloflow.runs import run
@@ -26,7 +26,7 @@ def run_case(data: dict, work: Path, force: bool = False) -> tuple[Path, float]:
     folder = work / "runs" / data["name"]
     t0 = time.perf_counter()
     try:
-        run(case_path, folder, force=force)
+        run(case_path, folder, force=force, cache=cache)
     except SiloflowError as exc:
         raise SystemExit(f"{data['name']} failed: {exc}") from None
     return folder, time.perf_counter() - t0

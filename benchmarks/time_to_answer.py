@@ -17,7 +17,8 @@ The questions:
 For 1 and 2 the fastest proven path is RUN here, timed end to end through ``siloflow.run`` (render,
 engine, checks, first results and report): ``profile: fast`` (which picks the profile proven for the
 results asked, siloflow.packaged_profile), ``outputs.results`` cut to what the question needs (the
-lean deck), LIGGGHTS on 2 ranks. The papers' settings (``profile: reference``) are EXTRAPOLATED, not
+lean deck), LIGGGHTS on 2 ranks, and for 1 the fill cache (the three orifices share one settled bed,
+as ``siloflow sweep`` shares it). The papers' settings (``profile: reference``) are EXTRAPOLATED, not
 run: the fast path's engine time measured here x the profile's speed-up measured by the accuracy
 benchmark on this very case (benchmarks/results/accuracy/comparison.csv, with its 95 % interval),
 plus the post-processing time measured here. For 3 both are extrapolated from planned steps x grains
@@ -69,10 +70,11 @@ def fast_case(results: list[str], name: str, orifice_radius: float | None = None
     return data
 
 
-def timed_run(data: dict) -> dict:
-    """One run through siloflow's whole pipeline: wall time (s) and the engine's share."""
+def timed_run(data: dict, cache: Path | None = None) -> dict:
+    """One run through siloflow's whole pipeline (``cache``: a fill cache folder): wall time (s) and
+    the engine's share."""
     from siloflow.run_folder import RunFolder
-    folder, wall = run_case(data, WORK, force=True)
+    folder, wall = run_case(data, WORK, force=True, cache=cache)
     run = RunFolder(folder)
     engine = float(run.record.wall_time)
     return {"folder": folder, "wall_s": wall, "engine_s": engine, "profile": run.plan.profile}
@@ -101,7 +103,8 @@ def measured_row(question: str, runs: list[dict], answer: str) -> dict:
     unbounded = ", ".join(f"{q} (measured {p.measured[q][0]:+.1%})" for q in p.unbounded if q in p.measured)
     return {"question": question, "runs": len(runs), "grains": 1000,
             "fast_path": f"profile fast ({candidate_of(p)}, proven for {p.question}), results "
-                         f"{'/'.join(runs[0]['results'])}, LIGGGHTS 2 ranks",
+                         f"{'/'.join(runs[0]['results'])}, LIGGGHTS 2 ranks"
+                         + (", one fill shared through the fill cache" if len(runs) > 1 else ""),
             "fast_wall_s": engine + post, "fast_how": "measured",
             "fast_bounds": bounds + (f"; unbounded: {unbounded}" if unbounded else ""),
             "reference_wall_s": engine * s + post, "reference_wall_lo_s": engine * lo + post,
@@ -115,7 +118,7 @@ def beverloo_question() -> dict:
     from siloflow.answers import beverloo
     runs = []
     for radius in BEVERLOO_RADII:
-        r = timed_run(fast_case(["flow_rate"], f"tta_beverloo_{radius * 1000:.2f}mm", radius))
+        r = timed_run(fast_case(["flow_rate"], f"tta_beverloo_{radius * 1000:.2f}mm", radius), cache=WORK / "fill_cache")
         runs.append({**r, "results": ["flow_rate"]})
     t0 = time.perf_counter()
     _, fit = beverloo([r["folder"] for r in runs])
