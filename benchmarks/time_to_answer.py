@@ -3,6 +3,7 @@ at the papers' numerical settings and on siloflow's fastest proven path, with th
 path carries.
 
     python benchmarks/time_to_answer.py        # make bench-time-to-answer (about 5 min; nothing else may run)
+    python benchmarks/time_to_answer.py --doc  # only rewrite docs/time_to_answer.md's table from the committed results
 
 The questions:
 
@@ -26,8 +27,9 @@ at the engine rate ``make bench-scale`` measured at 3e5 grains (benchmarks/resul
 no profile bounds coarse-grained fields, so the papers' settings are the fastest proven path, and
 the fast profile's time is given as what it would cost unbounded.
 
-Writes benchmarks/results/time_to_answer/time_to_answer.csv and time_to_answer.md (the table
-docs/time_to_answer.md shows).
+Writes benchmarks/results/time_to_answer/time_to_answer.csv and time_to_answer.md, and puts the
+table in docs/time_to_answer.md between ``<!-- time-to-answer -->`` and ``<!-- end time-to-answer -->``
+(tests/test_profiles.py checks that the two agree).
 """
 from __future__ import annotations
 
@@ -194,7 +196,26 @@ def markdown(table: pd.DataFrame) -> str:
     return "\n".join(lines) + "\n"
 
 
+DOC = ROOT / "docs" / "time_to_answer.md"
+MARKERS = ("<!-- time-to-answer -->\n", "<!-- end time-to-answer -->")
+
+
+def doc_table(doc: str) -> str:
+    """The table between the markers of docs/time_to_answer.md's text."""
+    start = doc.index(MARKERS[0]) + len(MARKERS[0])
+    return doc[start:doc.index(MARKERS[1], start)]
+
+
+def write_doc() -> None:
+    table = markdown(pd.read_csv(OUT / "time_to_answer.csv"))
+    doc = DOC.read_text()
+    DOC.write_text(doc.replace(doc_table(doc), table))
+
+
 def main() -> None:
+    if "--doc" in sys.argv[1:]:
+        write_doc()
+        return
     OUT.mkdir(parents=True, exist_ok=True)
     if WORK.exists():
         shutil.rmtree(WORK)                 # the benchmark's own scratch folder
@@ -205,6 +226,8 @@ def main() -> None:
     (OUT / "time_to_answer.md").write_text(markdown(table))
     (OUT / "answers.json").write_text(json.dumps({r["question"]: r["answer"] for r in rows}, indent=1) + "\n")
     print(markdown(table))
+    if DOC.is_file():
+        write_doc()
 
 
 if __name__ == "__main__":
