@@ -49,7 +49,11 @@ VARIANTS = [("liggghts", 1, "mesh walls"), ("liggghts", 2, "mesh walls"),
             ("liggghts", 2, "linear: mesh walls"),
             # the neighbour skin (siloflow writes half the mean grain radius) at a quarter and a whole radius
             ("liggghts", 2, "mesh walls, skin 0.25 r"), ("liggghts", 2, "mesh walls, skin 1 r"),
-            ("lammps", 2, "granular, skin 0.25 r"), ("lammps", 2, "granular, skin 1 r")]
+            ("lammps", 2, "granular, skin 0.25 r"), ("lammps", 2, "granular, skin 1 r"),
+            # the neighbour list's rebuild check (siloflow: every step, delay 0) every 5 steps, and the
+            # bins at the whole cut-off instead of half of it (each engine's default)
+            ("liggghts", 2, "mesh walls, every 5"), ("liggghts", 2, "mesh walls, bins 1 cut-off"),
+            ("lammps", 2, "granular, every 5"), ("lammps", 2, "granular, bins 1 cut-off")]
 #: a linear law for the quick case's 3 mm glass beads with the Hertz law's contact time at the fill's
 #: impact speed (t_c = pi sqrt(m*/kn): kn = 1.2e3 N/m gives about 0.5 ms), walls twice as stiff
 LINEAR_LAW = {"model": "linear", "particle": {"density": 2500.0},
@@ -57,6 +61,10 @@ LINEAR_LAW = {"model": "linear", "particle": {"density": 2500.0},
               "particle_wall": {"friction": 0.5, "restitution": 0.5, "kn": 2.4e3, "kt": 1.2e3}}
 #: skin variants: the skin as a multiple of the grain radius
 SKINS = {"skin 0.25 r": 0.25, "skin 1 r": 1.0}
+#: neighbour-list check variants: the deck's ``neigh_modify delay 0`` line becomes this
+EVERY = {"every 5": "neigh_modify    every 5 delay 0 check yes"}
+#: bin-size variants: the bin as a multiple of the neighbour cut-off (2 r_max + skin)
+BINS = {"bins 1 cut-off": 1.0}
 #: steps of the chute benchmark here (its input runs 100)
 CHUTE_STEPS = 1000
 
@@ -134,6 +142,24 @@ def neighbour_skin(folder: Path, engine: str, skin: float) -> None:
     deck.write_text(text)
 
 
+def neighbour_list(folder: Path, engine: str, every: str | None, bin_size: float | None) -> None:
+    """Set the deck's neighbour-list check (``every``: the ``neigh_modify`` line replacing ``delay 0``)
+    or its bin size (m; LIGGGHTS' placed-fill binsize line is replaced, else one is added)."""
+    deck = folder / ("in.liggghts" if engine == "liggghts" else "in.lammps")
+    text = re.sub(r"^neigh_modify    binsize \S+\n", "", deck.read_text(), flags=re.M)
+    line = every or f"neigh_modify    delay 0\nneigh_modify    binsize {bin_size!r}"
+    text, n = re.subn(r"^neigh_modify    delay 0$", line, text, count=1, flags=re.M)
+    if n != 1:
+        raise SystemExit(f"{deck}: no 'neigh_modify delay 0' line to replace")
+    deck.write_text(text)
+
+
+def dangerous_builds(log_text: str) -> int:
+    """Neighbour-list builds the engine calls dangerous (a grain may have moved past the skin
+    unseen), summed over the log's runs."""
+    return sum(int(n) for n in re.findall(r"^Dangerous builds\s*=\s*(\d+)", log_text, flags=re.M))
+
+
 def loop_rate(log_text: str) -> tuple[float, float]:
     """(atom-steps, loop seconds) summed over a log's ``run`` commands."""
     steps = seconds = 0.0
@@ -180,6 +206,7 @@ def run_variant(engine: str, ranks: int, pair: str) -> dict:
     from siloflow.engine import get_engine
     name = variant_name(engine, ranks, pair)
     folder = WORK / name
+    shutil.rmtree(folder, ignore_errors=True)   # the benchmark's own scratch (its decks are edited below)
     c = case_from_dict(case(engine, ranks, linear=pair.startswith("linear")))
     plan = derive(c)
     eng = get_engine(engine)
@@ -191,13 +218,21 @@ def run_variant(engine: str, ranks: int, pair: str) -> dict:
     for tag, radii in SKINS.items():
         if pair.endswith(tag):
             neighbour_skin(folder, engine, radii * plan.particle_radius)
+    for tag, line in EVERY.items():
+        if pair.endswith(tag):
+            neighbour_list(folder, engine, line, None)
+    for tag, cutoffs in BINS.items():
+        if pair.endswith(tag):
+            neighbour_list(folder, engine, None, cutoffs * 2.5 * plan.particle_radius)   # 2 r_max + the deck's skin of r_max / 2
     record = eng.execute(folder)
     eng.collect(folder)
     log = "log.liggghts" if engine == "liggghts" else "log.lammps"
-    atom_steps, loop = loop_rate((folder / log).read_text(errors="replace"))
+    log_text = (folder / log).read_text(errors="replace")
+    atom_steps, loop = loop_rate(log_text)
     return {"variant": name, "engine": engine, "ranks": ranks, "pair_style": pair, "atom_steps": atom_steps,
             "loop_time_s": loop, "wall_time_s": record.wall_time, "loop_rate": atom_steps / loop,
-            "wall_rate": atom_steps / record.wall_time, "version": eng.version()}
+            "wall_rate": atom_steps / record.wall_time, "dangerous_builds": dangerous_builds(log_text),
+            "version": eng.version()}
 
 
 def figure(table: pd.DataFrame) -> None:
