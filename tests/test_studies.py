@@ -333,6 +333,30 @@ def test_a_candidate_that_failed_on_any_seed_is_never_recommended(tmp_path):
     assert ab.conclude(tmp_path)[1]["candidate"] == "reference"
 
 
+def test_a_recommendation_whose_new_seeds_land_outside_its_bound_is_passed_over(tmp_path):
+    """The new seeds' flow rate 10 % off puts the fastest proven candidate's error outside its bound:
+    the next proven one is recommended, and the one passed over is recorded with its check."""
+    import numpy as np
+    rng = np.random.default_rng(7)
+    rows = []
+    for cand, wall in {"reference": 100.0, "E1e-4_dt0.2": 1.0, "E1e-3_dt0.2": 2.0}.items():
+        for seed in range(4):
+            rows.append({**_identical_runs({cand: wall}, 1)[0], "seed": seed,
+                         "flow_rate": 0.01 * (1 + 0.001 * rng.standard_normal())})
+    pd.DataFrame(rows).to_csv(tmp_path / "runs.csv", index=False)
+    assert ab.conclude(tmp_path)[1]["candidate"] == "E1e-4_dt0.2"
+    check = [{**r, "candidate": "E1e-4_dt0.2" + ab.VALIDATION, "seed": 1100 + r["seed"],
+              "flow_rate": 0.011 * (1 + 0.001 * rng.standard_normal())} for r in rows[4:8]]
+    pd.DataFrame(rows + check).to_csv(tmp_path / "runs.csv", index=False)
+    rec = ab.conclude(tmp_path)[1]
+    assert rec["candidate"] == "E1e-3_dt0.2" and rec["validation"] == []       # to be checked in turn
+    (over,) = rec["passed_over"]
+    assert over["candidate"] == "E1e-4_dt0.2"
+    assert {c["quantity"]: c["inside"] for c in over["validation"]}["flow_rate"] is False
+    assert rec["questions"]["flow_rate"]["candidate"] == "E1e-3_dt0.2"
+    assert ab.recommended_candidates(rec) == ["E1e-3_dt0.2"]
+
+
 def test_upscaling_keeps_the_bed_and_scales_the_grains():
     base = yaml.safe_load((ROOT / "benchmarks" / "cases" / "accuracy_small.yaml").read_text())
     cand = next(c for c in ab.CANDIDATES if c.upscale)

@@ -156,9 +156,13 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
             run_bench(case_file, output, seeds, chosen, report=_note, fill_only_seeds=fill_only_seeds)
         table, rec = conclude(output, tolerances, case_file=case_file)
         checking = (validate_seeds or validate_fill_only) and not conclude_only
-        if checking and recommended_candidates(rec):
-            for name in recommended_candidates(rec):     # the recommendation's, then each question's
+        checked: set[str] = set()
+        # the recommendation's, then each question's; one the new seeds contradict is passed over, and
+        # the next proven candidate is checked in turn
+        while checking and (todo := [n for n in recommended_candidates(rec) if n not in checked]):
+            for name in todo:
                 validate(case_file, output, name, validate_seeds, report=_note, fill_only_seeds=validate_fill_only)
+                checked.add(name)
             table, rec = conclude(output, tolerances, case_file=case_file)
     cols = ["candidate", "quantity", "n_cand", "speedup", "rel_error", "ci_lo", "ci_hi", "verdict"]
     out.print(printable(table[cols].to_string(index=False, float_format=lambda v: f"{v:.3g}")), markup=False,
@@ -197,10 +201,14 @@ def bench(case_file: Path = typer.Argument(..., help="YAML case file (its settin
                                 f"{_tolerance_text(question_tolerances(tolerances)[question])}"),
                       markup=False, highlight=False)
             continue
-        checked = {c["quantity"]: c for c in r.get("validation") or []}
+        confirmed = {c["quantity"]: c for c in r.get("validation") or []}
         out.print(printable(f"question {question}: {r['candidate']}, {r['speedup']:.3g}x; 95 % bounds "
-                            + ", ".join(f"{q} {b:.1%}" + ("" if q in checked else " (no new seeds yet)")
+                            + ", ".join(f"{q} {b:.1%}" + ("" if q in confirmed else " (no new seeds yet)")
                                         for q, b in r["error_bounds"].items())), markup=False, highlight=False)
+        for p in r.get("passed_over") or []:
+            out.print(printable(f"  passed over: {p['candidate']}, {p['speedup']:.3g}x: its new seeds put "
+                                + ", ".join(f"{c['quantity']} at {c['rel_error']:+.1%}, outside {c['bound']:.1%}"
+                                            for c in p["validation"] if not c["inside"])), markup=False, highlight=False)
     out.print(f"tables and figure: {output} (comparison.csv, pareto.png, recommended_profile.json)")
 
 
