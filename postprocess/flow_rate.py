@@ -208,8 +208,24 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=No
                        float(np.sqrt(np.mean(res ** 2))))
 
 
+def beverloo_diameter(grains, folder) -> tuple[float, float, str]:
+    """Beverloo's grain diameter d (m), the grains' mean density (kg/m3) and what d is, from a run
+    plan's grain species: one size, its diameter; several sizes of sphere, the mass-weighted mean
+    diameter sum(n_i m_i d_i) / sum(n_i m_i) (``n_i`` number fractions; the mean the mass flow
+    weighs, the usual choice for a polydisperse Beverloo fit, and k then refers to it)."""
+    if not grains or any(sp.kind != "sphere" for sp in grains):
+        raise ReadError(f"{folder}: Beverloo's d needs spheres (a clump has no one diameter)")
+    if len(grains) == 1:
+        return 2 * grains[0].radius, grains[0].density, "grain diameter"
+    weights = np.array([sp.number_fraction * sp.mass for sp in grains])
+    d = float(np.sum(weights * [2 * sp.radius for sp in grains]) / weights.sum())
+    density = float(np.sum(weights * [sp.density for sp in grains]) / weights.sum())
+    return d, density, f"mass-weighted mean diameter of {len(grains)} sizes"
+
+
 def beverloo_table(folders) -> pd.DataFrame:
-    """One row per analysed run folder: orifice diameter D0 (a slab's slot width), grain diameter d,
+    """One row per analysed run folder: orifice diameter D0 (a slab's slot width), grain diameter d
+    (several sizes: their mass-weighted mean, ``d_is`` says which; :func:`beverloo_diameter`),
     outlet length L (a slab's depth, a box's rectangle or slot; NaN for a round orifice) (m), L_ends (the
     outlet's length ends at walls or edges: Beverloo's L - k d), D0_is (what D0 is: a silo from STL
     with a polygon outlet gives its hydraulic diameter 4 A / P, the round law approximated), bulk density
@@ -220,18 +236,16 @@ def beverloo_table(folders) -> pd.DataFrame:
         run = RunFolder(folder)
         summary = run.read_summary()
         plan = run.plan
-        grains = plan.grains
-        if len(grains) != 1 or grains[0].kind != "sphere":
-            raise ReadError(f"{folder}: Beverloo's d needs monodisperse spheres")
+        d, density, d_is = beverloo_diameter(plan.grains, folder)
         fa = summary.get("frame_analyses", {})
-        rho_b = fa.get("bulk_density_kg_m3") or plan.fill.packing_fraction * grains[0].density
+        rho_b = fa.get("bulk_density_kg_m3") or plan.fill.packing_fraction * density
         rate = summary["flow_rate"]
         if not (rate["rate"] and np.isfinite(rate["rate"])):
             raise ReadError(f"{folder}: no steady flow rate in its results")
         g = plan.geometry
         L = g.thickness if g.kind == "planar" else 2 * g.outlet_half_y if g.kind == "box" and g.outlet != "circle" \
             else np.nan
-        rows.append({"run": str(folder), "D0": 2 * g.outlet_radius, "d": 2 * grains[0].radius,
+        rows.append({"run": str(folder), "D0": 2 * g.outlet_radius, "d": d, "d_is": d_is,
                      "L": L, "L_ends": g.kind == "box",
                      "D0_is": "hydraulic diameter 4A/P of a polygon outlet (the round law approximated)"
                      if g.kind == "mesh" and g.outlet == "polygon" else "outlet width or diameter",

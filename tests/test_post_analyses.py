@@ -458,3 +458,20 @@ def test_analyses_write_no_files(tmp_path, monkeypatch):
         folder.chmod(0o755)
     assert sorted(p.relative_to(folder) for p in folder.rglob("*")) == before
     assert os.listdir(folder) == ["atoms.dump"]
+
+
+def test_beverloo_d_of_several_sizes_is_their_mass_weighted_mean_diameter():
+    """Two sizes, half the grains each, the same density: masses 1 : 8, so d = (1 x 2 + 8 x 4) / 9 mm;
+    one size is its diameter; a clump has none."""
+    from types import SimpleNamespace
+    from postprocess.flow_rate import beverloo_diameter
+    from siloflow.errors import ReadError
+
+    def sphere(r, fraction=0.5, kind="sphere"):
+        return SimpleNamespace(kind=kind, radius=r, density=2500.0, number_fraction=fraction,
+                               mass=2500.0 * 4 / 3 * math.pi * r ** 3)
+    d, density, what = beverloo_diameter([sphere(0.001), sphere(0.002)], "run")
+    assert d == pytest.approx((1 * 0.002 + 8 * 0.004) / 9) and density == 2500.0 and "mass-weighted" in what
+    assert beverloo_diameter([sphere(0.0015, 1.0)], "run")[:2] == (0.003, 2500.0)
+    with pytest.raises(ReadError, match="clump"):
+        beverloo_diameter([sphere(0.001, 1.0, kind="clump")], "run")
