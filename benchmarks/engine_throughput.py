@@ -53,7 +53,10 @@ VARIANTS = [("liggghts", 1, "mesh walls"), ("liggghts", 2, "mesh walls"),
             # the neighbour list's rebuild check (siloflow: every step, delay 0) every 5 steps, and the
             # bins at the whole cut-off instead of half of it (each engine's default)
             ("liggghts", 2, "mesh walls, every 5"), ("liggghts", 2, "mesh walls, bins 1 cut-off"),
-            ("lammps", 2, "granular, every 5"), ("lammps", 2, "granular, bins 1 cut-off")]
+            ("lammps", 2, "granular, every 5"), ("lammps", 2, "granular, bins 1 cut-off"),
+            # the deck that answers the flow rate alone (outputs.results: [flow_rate], the lean deck)
+            ("liggghts", 2, "flow rate only: mesh walls"), ("lammps", 2, "flow rate only: granular"),
+            ("lammps", 2, "flow rate only, linear: gran/hooke/history")]
 #: a linear law for the quick case's 3 mm glass beads with the Hertz law's contact time at the fill's
 #: impact speed (t_c = pi sqrt(m*/kn): kn = 1.2e3 N/m gives about 0.5 ms), walls twice as stiff
 LINEAR_LAW = {"model": "linear", "particle": {"density": 2500.0},
@@ -69,14 +72,14 @@ BINS = {"bins 1 cut-off": 1.0}
 CHUTE_STEPS = 1000
 
 
-def case(engine: str, ranks: int, linear: bool = False) -> dict:
+def case(engine: str, ranks: int, linear: bool = False, flow_only: bool = False) -> dict:
     data = yaml.safe_load((ROOT / "decks" / "quick.yaml").read_text())
     data = copy.deepcopy(data)
     if linear:
         data["materials"] = copy.deepcopy(LINEAR_LAW)
     data["fill"]["count"] = 3000
     data["discharge"] = {"duration": 0.3}
-    data["outputs"] = {"sample_interval": 0.005}
+    data["outputs"] = {"sample_interval": 0.005, **({"results": ["flow_rate"]} if flow_only else {})}
     data["engine"] = {**data["engine"], "name": engine, "ranks": ranks}
     return data
 
@@ -207,7 +210,8 @@ def run_variant(engine: str, ranks: int, pair: str) -> dict:
     name = variant_name(engine, ranks, pair)
     folder = WORK / name
     shutil.rmtree(folder, ignore_errors=True)   # the benchmark's own scratch (its decks are edited below)
-    c = case_from_dict(case(engine, ranks, linear=pair.startswith("linear")))
+    c = case_from_dict(case(engine, ranks, linear="linear" in pair.split(":")[0],
+                                     flow_only=pair.startswith("flow rate only")))
     plan = derive(c)
     eng = get_engine(engine)
     eng.prepare(c, folder, force=True, plan=plan)
