@@ -127,29 +127,36 @@ def granular_pair(folder: Path, plan) -> None:
     deck.write_text("\n".join(lines) + "\n")
 
 
+def deck_path(folder: Path, engine: str) -> Path:
+    return folder / ("in.liggghts" if engine == "liggghts" else "in.lammps")
+
+
+def deck_skin(text: str) -> float:
+    """The skin (m) of a deck's ``neighbor`` line."""
+    return float(re.search(r"^neighbor\s+(\S+) bin$", text, flags=re.M).group(1))
+
+
 def neighbour_skin(folder: Path, engine: str, skin: float) -> None:
     """Set the deck's neighbour skin (m) and, on LIGGGHTS, the bin size that follows it (half the
     cut-off, 2 r_max + skin, as the deck sets it)."""
-    deck = folder / ("in.liggghts" if engine == "liggghts" else "in.lammps")
-    lines = []
-    for line in deck.read_text().splitlines():
-        words = line.split()
-        if words[:1] == ["neighbor"]:
-            old = float(words[1])
-            line = f"neighbor        {skin!r} bin"
-        lines.append(line)
-    text = "\n".join(lines) + "\n"
+    deck = deck_path(folder, engine)
+    text = deck.read_text()
+    old = deck_skin(text)
+    text = re.sub(r"^neighbor\s+\S+ bin$", f"neighbor        {skin!r} bin", text, count=1, flags=re.M)
     if engine == "liggghts":
         text = re.sub(r"^neigh_modify    binsize (\S+)$",
                       lambda m: f"neigh_modify    binsize {float(m.group(1)) + 0.5 * (skin - old)!r}", text, flags=re.M)
     deck.write_text(text)
 
 
-def neighbour_list(folder: Path, engine: str, every: str | None, bin_size: float | None) -> None:
+def neighbour_list(folder: Path, engine: str, every: str | None, cutoffs: float | None, max_radius: float) -> None:
     """Set the deck's neighbour-list check (``every``: the ``neigh_modify`` line replacing ``delay 0``)
-    or its bin size (m; LIGGGHTS' placed-fill binsize line is replaced, else one is added)."""
-    deck = folder / ("in.liggghts" if engine == "liggghts" else "in.lammps")
-    text = re.sub(r"^neigh_modify    binsize \S+\n", "", deck.read_text(), flags=re.M)
+    or its bin size, ``cutoffs`` x the neighbour cut-off 2 ``max_radius`` (m) + the deck's skin
+    (LIGGGHTS' placed-fill binsize line is replaced, else one is added)."""
+    deck = deck_path(folder, engine)
+    text = deck.read_text()
+    bin_size = None if cutoffs is None else cutoffs * (2 * max_radius + deck_skin(text))
+    text = re.sub(r"^neigh_modify    binsize \S+\n", "", text, flags=re.M)
     line = every or f"neigh_modify    delay 0\nneigh_modify    binsize {bin_size!r}"
     text, n = re.subn(r"^neigh_modify    delay 0$", line, text, count=1, flags=re.M)
     if n != 1:
@@ -224,10 +231,10 @@ def run_variant(engine: str, ranks: int, pair: str) -> dict:
             neighbour_skin(folder, engine, radii * plan.particle_radius)
     for tag, line in EVERY.items():
         if pair.endswith(tag):
-            neighbour_list(folder, engine, line, None)
+            neighbour_list(folder, engine, line, None, plan.particle_radius)
     for tag, cutoffs in BINS.items():
         if pair.endswith(tag):
-            neighbour_list(folder, engine, None, cutoffs * 2.5 * plan.particle_radius)   # 2 r_max + the deck's skin of r_max / 2
+            neighbour_list(folder, engine, None, cutoffs, plan.particle_radius)
     record = eng.execute(folder)
     eng.collect(folder)
     log = "log.liggghts" if engine == "liggghts" else "log.lammps"

@@ -208,18 +208,19 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=No
                        float(np.sqrt(np.mean(res ** 2))))
 
 
-def beverloo_diameter(grains, folder) -> tuple[float, float, str]:
+def beverloo_diameter(plan, folder) -> tuple[float, float, str]:
     """Beverloo's grain diameter d (m), the grains' mean density (kg/m3) and what d is, from a run
-    plan's grain species: one size, its diameter; several sizes of sphere, the mass-weighted mean
-    diameter sum(n_i m_i d_i) / sum(n_i m_i) (``n_i`` number fractions; the mean the mass flow
-    weighs, the usual choice for a polydisperse Beverloo fit, and k then refers to it)."""
+    plan: one size, its diameter; several sizes of sphere, the mass-weighted mean diameter
+    sum(w_i d_i) over the fill's mass fractions w_i (the mean the mass flow weighs, the usual choice
+    for a polydisperse Beverloo fit, and k then refers to it)."""
+    grains = plan.grains
     if not grains or any(sp.kind != "sphere" for sp in grains):
         raise ReadError(f"{folder}: Beverloo's d needs spheres (a clump has no one diameter)")
     if len(grains) == 1:
         return 2 * grains[0].radius, grains[0].density, "grain diameter"
-    weights = np.array([sp.number_fraction * sp.mass for sp in grains])
-    d = float(np.sum(weights * [2 * sp.radius for sp in grains]) / weights.sum())
-    density = float(np.sum(weights * [sp.density for sp in grains]) / weights.sum())
+    weights = plan.fill.mass_fractions
+    d = float(sum(w * 2 * sp.radius for w, sp in zip(weights, grains)))
+    density = float(sum(w * sp.density for w, sp in zip(weights, grains)))
     return d, density, f"mass-weighted mean diameter of {len(grains)} sizes"
 
 
@@ -236,7 +237,7 @@ def beverloo_table(folders) -> pd.DataFrame:
         run = RunFolder(folder)
         summary = run.read_summary()
         plan = run.plan
-        d, density, d_is = beverloo_diameter(plan.grains, folder)
+        d, density, d_is = beverloo_diameter(plan, folder)
         fa = summary.get("frame_analyses", {})
         rho_b = fa.get("bulk_density_kg_m3") or plan.fill.packing_fraction * density
         rate = summary["flow_rate"]

@@ -461,17 +461,22 @@ def test_analyses_write_no_files(tmp_path, monkeypatch):
 
 
 def test_beverloo_d_of_several_sizes_is_their_mass_weighted_mean_diameter():
-    """Two sizes, half the grains each, the same density: masses 1 : 8, so d = (1 x 2 + 8 x 4) / 9 mm;
-    one size is its diameter; a clump has none."""
-    from types import SimpleNamespace
+    """Paper B's seven sizes: d = sum(n_i r_i^3 2 r_i) / sum(n_i r_i^3) (one density), worked here
+    from the case's radii and number fractions; one size is its diameter; a clump has none."""
+    from pathlib import Path
     from postprocess.flow_rate import beverloo_diameter
+    from siloflow.case_file import load_case
+    from siloflow.derived import derive
     from siloflow.errors import ReadError
-
-    def sphere(r, fraction=0.5, kind="sphere"):
-        return SimpleNamespace(kind=kind, radius=r, density=2500.0, number_fraction=fraction,
-                               mass=2500.0 * 4 / 3 * math.pi * r ** 3)
-    d, density, what = beverloo_diameter([sphere(0.001), sphere(0.002)], "run")
-    assert d == pytest.approx((1 * 0.002 + 8 * 0.004) / 9) and density == 2500.0 and "mass-weighted" in what
-    assert beverloo_diameter([sphere(0.0015, 1.0)], "run")[:2] == (0.003, 2500.0)
+    root = Path(__file__).resolve().parents[1]
+    plan = derive(load_case(root / "benchmarks" / "cases" / "accuracy_small.yaml"))
+    r, n = np.array(plan.fill.radii), np.array(plan.fill.number_fractions)
+    assert len(r) == 7
+    d, density, what = beverloo_diameter(plan, "run")
+    assert d == pytest.approx(np.sum(n * r ** 3 * 2 * r) / np.sum(n * r ** 3), rel=1e-12)
+    assert 2 * r.min() < d < 2 * r.max() and "mass-weighted" in what
+    assert density == pytest.approx(plan.grains[0].density, rel=1e-12)        # one density: the sum of w_i rho
+    mono = derive(load_case(root / "decks" / "quick.yaml"))
+    assert beverloo_diameter(mono, "run")[:2] == (2 * mono.grains[0].radius, mono.grains[0].density)
     with pytest.raises(ReadError, match="clump"):
-        beverloo_diameter([sphere(0.001, 1.0, kind="clump")], "run")
+        beverloo_diameter(derive(load_case(root / "decks" / "paper_a_clumps_quick.yaml")), "run")

@@ -360,6 +360,7 @@ def test_a_fast_case_runs_the_profile_proven_for_what_it_asks(quick_dict):
     assert choose_profile(["porosity"], made)[0] == "a"            # none bounds it: the fastest of the most
     assert choose_profile(None, made)[0] == "b"                    # two bounded each: the faster
 
+
 def test_the_time_to_answer_page_shows_the_committed_table():
     """docs/time_to_answer.md's table is benchmarks/results/time_to_answer/time_to_answer.csv as
     ``make bench-time-to-answer`` writes it (its --doc option puts it there again)."""
