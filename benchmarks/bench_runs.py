@@ -12,6 +12,30 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 #: LIGGGHTS' and LAMMPS' "Loop time of T on P procs for N steps with A atoms", one per ``run``
 LOOP = re.compile(r"^Loop time of (\S+) on (\d+) procs for (\d+) steps with (\d+) atoms", re.M)
+#: the sections of the engines' loop timing: LIGGGHTS 3.8 "Pair  time (%) = T (P)", LAMMPS' table
+#: "Pair    | min | avg | max | %varavg | %total" (its Other row has the average alone)
+SECTIONS = ("Pair", "Neigh", "Comm", "Output", "Modify", "Other")
+_LIGGGHTS_SECTION = re.compile(r"^(\w+)\s+time \(%\) = (\S+) \(", re.M)
+_LAMMPS_SECTION = re.compile(r"^(\w+)\s*\|\s*(?:(\S+)\s*\|\s*(\S+)|\s*\|\s*(\S+))", re.M)
+
+
+def loop_split(log_text: str) -> dict[str, float]:
+    """Seconds of each loop section (``pair_s`` ... ``other_s``: :data:`SECTIONS`) summed over a
+    log's ``run`` commands, LIGGGHTS' or LAMMPS' (the average over ranks); 0 for a section the log
+    never names (LIGGGHTS 3.8 has no Modify: its fixes are in Other)."""
+    out = {f"{s.lower()}_s": 0.0 for s in SECTIONS}
+    for name, seconds in _LIGGGHTS_SECTION.findall(log_text):
+        name = "Output" if name == "Outpt" else name          # LIGGGHTS 3.8 spells it so
+        if name in SECTIONS:
+            out[f"{name.lower()}_s"] += float(seconds)
+    for m in _LAMMPS_SECTION.finditer(log_text):
+        name, avg = m.group(1), m.group(3) or m.group(4)
+        if name in SECTIONS:
+            try:
+                out[f"{name.lower()}_s"] += float(avg)
+            except ValueError:
+                pass
+    return out
 
 
 def run_case(data: dict, work: Path, force: bool = False, cache: Path | None = None) -> tuple[Path, float]:

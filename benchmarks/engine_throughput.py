@@ -33,7 +33,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
-from bench_runs import LOOP  # noqa: E402
+from bench_runs import LOOP, loop_split  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "results" / "engines"
 WORK = ROOT / "benchmarks" / "work" / "engines"
@@ -201,7 +201,8 @@ def run_chute(ranks: int) -> dict:
     atom_steps, loop = loop_rate((folder / "log.lammps").read_text(errors="replace"))
     return {"variant": f"lammps-chute_{ranks}_gran-hooke-history", "engine": "lammps-chute", "ranks": ranks,
             "pair_style": "gran/hooke/history", "atom_steps": atom_steps, "loop_time_s": loop, "wall_time_s": wall,
-            "loop_rate": atom_steps / loop, "wall_rate": atom_steps / wall, "version": lammps.__version__}
+            "loop_rate": atom_steps / loop, "wall_rate": atom_steps / wall,
+            **loop_split((folder / "log.lammps").read_text(errors="replace")), "version": lammps.__version__}
 
 
 def variant_name(engine: str, ranks: int, pair: str) -> str:
@@ -243,7 +244,7 @@ def run_variant(engine: str, ranks: int, pair: str) -> dict:
     return {"variant": name, "engine": engine, "ranks": ranks, "pair_style": pair, "atom_steps": atom_steps,
             "loop_time_s": loop, "wall_time_s": record.wall_time, "loop_rate": atom_steps / loop,
             "wall_rate": atom_steps / record.wall_time, "dangerous_builds": dangerous_builds(log_text),
-            "version": eng.version()}
+            **loop_split(log_text), "version": eng.version()}
 
 
 def figure(table: pd.DataFrame) -> None:

@@ -128,6 +128,22 @@ class CartesianGrid:
         return {k: self.lo[a] + (np.arange(self.shape[a]) + 0.5) * self.spacing[a] for a, k in enumerate("xyz")}
 
     @property
+    def cells(self) -> int:
+        """How many cells (a Python int: no overflow however absurd the counts)."""
+        return math.prod(int(n) for n in self.shape)
+
+    def describe(self) -> str:
+        nx, ny, nz = (int(n) for n in self.shape)
+        if self.slab:
+            return f"a slab's planar grid of {nx} x {nz} (x, z) cells"
+        return f"a Cartesian grid of {nx} x {ny} x {nz} (x, y, z) cells"
+
+    def sums_bytes(self, kernel: Kernel, nfields: int, nsources: int) -> int:
+        """Bytes one :meth:`accumulate` of ``nfields`` columns from ``nsources`` sources holds at
+        once (float64): the sums on every cell, the node planes' source ranges, the sorted sources."""
+        return 8 * (self.cells * nfields + 3 * int(self.shape[2]) + nsources * (2 * nfields + 8))
+
+    @property
     def cell_volume(self) -> float:
         return float(np.prod(self.spacing))
 
@@ -183,6 +199,25 @@ class AxisymmetricGrid:
 
     def axes(self) -> dict:
         return {"r": (np.arange(self.nr) + 0.5) * self.dr, "z": self.z_lo + (np.arange(self.nz) + 0.5) * self.dz}
+
+    @property
+    def cells(self) -> int:
+        return self.nr * self.nz
+
+    def describe(self) -> str:
+        return f"an (r, z) grid of {self.nr} x {self.nz} cells" + (
+            f" (lattice method, refine {self.refine})" if self.method == "lattice" else "")
+
+    def sums_bytes(self, kernel: Kernel, nfields: int, nsources: int) -> int:
+        """Bytes one :meth:`accumulate` of ``nfields`` columns from ``nsources`` sources holds at
+        once (float64): the two slots of every column on every node, per thread for the Gaussian,
+        their sum and the combined sums; the lattice's tables and lattice
+        (``RingMomentLattice.estimate_bytes``)."""
+        sources = 8 * nsources * (2 * nfields + 8)
+        if self.method == "lattice":
+            return RingMomentLattice.estimate_bytes(self, kernel, self.refine, nfields, nsources) + sources
+        nchunks = max(1, min(numba.get_num_threads(), nsources // 1000 + 1)) if kernel.kind == GAUSSIAN else 0
+        return 8 * (((nchunks + 1) * 2 + 1) * self.cells * nfields + self.nr + 3 * self.nz) + sources
 
     def cell_volumes(self):
         """Volume of each annular cell (nz, nr), m3: pi (r_out^2 - r_in^2) dz."""

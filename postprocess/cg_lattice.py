@@ -88,12 +88,8 @@ class RingMomentLattice:
         self.grid, self.kernel, self.k, self.block = grid, kernel, int(refine), int(block)
         self.hr, self.hz = grid.dr / self.k, grid.dz / self.k
         c = kernel.cutoff
-        self.Q = int(math.ceil(c / self.hz))                    # z offsets -Q..Q
-        self.padz = self.Q + _STENCIL
-        nlz = 2 * self.padz + self.k * grid.nz + 1
-        self.nlz = nlz + (-nlz) % self.k                         # whole phases
+        self.Q, self.padz, self.nlz, self.nlr = self.dimensions(grid, kernel, refine)
         self.zl0 = grid.z_lo - self.padz * self.hz
-        self.nlr = int(math.ceil((grid.r_max + c) / self.hr)) + 1 + _STENCIL + 1
         r_nodes = (np.arange(grid.nr) + 0.5) * grid.dr
         rho_lat = (np.arange(self.nlr) - 1.0) * self.hr
         dz_vals = np.arange(self.Q + 1) * self.hz
@@ -108,6 +104,28 @@ class RingMomentLattice:
                 cols = np.nonzero(np.any(self.table[:, q, i0:i1, :] != 0.0, axis=(0, 1)))[0]
                 if len(cols):
                     self.bands[q, i0] = (int(cols[0]), int(cols[-1]) + 1)
+
+    @staticmethod
+    def dimensions(grid, kernel, refine: int) -> tuple[int, int, int, int]:
+        """The z offsets Q (-Q..Q lattice rows within the cutoff), the lattice's padding rows in z,
+        and its rows nlz (z) and columns nlr (radius) for ``grid`` and ``kernel``."""
+        k = int(refine)
+        Q = int(math.ceil(kernel.cutoff / (grid.dz / k)))
+        padz = Q + _STENCIL
+        nlz = 2 * padz + k * grid.nz + 1
+        nlr = int(math.ceil((grid.r_max + kernel.cutoff) / (grid.dr / k))) + 1 + _STENCIL + 1
+        return Q, padz, nlz + (-nlz) % k, nlr
+
+    @classmethod
+    def estimate_bytes(cls, grid, kernel, refine: int, nfields: int, nsources: int) -> int:
+        """Bytes the tables and one :meth:`accumulate` of ``nfields`` columns from ``nsources``
+        sources hold at once (float64): the moment table 3 (Q + 1) nr nlr, the lattice per thread
+        and its phase copy nlz nlr nfields, and the sums on the grid (six nz nr nfields)."""
+        import numba
+        Q, _, nlz, nlr = cls.dimensions(grid, kernel, refine)
+        nchunks = max(1, min(numba.get_num_threads(), nsources // 20000 + 1))
+        cells = grid.nr * grid.nz
+        return 8 * (3 * (Q + 1) * grid.nr * nlr + (nchunks + 1) * nlz * nlr * nfields + 6 * cells * nfields)
 
     def accumulate(self, pos, weights, dest, nfields, codes):
         """Kernel sums in the exact method's layout (nz, nr, nfields, 2) for sources at ``pos``

@@ -4,13 +4,13 @@ profiles and numbers (:func:`analyse_cg`: :class:`CgResults`, data only); the re
 (``postprocess.report.cg``) writes fields.nc (NetCDF), the profiles as CSV, a summary and figures."""
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from siloflow.atomic_files import read_json
 from siloflow.errors import ReadError
 from siloflow.run_folder import CG_SUMMARY_NAME, RunFolder
 
@@ -18,7 +18,8 @@ from .cg_analyses import axial_profiles, janda_fit, kinetic_peak_height, outlet_
 from .cg_kernels import make_kernel
 from .cg_grids import AxisymmetricGrid, CartesianGrid
 from .coarse_grain import CoarseGraining
-from .dumps import read_frames
+from .dumps import PRIMITIVE_CONTACT_COLUMNS, frames_by_step, primitive_wall_contacts, read_frames
+from .paraview import particle_dump_files
 
 
 @dataclass
@@ -43,6 +44,7 @@ class CgSetup:
     clump_mass: str = "body"                 # how the dumps carry a clump's mass (clump_bodies.CLUMP_MASS)
     outlet_offset: float = 0.0               # an eccentric outlet's centre at x = outlet_offset, m
     half_depth: float | None = None          # a box silo: the grid is Cartesian, y within -+ half_depth, m
+    primitive_walls: list = field(default_factory=list)   # [(layout's primitive wall, its dump files)]: more wall contacts
 
 
 def setup_from_run(folder) -> CgSetup:
@@ -53,12 +55,12 @@ def setup_from_run(folder) -> CgSetup:
     summary = run.read_summary()
     dt = plan.dt
     rate = summary["flow_rate"]
-    atoms = run.dump_files("particles")
-    if atoms is None:
-        raise ReadError(f"{run.path}: no particle dumps (outputs.dump_interval was not set)")
+    atoms = particle_dump_files(run)
     layout = run.dump_layout
     contacts = run.dump_files("contacts")
     walls = run.dump_files("wall_contacts") if layout.wall_contact_columns else None
+    primitives = [(w, [f for f in run.dump_files("primitive_walls") or [] if f.name.startswith(f"primitive_{w['name']}.")])
+                  for w in layout.primitive_walls] if walls else []
     g = plan.geometry
     top = summary.get("frame_analyses", {}).get("settled_surface_height_m") or g.top
     densities = {sp.density for sp in plan.species}
@@ -73,7 +75,7 @@ def setup_from_run(folder) -> CgSetup:
                    int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, layout.wall_contact_columns or None,
                    slab_thickness=g.thickness if g.kind == "planar" else None, note=note,
                    clump_mass=layout.clump_mass, outlet_offset=getattr(g, "outlet_offset", 0.0),
-                   half_depth=g.half_depth if g.kind == "box" else None)
+                   half_depth=g.half_depth if g.kind == "box" else None, primitive_walls=primitives)
 
 
 @dataclass
@@ -126,6 +128,10 @@ def analyse_cg(setup: CgSetup, kernel_name: str = "gaussian", width: float = 2.0
         grid = CartesianGrid([-setup.r_max, -ry, setup.z_lo], [setup.r_max, ry, setup.z_hi], (nr, nr, nz))
     contacts = read_frames(setup.contacts, columns=setup.contact_columns) if setup.contacts else None
     walls = read_frames(setup.wall_contacts, columns=setup.wall_contact_columns) if setup.wall_contacts else None
+    if walls is not None and setup.primitive_walls:      # LIGGGHTS' primitive side walls: their grains' contacts
+        walls = frames_by_step(walls, *((primitive_wall_contacts(f, w["style"], w["args"])
+                                         for f in read_frames(files, columns=PRIMITIVE_CONTACT_COLUMNS))
+                                        for w, files in setup.primitive_walls if files))
     cg = CoarseGraining(grid, kernel, setup.particle_density, species, per_frame=per_frame,
                         clump_mass=setup.clump_mass).run(
         in_window(read_frames(setup.atoms, every=every)), contacts, walls)
@@ -165,9 +171,9 @@ def scaling_across_runs(folders) -> dict:
     rows = []
     for folder in folders:
         try:
-            s = json.loads((Path(folder) / CG_SUMMARY_NAME).read_text())
-        except (OSError, ValueError):
-            raise ReadError(f"{folder}: no {CG_SUMMARY_NAME} (run `siloflow cg` first)") from None
+            s = read_json(Path(folder) / CG_SUMMARY_NAME, "a coarse-graining summary", allow_nan=True)
+        except ReadError as exc:
+            raise ReadError(f"{folder}: no readable {CG_SUMMARY_NAME} ({exc}; run `siloflow cg` first)") from None
         if "v_z_centre_outlet" not in s:
             raise ReadError(f"{folder}: not an axisymmetric coarse-graining")
         rows.append({"folder": str(folder), "R": s["outlet_radius_m"], "v_z0": abs(s["v_z_centre_outlet"]),

@@ -30,10 +30,11 @@ import numpy as np
 from .analysis_base import FrameAnalysis, StepCursor
 from .cg_contacts import joined_contacts, species_of
 from .cg_cores import CONTACT_CODES, PARTICLE_CODES, PARTICLE_COLUMNS
-from .cg_grids import AxisymmetricGrid, CartesianGrid, contact_points, particle_weights
+from .cg_grids import AxisymmetricGrid, CartesianGrid, contact_points, line_points_needed, particle_weights
 from .cg_kernels import Kernel
 from .clump_bodies import body_centres, body_frame
 from .dumps import read_frames
+from .memory import check_memory, memory_budget
 
 # the grids are re-exported: every user of CoarseGraining builds one
 __all__ = ["AxisymmetricGrid", "CartesianGrid", "CoarseGraining", "coarse_grain_frame", "fields_from_sums"]
@@ -127,7 +128,10 @@ class CoarseGraining(FrameAnalysis):
 
     Frames need positions, velocities, radius, and mass (or ``particle_density`` (kg/m3) to
     compute it from the radius). Memory: one frame, plus the grid sums (times frames if
-    per_frame).
+    per_frame); before the first frame's sums are allocated, :meth:`memory_estimate` is checked
+    against half the machine's available memory (``postprocess.memory``), and with per_frame
+    again at every frame: a grid beyond it is refused (``SetupError`` naming the estimate and
+    the options that size the grid), never allocated.
 
     After :meth:`run`, in :attr:`results` (and as attributes): ``sum`` (the kernel sums over all
     frames, as :func:`coarse_grain_frame` returns them), ``frames`` (each frame's sums, per_frame
@@ -155,6 +159,7 @@ class CoarseGraining(FrameAnalysis):
         self.class_density = None               # kg/m3 per species class, from the first frame
         self.frames: list[dict] = []
         self.steps: list[int] = []
+        self._memory: tuple | None = None      # (budget, first frame's particles, points, species) once checked
 
     def _mass(self, frame):
         if "mass" in frame.data:
@@ -183,6 +188,7 @@ class CoarseGraining(FrameAnalysis):
             if np.all(v > 0):                  # each class's mass per solid volume
                 self.class_density = m / v
         pos, vel, masses = frame.positions(), frame.velocities(), self._mass(frame)
+        self._check_memory(frame.n, joined, len(self.classes or []))
         sums = coarse_grain_frame(self.grid, self.kernel, pos, vel, masses, sp, len(self.classes or []), joined,
                                   self.n_s)
         if self.per_frame:
@@ -194,6 +200,55 @@ class CoarseGraining(FrameAnalysis):
                 self.sum[k] += sums[k]
         self.steps.append(int(frame.timestep))
         return {"particles": frame.n, "contacts": 0 if joined is None else len(joined[0]), "mass": float(masses.sum())}
+
+    def memory_estimate(self, n_particles: int, n_points: int = 0, n_species: int = 0, kept_frames: int = 0) -> int:
+        """Bytes (float64 arrays) the coarse-graining holds at once for frames of ``n_particles``
+        particles and ``n_points`` contact line-integral points, ``n_species`` partial fields and
+        ``kept_frames`` per-frame sums: the running and this frame's sums on every cell, the
+        kept frames', and the larger of one accumulation (``grid.sums_bytes``) and the fields
+        computed from the sums (about 30 + 14 per species values per cell)."""
+        cells = self.grid.cells
+        nf = len(PARTICLE_COLUMNS) * (1 + n_species)
+        nc = 9 if n_points else 0
+        held = 8 * cells * (nf + nc) * (2 + kept_frames)
+        accumulate = max(self.grid.sums_bytes(self.kernel, nf, n_particles),
+                         self.grid.sums_bytes(self.kernel, 9, n_points) if n_points else 0)
+        fields = 8 * cells * (nf + 2 * nc + 30 + 14 * n_species)
+        return held + max(accumulate, fields)
+
+    def _memory_fix(self) -> str:
+        grid = self.grid
+        fix = "choose fewer cells: siloflow cg --nr and --nz (Python: Run.cg(nr=..., nz=...))"
+        if grid.kind == "cartesian" and not getattr(grid, "slab", False):
+            fix += "; a Cartesian grid has nr x nr x nz cells (--grid rz: nr x nz)"
+        if getattr(grid, "method", "") == "lattice":
+            fix += "; or a smaller --refine (refine=...), or --method exact"
+        if self.species is not None:
+            fix += "; --species none (species=None) drops the per-species sums"
+        return fix
+
+    def _check_memory(self, n_particles: int, joined, n_species: int) -> None:
+        """Refuse (``SetupError``) a grid whose sums would not fit in the memory budget, before
+        the first frame's are allocated, and with ``per_frame`` each next frame's that would not."""
+        if self._memory is None:
+            if joined is None:
+                points = 0
+            elif self.n_s is not None:
+                points = int(self.n_s) * len(joined[0])
+            else:
+                points = int(line_points_needed(np.linalg.norm(joined[0] - joined[1], axis=1), self.kernel).sum())
+            self._memory = (memory_budget(), n_particles, points, n_species)
+            need = self.memory_estimate(n_particles, points, n_species, 1 if self.per_frame else 0)
+            check_memory(need, f"coarse-graining on {self.grid.describe()} ({self.grid.cells:,} cells)",
+                         self._memory_fix() + ("; --per-frame (per_frame=True) keeps every frame's sums too"
+                                               if self.per_frame else ""), self._memory[0])
+        elif self.per_frame:
+            budget, particles, points, species = self._memory
+            need = self.memory_estimate(particles, points, species, len(self.frames) + 1)
+            check_memory(need, f"--per-frame (per_frame=True) on {self.grid.describe()}, keeping the sums of "
+                         f"{len(self.frames) + 1} frames,",
+                         "leave --per-frame off (the time average needs one frame's sums), keep fewer frames "
+                         "(--every n; Python every=n) or " + self._memory_fix(), budget)
 
     def run(self, frames, contacts=None, wall_contacts=None, start: int = 0, stop: int | None = None,
             step: int = 1):

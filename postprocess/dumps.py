@@ -244,7 +244,11 @@ def _header(r: _Lines, path: Path, columns):
         line = whole_line()
         if not _INTEGER.fullmatch(line):
             raise fail(f"expected the {what} (an integer), found {_show(line) if line else 'the end of the file'}")
-        return int(line)
+        digits = line.strip().lstrip(b"+-").lstrip(b"0")
+        value = int(line) if len(digits) <= 19 else None     # (Python refuses to convert 4300 digits or more)
+        if value is None or not -2 ** 63 <= value < 2 ** 63:   # the engines count in 64 bits, and so do the tables
+            raise fail(f"the {what} {_show(line)} does not fit a 64-bit integer: no LAMMPS or LIGGGHTS dump holds it")
+        return value
 
     def item(prefixes: tuple[bytes, ...]) -> bytes:
         line = whole_line()
@@ -538,3 +542,54 @@ def last_frame(source, columns: Sequence[str] | None = None) -> Frame:
         names = [str(p) for p in dump_files(source)]
         raise ReadError(f"{', '.join(names[:3])}{', ...' if len(names) > 3 else ''}: no frames (empty file?)")
     return frame
+
+
+#: the per-atom columns of a LIGGGHTS primitive wall's contact dump (siloflow.engine.liggghts.side_walls):
+#: the touching grain, then its stored wall force (``f_force_<fix>[1..3]``, the force on the grain, N)
+PRIMITIVE_CONTACT_COLUMNS = ["id", "x", "y", "z", "radius", "fx", "fy", "fz"]
+
+
+def primitive_wall_contacts(frame: Frame, style: str, args: Sequence[float]) -> Frame:
+    """A primitive wall's contact dump frame (one row per touching grain: :data:`PRIMITIVE_CONTACT_COLUMNS`)
+    as a wall/gran/local frame: the contact point on the wall (``xw yw zw``: the grain centre's
+    projection on a ``zcylinder`` of radius, axis x, y = ``args``, or on the plane ``xplane``/``yplane``
+    at ``args[0]``), the grain's centre (``x1 y1 z1``), ``mesh``/``triangle`` -1, ``id1`` and the force on
+    the grain (``fx fy fz``). A grain touches a primitive at most once, at its own height."""
+    d = frame.data
+    missing = [c for c in PRIMITIVE_CONTACT_COLUMNS if c not in d]
+    if missing:
+        raise ReadError(f"{frame.source}: a primitive wall's contact dump needs the columns {missing}")
+    x, y, z = (d[c].to_numpy(float) for c in ("x", "y", "z"))
+    if style == "zcylinder":
+        radius, cx, cy = (float(a) for a in args)
+        rx, ry = x - cx, y - cy
+        rho = np.hypot(rx, ry)
+        scale = np.divide(radius, rho, out=np.ones_like(rho), where=rho > 0)
+        xw, yw = cx + rx * scale, cy + ry * scale
+    elif style == "xplane":
+        xw, yw = np.full_like(x, float(args[0])), y
+    elif style == "yplane":
+        xw, yw = x, np.full_like(y, float(args[0]))
+    else:
+        raise ReadError(f"{frame.source}: no contact point for a primitive wall of style {style!r}")
+    n = len(d)
+    data = pd.DataFrame({"xw": xw, "yw": yw, "zw": z, "x1": x, "y1": y, "z1": z,
+                         "mesh": np.full(n, -1, np.int64), "triangle": np.full(n, -1, np.int64),
+                         "id1": d["id"].to_numpy(np.int64),
+                         "fx": d["fx"].to_numpy(float), "fy": d["fy"].to_numpy(float), "fz": d["fz"].to_numpy(float)})
+    return Frame(frame.timestep, frame.box, data, kind="entries", boundary=frame.boundary, source=frame.source)
+
+
+def frames_by_step(*streams: Iterable[Frame]) -> Iterator[Frame]:
+    """The frames of several contact streams (e.g. mesh walls' and primitive walls') joined per
+    timestep, in step order: one frame of each step holding every stream's rows there."""
+    steps: dict[int, list[Frame]] = {}
+    for stream in streams:
+        for f in stream:
+            steps.setdefault(f.timestep, []).append(f)
+    for step in sorted(steps):
+        parts = steps[step]
+        data = pd.concat([p.data for p in parts], ignore_index=True) if len(parts) > 1 else parts[0].data
+        first = parts[0]
+        yield Frame(step, first.box, data, kind="entries", boundary=first.boundary,
+                    source=", ".join(p.source for p in parts))

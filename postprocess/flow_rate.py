@@ -5,7 +5,8 @@
 * Wr(t) = -dh/dt * A * rho_p * phi_bulk: from the speed of the free surface h(t) (m) in the
   cylinder section (area A, m2), with the bulk solid fraction phi_bulk.
 * Steady state: the longest stretch in which the rate stays within a tolerance of its median.
-* Beverloo: W = C rho_b sqrt(g) (D0 - k d)^(5/2), C and k fitted across runs, with standard errors.
+* Beverloo: W = C rho_b sqrt(g) (D0 - k d)^(5/2), C and k fitted across runs, with standard errors;
+  a run that clogged or never flowed steadily is no point of it (:func:`flow_verdict`).
 """
 from __future__ import annotations
 
@@ -165,6 +166,52 @@ def beverloo(D0, d, C: float, k: float, rho_b, g: float = 9.81, slot_length=None
     return C * np.asarray(rho_b, float) * np.sqrt(g) * length * span ** 1.5
 
 
+#: the parameters a Beverloo fit finds (C and k); it needs at least one run more than these
+BEVERLOO_PARAMETERS = 2
+#: the largest rms relative residual of a Beverloo fit given as a result. Steady discharges of one
+#: material follow the law to a few per cent (a fit to rates with 1 % noise leaves 1-2 %); a fit that
+#: misses its runs by a fifth on average describes none of them (a clog or a run not yet in steady
+#: flow among them, orifices near k d, or another law), and its C and k are no answer
+MAX_RMS_RELATIVE_RESIDUAL = 0.20
+
+
+def _finite(value) -> float:
+    """``value`` as a float if it is a number (not a bool), else NaN."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return float("nan")
+    return float(value)
+
+
+def flow_verdict(summary: dict) -> dict:
+    """What a run's summary (``results/summary.json``) says of its discharge as one steady flow:
+    ``clogged`` (True when the post-processing found it clogged, ``discharge.clog``, or the engine
+    stopped its until_steady discharge as clogged; False; None when the summary predates clog
+    detection), ``steady_t_start_s`` and ``steady_t_end_s`` (the steady window detected from the
+    rate, s; NaN without one) and ``unsteady``: why its flow rate is no steady one, '' when it is
+    (not clogged, a steady window detected, a finite positive flow rate). A detected window of too
+    few samples to be resolved is kept: the flow rate is the straight line over its own window."""
+    def section(name):
+        value = summary.get(name)
+        return value if isinstance(value, dict) else None
+
+    clog, stop, steady, rate = section("clogged"), section("discharge_stop"), section("steady_window_detected"), \
+        section("flow_rate") or {}
+    stopped = stop is not None and stop.get("reason") == "clogged"
+    clogged = True if clog is not None or stopped else (False if "clogged" in summary else None)
+    why = ""
+    if clog is not None:
+        why = (f"its discharge clogged: {_finite(clog.get('discharged_mass_kg')) * 1000:.3g} g out, nothing after "
+               f"t = {_finite(clog.get('t_last_outflow_s')):.3g} s from opening")
+    elif stopped:
+        why = "its discharge clogged: the engine stopped it when nothing flowed"
+    elif "steady_window_detected" in summary and steady is None:
+        why = "no steady discharge was detected in it (its rate never held near its median)"
+    elif not _finite(rate.get("rate")) > 0:
+        why = "its results hold no steady flow rate"
+    return {"clogged": clogged, "steady_t_start_s": _finite((steady or {}).get("t_start")),
+            "steady_t_end_s": _finite((steady or {}).get("t_end")), "unsteady": why}
+
+
 @dataclass
 class BeverlooFit:
     C: float
@@ -178,14 +225,17 @@ class BeverlooFit:
 def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=None, slot_ends=False) -> BeverlooFit:
     """Fit C and k of Beverloo's law to flow rates ``W`` (kg/s) of runs with orifice diameters
     ``D0`` (m), grain diameters ``d`` (m) and bulk densities ``rho_b`` (kg/m3); needs >= 3 runs
-    with at least 2 different D0/d. ``slot_length`` (m, per run): slots of width D0, the
-    two-dimensional law (:func:`beverloo`). Standard errors from the fit covariance (scaled by the
-    residuals, or by ``W_stderr`` when given)."""
+    with at least 2 different D0/d (:data:`BEVERLOO_PARAMETERS` + 1 runs: C, k and one to check them).
+    ``slot_length`` (m, per run): slots of width D0, the two-dimensional law (:func:`beverloo`).
+    Standard errors from the fit covariance (scaled by the residuals, or by ``W_stderr`` when given).
+    The fit is returned whatever its residual: :func:`check_beverloo_fit` refuses a poor one."""
     D0, d, W, rho_b = (np.asarray(a, float) * np.ones(len(np.atleast_1d(W))) for a in (D0, d, W, rho_b))
     L = None if slot_length is None else np.asarray(slot_length, float) * np.ones(len(W))
     ends = np.asarray(slot_ends, bool) * np.ones(len(W), bool)
-    if len(W) < 3 or len(np.unique(np.round(D0 / d, 9))) < 2:
-        raise ValueError("a Beverloo fit needs at least 3 runs and 2 different orifice/grain size ratios")
+    if len(W) < BEVERLOO_PARAMETERS + 1 or len(np.unique(np.round(D0 / d, 9))) < 2:
+        raise ValueError(f"a Beverloo fit needs at least {BEVERLOO_PARAMETERS + 1} runs (C and k, and one more to "
+                         f"check them) and 2 different orifice/grain size ratios; it was given {len(W)} run(s) of "
+                         f"{len(np.unique(np.round(D0 / d, 9)))} ratio(s)")
 
     # W^(1/n) is linear in D0 and d (n = 5/2, a slot's 3/2): (W / (C rho_b sqrt g [L]))^(1/n) = D0 - k d
     n = 2.5 if L is None else 1.5
@@ -206,6 +256,19 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=No
     err = np.sqrt(np.diag(pcov)) if np.all(np.isfinite(pcov)) else np.array([np.nan, np.nan])
     return BeverlooFit(float(popt[0]), float(err[0]), float(popt[1]), float(err[1]), len(W),
                        float(np.sqrt(np.mean(res ** 2))))
+
+
+def check_beverloo_fit(fit: BeverlooFit, max_residual: float = MAX_RMS_RELATIVE_RESIDUAL) -> None:
+    """Refuse (``ValueError``) a fit that is no answer: an rms relative residual above
+    ``max_residual`` (:data:`MAX_RMS_RELATIVE_RESIDUAL`), or C, k or the residual not a number."""
+    values = (fit.C, fit.k, fit.rms_relative_residual)
+    if not all(np.isfinite(values)):
+        raise ValueError(f"the Beverloo fit gave no numbers (C = {fit.C}, k = {fit.k}, rms residual "
+                         f"{fit.rms_relative_residual})")
+    if fit.rms_relative_residual > max_residual:
+        raise ValueError(f"the Beverloo fit misses its {fit.n_runs} runs by {fit.rms_relative_residual:.1%} (rms "
+                         f"relative residual; at most {max_residual:.0%} is taken as a fit), so C = {fit.C:.4g} and "
+                         f"k = {fit.k:.4g} describe none of them")
 
 
 def beverloo_diameter(plan, folder) -> tuple[float, float, str]:
@@ -231,7 +294,9 @@ def beverloo_table(folders) -> pd.DataFrame:
     outlet's length ends at walls or edges: Beverloo's L - k d), D0_is (what D0 is: a silo from STL
     with a polygon outlet gives its hydraulic diameter 4 A / P, the round law approximated), bulk density
     rho_b (kg/m3, measured in the settled bed when dumps exist, else packing fraction x rho_p),
-    steady flow rate W and its standard error (kg/s), gravity (m/s2)."""
+    steady flow rate W and its standard error (kg/s), gravity (m/s2), ``clogged`` and ``left_out``:
+    why the run is no point of a fit ('' when it is one: :func:`flow_verdict`; W is NaN when it
+    has none)."""
     rows = []
     for folder in folders:
         run = RunFolder(folder)
@@ -240,9 +305,8 @@ def beverloo_table(folders) -> pd.DataFrame:
         d, density, d_is = beverloo_diameter(plan, folder)
         fa = summary.get("frame_analyses", {})
         rho_b = fa.get("bulk_density_kg_m3") or plan.fill.packing_fraction * density
-        rate = summary["flow_rate"]
-        if not (rate["rate"] and np.isfinite(rate["rate"])):
-            raise ReadError(f"{folder}: no steady flow rate in its results")
+        verdict = flow_verdict(summary)
+        rate = summary.get("flow_rate") if isinstance(summary.get("flow_rate"), dict) else {}
         g = plan.geometry
         L = g.thickness if g.kind == "planar" else 2 * g.outlet_half_y if g.kind == "box" and g.outlet != "circle" \
             else np.nan
@@ -250,6 +314,8 @@ def beverloo_table(folders) -> pd.DataFrame:
                      "L": L, "L_ends": g.kind == "box",
                      "D0_is": "hydraulic diameter 4A/P of a polygon outlet (the round law approximated)"
                      if g.kind == "mesh" and g.outlet == "polygon" else "outlet width or diameter",
-                     "rho_b": float(rho_b), "W": rate["rate"], "W_stderr": rate.get("stderr", np.nan), "g": plan.gravity,
-                     "rho_b_source": "measured" if fa.get("bulk_density_kg_m3") else "case packing fraction"})
+                     "rho_b": float(rho_b), "W": _finite(rate.get("rate")), "W_stderr": _finite(rate.get("stderr")),
+                     "g": plan.gravity,
+                     "rho_b_source": "measured" if fa.get("bulk_density_kg_m3") else "case packing fraction",
+                     "clogged": verdict["clogged"], "left_out": verdict["unsteady"]})
     return pd.DataFrame(rows)

@@ -15,7 +15,6 @@ single quick run leaves most comparisons "not resolved" rather than claiming wha
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +23,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from siloflow.atomic_files import read_json
 from siloflow.errors import ReadError
 from siloflow.run_folder import RESULT_TABLES, RunFolder
 
@@ -114,11 +114,11 @@ class ModelRuns:
         for folder in runs.folders:
             run = RunFolder(folder)
             try:
-                summary = json.loads(run.summary_file.read_text(encoding="utf-8"))
+                summary = read_json(run.summary_file, "a summary of results", allow_nan=True)
                 # the frame analyses' numbers (bulk density, porosity regions) sit in their own section
                 runs.summaries.append({**summary, **(summary.get("frame_analyses") or {})})
                 runs.sectors.append(pd.read_csv(run.results / RESULT_TABLES["wall_pressure_sectors"]))
-            except (OSError, ValueError) as exc:
+            except (OSError, ValueError, ReadError) as exc:
                 raise ReadError(f"{folder}: no post-processed results ({exc}); run 'siloflow post' on it") from None
             runs.open_times.append(open_time(run))
         return runs

@@ -199,7 +199,8 @@ def extract_run(folder, batches: int, width_flow_rb: float, width_stress_rb: flo
         lo = int(math.ceil(t0 / dt))
         hi = int(math.floor(t1 / dt)) if b == batches - 1 else int(math.ceil(t1 / dt)) - 1
         window = replace(setup, step_lo=lo, step_hi=hi, atoms=files_in(setup.atoms, lo, hi),
-                         contacts=files_in(setup.contacts, lo, hi), wall_contacts=files_in(setup.wall_contacts, lo, hi))
+                         contacts=files_in(setup.contacts, lo, hi), wall_contacts=files_in(setup.wall_contacts, lo, hi),
+                         primitive_walls=[(w, files_in(f, lo, hi)) for w, f in setup.primitive_walls])
         flow = analyse_cg(window, "gaussian", w_flow, "m", nr, nz, species="radius", method=CG_METHOD).dataset
         stress = flow if w_stress == w_flow else analyse_cg(window, "gaussian", w_stress, "m", nr, nz, method=CG_METHOD,
                                                              species="radius").dataset

@@ -1,9 +1,10 @@
 """ParaView's view of a run: VTK objects built from what a run folder holds, for either engine.
 
 - :func:`particle_series`: one ``vtkPolyData`` per particle dump frame (read with
-  ``postprocess.dumps``), points at the centres, one vertex each, with the point arrays ``id``,
-  ``type``, ``radius`` and, where the dump has them, ``mass``, ``body`` (a clump's ``mol``),
-  ``velocity``, ``force`` and ``omega`` (vectors); the same arrays whichever engine wrote the dumps;
+  ``postprocess.dumps``; an empty dump file is skipped and listed), points at the centres, one
+  vertex each, with the point arrays ``id``, ``type``, ``radius`` and, where the dump has them,
+  ``mass``, ``body`` (a clump's ``mol``), ``velocity``, ``force`` and ``omega`` (vectors); the
+  same arrays whichever engine wrote the dumps;
 - :func:`wall_series`: one ``vtkPolyData`` of the walls (``meshes/*.stl`` of the plan's walls)
   per wall-force sample, with the cell arrays ``wall`` (index into the field data's
   ``wall_names``), ``band`` and ``sector`` (-1 off the sensors), ``pressure`` (Pa, the sensor
@@ -29,9 +30,10 @@ import numpy as np
 
 from siloflow.errors import ReadError
 from siloflow.extras import require
-from siloflow.run_folder import RunFolder
+from siloflow.run_folder import PARTICLE_DUMPS, RunFolder
 
 from .dumps import Frame, read_frames
+from .memory import check_memory
 from .wall_pressure import band_mean, band_pressures, wide_forces
 
 #: the dump's vector columns and their names in VTK
@@ -125,18 +127,50 @@ class Snapshot:
     data: object
 
 
-def particle_series(folder, every: int = 1) -> Iterator[Snapshot]:
-    """The run's particle dumps, frame by frame (streamed: one frame in memory), as
-    :func:`particle_polydata` at time = step x the plan's time step. ``ReadError`` when the run
-    wrote no particle dumps."""
-    run = folder if isinstance(folder, RunFolder) else RunFolder(folder)
+def particle_dump_files(run: RunFolder) -> list[Path]:
+    """The run's particle dump files in step order; ``ReadError`` saying why there are none: the
+    case asked for none, or the files the plan says the run wrote are missing from output/dumps/."""
     files = run.dump_files("particles")
-    if files is None:
-        raise ReadError(f"{run.path}: no particle dumps (outputs.dump_interval was not set)")
-    dt = run.plan.dt
-    for frame in read_frames(files, every=every):
-        time = frame.timestep * dt
-        yield Snapshot(frame.timestep, time, particle_polydata(frame, time))
+    if files is not None:
+        return files
+    if run.plan.outputs.dump_every is None:
+        raise ReadError(f"{run.path}: no particle dumps: its case asked for none (no outputs.dump_interval and no "
+                        "result that needs frames in outputs.results)")
+    raise ReadError(f"{run.path}: the particle dumps are missing: the run was to write one every "
+                    f"{run.plan.outputs.dump_every} steps as {run.dumps / PARTICLE_DUMPS}, and there is none "
+                    f"(deleted or moved, or the run stopped before the first)")
+
+
+class ParticleSeries:
+    """The run's particle dumps, frame by frame (streamed: one frame in memory), as
+    :func:`particle_polydata` at time = step x the plan's time step; every ``every``-th frame.
+    ``ReadError`` (:func:`particle_dump_files`) when there are none. A dump file that holds no
+    frame (empty) is skipped and listed in :attr:`empty` as the iteration passes it."""
+
+    def __init__(self, run: RunFolder, every: int = 1):
+        self.run, self.every = run, every
+        self.files = particle_dump_files(run)
+        self.empty: list[Path] = []
+
+    def __iter__(self) -> Iterator[Snapshot]:
+        dt = self.run.plan.dt
+        self.empty = []
+        k = 0
+        for path in self.files:
+            frames = 0
+            for frame in read_frames(path):
+                if k % self.every == 0:
+                    time = frame.timestep * dt
+                    yield Snapshot(frame.timestep, time, particle_polydata(frame, time))
+                k += 1
+                frames += 1
+            if not frames:
+                self.empty.append(path)
+
+
+def particle_series(folder, every: int = 1) -> ParticleSeries:
+    """The run folder ``folder``'s :class:`ParticleSeries`."""
+    return ParticleSeries(folder if isinstance(folder, RunFolder) else RunFolder(folder), every)
 
 
 # ----------------------------------------------------------------------------- walls
@@ -381,6 +415,19 @@ def meridian_grid(ds):
     return grid
 
 
+def revolved_bytes(ds, n_theta: int) -> int:
+    """Bytes (float64) :func:`revolved_grid` holds at once for ``ds`` in ``n_theta`` sectors: each
+    array's values in every 3D cell twice (turned or broadcast and flattened, then VTK's copy; a
+    symmetric tensor as 9 components) and the points five times (mesh, stack, order, VTK's copy)."""
+    nr, nz = int(ds.sizes["r"]), int(ds.sizes["z"])
+    comps = 0
+    for name in ds.data_vars:
+        var = ds[name]
+        n = math.prod(int(var.sizes[d]) for d in var.dims if d not in ("z", "r"))
+        comps += n // 6 * 9 if "sym" in var.dims else n
+    return 8 * (2 * nz * nr * int(n_theta) * comps + 15 * (nr + 1) * (int(n_theta) + 1) * (nz + 1))
+
+
 def revolved_grid(ds, n_theta: int = N_THETA):
     """An (r, z) grid's fields revolved about the z axis into ``n_theta`` sectors, as
     ``vtkStructuredGrid`` of hexahedra (prisms on the axis), vectors and tensors turned from
@@ -390,6 +437,10 @@ def revolved_grid(ds, n_theta: int = N_THETA):
     NetCDF's integrals (the mass, from rho) to round-off."""
     if n_theta < 3:
         raise ValueError("a revolved grid needs at least 3 sectors")
+    check_memory(revolved_bytes(ds, n_theta), f"the revolved VTK grid of {ds.sizes['r']} x {n_theta} x "
+                 f"{ds.sizes['z']} (r, theta, z) cells",
+                 "revolve into fewer sectors (siloflow vtk --theta; Python n_theta=...), or coarse-grain on "
+                 "fewer cells (siloflow cg --nr, --nz)")
     _, dm, _ = vtk_modules()
     r_e, z_e = _edges(ds["r"].values), _edges(ds["z"].values)
     nr, nz = len(r_e) - 1, len(z_e) - 1

@@ -104,24 +104,50 @@ def sweep_table_runs(table_file: Path) -> list[Path]:
     return runs
 
 
+def _left_out_lines(table) -> str:
+    """The runs left out of a Beverloo fit, one line each with why ('' when none is)."""
+    left = table[table.left_out != ""]
+    return "".join(f"\n  left out: {row.run}: {row.left_out}" for row in left.itertuples())
+
+
 def beverloo(folders: Sequence[Path]):
     """Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) (slabs' slots: C rho_b sqrt(g) L (D0 - k
     d)^(3/2), L the slab's depth) fitted across finished runs (different orifices or grains), or across the complete runs of one sweep table (``sweep.csv``). Returns
-    ``(table, fit)``: one row per run (D0, d, W, rho_b, g; SI) and ``postprocess.flow_rate``'s fit
-    (C and k with standard errors). ``ReadError`` when the runs differ in gravity or cannot be read."""
-    from postprocess.flow_rate import beverloo_table, fit_beverloo
+    ``(table, fit)``: one row per run (D0, d, W, rho_b, g; SI; ``left_out``: why a run is no point
+    of the fit, '' for those fitted) and ``postprocess.flow_rate``'s fit (C and k with standard
+    errors) over the runs not left out. A run whose discharge clogged, or that never flowed
+    steadily (``postprocess.flow_rate.flow_verdict``), is left out. ``ReadError`` when the runs
+    differ in gravity or cannot be read, when fewer than 3 runs are left to fit, or when the fit
+    misses them by more than ``MAX_RMS_RELATIVE_RESIDUAL`` (20 %, rms relative residual): no C and k
+    are given then."""
+    from postprocess.flow_rate import beverloo as law
+    from postprocess.flow_rate import beverloo_table, check_beverloo_fit, fit_beverloo
     folders = [Path(f) for f in folders]
     if len(folders) == 1 and folders[0].suffix == ".csv" and folders[0].is_file():
         folders = sweep_table_runs(folders[0])
     table = beverloo_table(folders)
-    if table.g.nunique() > 1:
+    used = table[table.left_out == ""]
+    left = _left_out_lines(table)
+    if used.empty:
+        raise ReadError(f"no run to fit: none of the {len(table)} given flowed steadily{left}")
+    if used.g.nunique() > 1:
         raise ReadError("the runs differ in gravity; one Beverloo fit needs one g")
-    slots = table.L.notna()
+    slots = used.L.notna()
     if slots.any() and not slots.all():
         raise ReadError("the runs mix slots (slabs) and round orifices: one Beverloo fit needs one outlet shape")
+    g, slot_length = float(used.g.iloc[0]), used.L if slots.all() else None
     try:
-        fit = fit_beverloo(table.D0, table.d, table.W, table.rho_b, float(table.g.iloc[0]),
-                           slot_length=table.L if slots.all() else None, slot_ends=table.L_ends)
+        fit = fit_beverloo(used.D0, used.d, used.W, used.rho_b, g, slot_length=slot_length, slot_ends=used.L_ends)
     except ValueError as exc:
-        raise ReadError(str(exc)) from None
+        raise ReadError(f"{exc}{left}") from None
+    except RuntimeError as exc:                 # scipy's curve_fit that did not converge
+        raise ReadError(f"the Beverloo fit over {len(used)} runs did not converge ({exc}){left}") from None
+    try:
+        check_beverloo_fit(fit)
+    except ValueError as exc:
+        model = law(used.D0, used.d, fit.C, fit.k, used.rho_b, g, slot_length, used.L_ends)
+        runs = "".join(f"\n  {row.run}: W = {row.W:.4g} kg/s, the fit's {w:.4g} kg/s"
+                       for row, w in zip(used.itertuples(), model))
+        raise ReadError(f"{exc}:{runs}{left}\nlook for a run that clogged or never reached a steady flow "
+                        "(siloflow post RUN says), or orifices too near k d") from None
     return table, fit

@@ -12,7 +12,7 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
-from .errors import SetupError
+from .errors import ReadError, SetupError
 
 
 def _umask() -> int:
@@ -104,6 +104,75 @@ def read_regular_bytes(path, limit: int, what: str = "the file") -> bytes:
     if size > limit:
         raise ValueError(f"{path} is larger than {limit} bytes")
     return b"".join(chunks)
+
+
+#: JSON nested deeper than this is no file siloflow wrote (a fill's key, its deepest, nests 5 levels)
+MAX_JSON_DEPTH = 64
+#: bytes of a run's, sweep's or cache's JSON file read at most (a manifest of 1e5 files is about 10 MB)
+JSON_LIMIT = 1 << 26
+
+
+class _NotFinite(ValueError):
+    """A NaN or infinite number in JSON that may not hold one."""
+
+
+def _not_finite(text: str):
+    raise _NotFinite(f"it holds {text}, where only finite numbers belong")
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if value - value != 0:                 # inf, -inf (1e999 overflows to inf)
+        _not_finite(text)
+    return value
+
+
+def _json_depth(data, stop: int) -> int:
+    """How deep ``data`` nests (lists and objects), counted up to ``stop`` without recursion."""
+    deepest, stack = 0, [(data, 1)]
+    while stack and deepest <= stop:
+        node, depth = stack.pop()
+        if isinstance(node, (dict, list)):
+            deepest = max(deepest, depth)
+            stack.extend((v, depth + 1) for v in (node.values() if isinstance(node, dict) else node))
+    return deepest
+
+
+def read_json(path, what: str, limit: int = JSON_LIMIT, kind: type | None = dict, allow_nan: bool = False):
+    """The JSON value of the file ``path`` (``what``: what it is, for the message), checked: a regular
+    file of at most ``limit`` bytes (:func:`read_regular_bytes`), UTF-8, JSON, nested at most
+    :data:`MAX_JSON_DEPTH` deep, without NaN or Infinity unless ``allow_nan`` (siloflow's own writer
+    may write them there), and of type ``kind`` at the top (None: any). Raises ``ReadError`` naming
+    the file, what it is and what is wrong (the one reader of a run's, sweep's and cache's files)."""
+    try:
+        raw = read_regular_bytes(path, limit, what)
+    except ValueError as exc:
+        raise ReadError(f"{exc} ({what})") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ReadError(f"{path} ({what}) is not UTF-8 text (byte {exc.start}): was it written by siloflow?") from None
+    hooks = {} if allow_nan else {"parse_constant": _not_finite, "parse_float": _finite}
+    try:
+        data = json.loads(text, **hooks)
+    except _NotFinite as exc:
+        raise ReadError(f"{path} ({what}): {exc}: was it written by siloflow?") from None
+    except json.JSONDecodeError as exc:
+        raise ReadError(f"{path} ({what}) is not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}") from None
+    except RecursionError:
+        raise ReadError(f"{path} ({what}) nests lists or objects too deeply (more than {MAX_JSON_DEPTH} levels): "
+                        "it is no file siloflow wrote") from None
+    except ValueError as exc:              # e.g. an integer of more digits than Python converts
+        raise ReadError(f"{path} ({what}) is not JSON siloflow reads: {exc}") from None
+    if _json_depth(data, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
+        raise ReadError(f"{path} ({what}) nests lists or objects too deeply (more than {MAX_JSON_DEPTH} levels): "
+                        "it is no file siloflow wrote")
+    if kind is not None and not isinstance(data, kind):
+        def name(t) -> str:
+            return {dict: "a JSON object", list: "a JSON list", str: "a JSON string", bool: "true or false",
+                    type(None): "null"}.get(t, "a JSON number" if t in (int, float) else t.__name__)
+        raise ReadError(f"{path} ({what}) holds {name(type(data))}, not {name(kind)}: was it written by siloflow?")
+    return data
 
 
 def write_json(path, data) -> None:

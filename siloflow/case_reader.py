@@ -94,7 +94,8 @@ def _field_path(loc) -> str:
     for item in loc:
         if isinstance(item, int):
             parts.append(f"[{item}]")
-        elif item in ("cylinder", "hopper", "planar", "box", "spheres", "polydisperse_spheres", "clumps") and parts:
+        elif item in ("cylinder", "hopper", "planar", "box", "mesh", "spheres", "polydisperse_spheres",
+                      "clumps") and parts:
             continue  # discriminator tag pydantic inserts into the path
         else:
             parts.append(("." if parts else "") + str(item))

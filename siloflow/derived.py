@@ -420,11 +420,12 @@ def derive(case: Case) -> RunPlan:
     else:
         count = int(f.packing_fraction * bed_volume(case, f.height) / (vol + dust_vol))
         if count < 1:
-            raise CaseError([("fill.height", "too low to hold a single particle")])
+            raise CaseError([("fill.height", f"too low to hold a single particle at fill.packing_fraction "
+                                             f"{f.packing_fraction:g}")])
     dust_count = round(dust_ratio * count)
     if dust is not None and dust_count < 1:
         raise CaseError([("particles.dust.number_ratio", f"{dust_ratio} dust per grain is less than one "
-                          f"dust sphere for {count} grains")])
+                          f"dust sphere for {count} grains (fill.count)")])
     h_bed = bed_height(case, count * (vol + dust_vol) / f.packing_fraction)
 
     # insertion region: above the expected bed, below the top
@@ -434,9 +435,10 @@ def derive(case: Case) -> RunPlan:
     if f.protocol == "pour" and f.insertion_z_min is None:      # a thin layer at a fixed height
         z_min = max(z_min, z_max - POUR_LAYER * d)
     if z_max - z_min < 2 * d:
-        raise CaseError([("fill", f"the expected bed ({h_bed:.4g} m at solid fraction "
+        amount = "fill.height" if f.height is not None else "fill.count"
+        raise CaseError([("fill", f"the expected bed ({h_bed:.4g} m: {amount} at fill.packing_fraction "
                           f"{f.packing_fraction}) leaves no room to insert particles below the top "
-                          f"({top:.4g} m): fill fewer particles or make the silo taller")])
+                          f"({top:.4g} m): fill fewer particles or make the silo taller (geometry.height)")])
     pour = f.pour_radius if f.pour_radius is not None else g.half_width      # central or distributed fill
     if box:
         # centres only, a grain's radius (and 5 %) from the walls
@@ -653,6 +655,16 @@ def shaping_fields(case: Case, role: str, kind: str = "angle") -> list[str]:
         return {"band": [sensors, "sensors.sectors", "geometry.files"], "wall": [sensors, "geometry.files"],
                 "outlet": ["geometry.outlet"]}.get(role, ["geometry.files", "geometry.scale"])
     offset = ["geometry.outlet_offset"] if getattr(g, "outlet_offset", 0.0) else []
+    if isinstance(g, BoxGeometry):       # its own fields: the outlet's by its shape, width and depth
+        offset += ["geometry.outlet_offset_y"] if g.outlet_offset_y else []
+        outlet = {"rectangle": ["geometry.outlet_width", "geometry.outlet_length"], "slot": ["geometry.outlet_width"],
+                  "circle": ["geometry.outlet_radius"]}[g.outlet]
+        sides = ["geometry.width", "geometry.depth"]
+        if kind == "edge" and role in ("hopper", "bottom", "plate", "outlet"):
+            return outlet + offset + sides
+        return {"band": [sensors, "geometry.height"] + sides, "wall": [sensors, "geometry.height"] + sides,
+                "hopper": offset + ["geometry.half_angle_deg"] + outlet + sides,
+                "bottom": offset + outlet + sides}.get(role, outlet + offset)
     if kind == "edge" and role in ("hopper", "cone", "bottom", "plate", "outlet"):
         if isinstance(g, PlanarGeometry):
             return ["geometry.outlet_width", "geometry.width", "geometry.half_angle_deg", "geometry.thickness"] + offset
@@ -763,4 +775,5 @@ def check_opening(gravity: float, speed: float, outlet_z: float, down: float = 1
     v_needed = math.sqrt(gravity * abs(outlet_z) / 2.0)
     if speed * down <= 1.5 * v_needed:
         raise CaseError([("discharge.opening.speed", f"{speed} m/s is too slow: the plate must move "
-                          f"down faster than {1.5 * v_needed:.3g} m/s to leave the grains behind")])
+                          f"down faster than {1.5 * v_needed:.3g} m/s to leave the grains behind (they fall "
+                          f"after it under gravity {gravity:g} m/s2)")])

@@ -128,7 +128,7 @@ CASE_FIELDS = ("gravity", "geometry", "materials", "particles", "fill.count", "f
                "fill.packing_fraction")
 #: physical ranges [lo, hi] of explicit values (unit weight N/m3), as the case schema's
 #: ``siloflow.case.DESIGN_RANGES`` (why each bound: there); K mu is the divisor of z_o
-EXPLICIT_RANGES = {"unit_weight": (100.0, 1e5), "K": (0.1, 1.0), "mu": (0.05, 1.5)}
+EXPLICIT_RANGES = {"unit_weight": (100.0, 1e5), "K": (0.1, 1.0), "mu": (0.05, 1.5), "phi_r": (5.0, 70.0)}
 
 
 def _wall_index(wall_type: str) -> int:
@@ -159,7 +159,7 @@ def bulk_solid(name: Optional[str] = None, *, unit_weight: Optional[float] = Non
     for key, (lo, hi) in EXPLICIT_RANGES.items():
         if key in given and not (lo <= given[key] <= hi and math.isfinite(given[key])):
             raise ValueError(f"{key} = {given[key]} is outside [{lo:g}, {hi:g}]")
-    for key, lo, hi in (("phi_r", 0.0, 90.0), ("C_op", -1e-12, 10.0)):
+    for key, lo, hi in (("C_op", -1e-12, 10.0),):
         if key in given and not (lo < given[key] <= hi and math.isfinite(given[key])):
             raise ValueError(f"{key} = {given[key]} is outside ({lo:g}, {hi:g}]")
     if name is None:
@@ -260,7 +260,11 @@ def squat_filling(depth, gamma: float, K: float, mu: float, a_over_u: float, phi
 
         Y_R(z) = 1 - ((z - h_o)/(z_o - h_o) + 1)^n,   n = -(1 + tan phi_r)(1 - h_o/z_o),
         p_hf = p_ho Y_R,  p_wf = mu p_ho Y_R,  p_vf = gamma z_V,  n_zSk = mu p_ho (z - z_V),
-        z_V = h_o - (z_o - h_o - (z + z_o - 2 h_o)^(n+1) / (z_o - h_o)^n) / (n + 1).
+        z_V = h_o - (z_o - h_o - (z + z_o - 2 h_o)^(n+1) / (z_o - h_o)^n) / (n + 1),
+
+    evaluated as z_V = h_o + (z_o - h_o) (X^(n+1) - 1) / (n + 1), X = (z - h_o)/(z_o - h_o) + 1 (no
+    power of z_o - h_o alone, which overflows at a steep phi_r, and the limit (z_o - h_o) ln X at
+    n = -1, where the standard's form divides 0 by 0).
 
     z_V is the standard's form as recalled and re-derived here: vertical equilibrium of a slice,
     dp_v/dz = gamma - (U/A) mu p_hf = gamma (1 - Y_R) because (U/A) mu p_ho = gamma, integrated
@@ -275,8 +279,12 @@ def squat_filling(depth, gamma: float, K: float, mu: float, a_over_u: float, phi
     n = squat_exponent(z_o, h_o, phi_r)
     below = z >= h_o - 1e-12               # m: round-off of a height given at the contact
     zz = np.where(below, np.maximum(z, h_o), h_o)
-    y = np.where(below, 1.0 - ((zz - h_o) / (z_o - h_o) + 1.0) ** n, 0.0)
-    z_v = h_o - (z_o - h_o - (zz + z_o - 2.0 * h_o) ** (n + 1.0) / (z_o - h_o) ** n) / (n + 1.0)
+    x = (zz - h_o) / (z_o - h_o) + 1.0
+    y = np.where(below, 1.0 - x ** n, 0.0)
+    log_x, m = np.log(x), n + 1.0
+    # (X^m - 1) / m, its series where m is too near 0 to divide by
+    growth = log_x * (1.0 + 0.5 * m * log_x) if abs(m) < 1e-9 else np.expm1(m * log_x) / m
+    z_v = h_o + (z_o - h_o) * growth
     p_vf = np.where(below, gamma * z_v, np.where(z < 0, 0.0, np.nan))
     return p_ho * y, mu * p_ho * y, p_vf, np.where(below, mu * p_ho * (zz - z_v), 0.0)
 

@@ -18,7 +18,10 @@ class EngineFiles:
     ``resume_log``, ``screen``, ``resume_screen``; the roles it has); ``tables``: its own tables,
     from which the engine-neutral ones are made; ``outputs``: a regular expression of its further
     outputs (state, restarts, VTK). The run folder counts these as siloflow's (``--force`` may
-    replace them) and as evidence that the engine ran; the engine reads its names from here."""
+    replace them) and as evidence that the engine ran; the engine reads its names from here. Any
+    other file a run leaves is recorded in the folder's manifest as the run ends
+    (``siloflow.run_folder.record_engine_outputs``): ``outputs`` is also the fallback for a folder
+    run by an older siloflow, which recorded none."""
 
     names: dict[str, str]
     tables: tuple[str, ...] = ()
@@ -37,7 +40,7 @@ ENGINE_FILES = {
         names={"deck": "in.liggghts", "resume_deck": "in.resume.liggghts", "log": "log.liggghts",
                "resume_log": "log.resume.liggghts", "screen": "screen.txt", "resume_screen": "screen.resume.txt"},
         tables=("output/flow.txt", "output/wall_forces.txt"),        # fix ave/time
-        outputs=(r"output/(flow|wall_forces)\.txt\.before_resume|output/vtk/particles_\d+\.vtk"
+        outputs=(r"output/(flow|wall_forces)\.txt\.before_resume|output/vtk/particles_(boundingBox_)?\d+\.vtk"
                  r"|restart_forced_liggghts_\d+\.data")),      # LIGGGHTS' own on SIGTERM (left by older siloflow)
     "lammps": EngineFiles(
         names={"log": "log.lammps", "resume_log": "log.lammps.resume", "screen": "screen.lammps.txt"},

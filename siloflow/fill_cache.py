@@ -22,6 +22,7 @@ from __future__ import annotations
 import fcntl
 import hashlib
 import json
+import math
 import os
 import shutil
 import time
@@ -32,7 +33,8 @@ from typing import Iterator, Optional
 
 import numpy as np
 
-from .errors import SetupError, SiloflowError
+from .atomic_files import read_json
+from .errors import ReadError, SetupError, SiloflowError
 
 #: plan fields that come after the fill (or only name or describe it): not in the key
 AFTER_FILL = ("name", "static_steps", "opening", "discharge", "outlet", "walls", "sensors", "outputs",
@@ -185,12 +187,13 @@ class FillCache:
         if not _is_key(name):
             return None, "its name is not a fill key"
         try:
-            info = json.loads((folder / ENTRY_NAME).read_text(encoding="utf-8"))
+            info = read_json(folder / ENTRY_NAME, "a fill cache entry's record")
             files = info["files"]
             stored_key = info["key"]
-            inputs = json.loads((folder / KEY_NAME).read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
-            return None, f"no readable {ENTRY_NAME} and {KEY_NAME} of a fill"
+            inputs = read_json(folder / KEY_NAME, "a fill cache entry's key", kind=None, allow_nan=True)
+        except (ReadError, KeyError) as exc:
+            why = f": {exc}" if isinstance(exc, ReadError) else ""
+            return None, f"no readable {ENTRY_NAME} and {KEY_NAME} of a fill{why}"
         if not isinstance(files, dict) or not all(isinstance(n, str) and isinstance(d, str) for n, d in files.items()):
             return None, f"{ENTRY_NAME} does not list files with their SHA-256"
         if stored_key != name or not isinstance(inputs, dict) or key_of(inputs) != name:
@@ -298,13 +301,97 @@ class FillCache:
         return Cleared(removed, left)
 
 
-def run_with_cache(engine, folder, plan, cache: FillCache, progress=None, on_hit=None, on_warning=None):
+#: relative tolerance of a sphere's radius and mass read back from a restart file (the engine keeps them as set)
+SPHERE_TOLERANCE = 1e-6
+#: of a clump's mass: LIGGGHTS integrates a clump's mass by Monte Carlo (measured: 0.035 % below the plan's)
+CLUMP_MASS_TOLERANCE = 0.01
+#: standard deviations a size class's count may stray from its share of the grains (each grain's class
+#: is drawn at random in a rain fill or paper B's shrinking; a placed fill gives the exact mix)
+COUNT_SIGMAS = 5.0
+
+
+def bed_problems(plan, bed, box: Optional[dict] = None) -> list[str]:
+    """What of the settled ``bed`` an engine read back from a cached restart file
+    (``siloflow.engine.base.SettledBed``) is not the bed ``plan`` fills, each naming what differs:
+    the atom count (up to ``FILL_LOSS_LIMIT`` of it may be lost in a fill), atom types that are no
+    species, each species' radii and grain masses (the density they give), its count against its
+    share of the grains, and the simulation box (``box``: the engine's, m). Empty when it fits."""
+    from .engine.processes import FILL_LOSS_LIMIT
+    problems = []
+    n, expected = len(bed.types), plan.expected_atoms
+    least = math.ceil(expected * (1 - FILL_LOSS_LIMIT))
+    if not least <= n <= expected:
+        problems.append(f"it holds {n} atoms where this case's bed holds {expected}"
+                        + (f" (at least {least}, if some were lost in the fill)" if least < expected else ""))
+    species = {k + 1: sp for k, sp in enumerate(plan.species)}
+    foreign = sorted(set(np.unique(bed.types).tolist()) - set(species))
+    if foreign:
+        problems.append(f"atom type{'s' if len(foreign) > 1 else ''} {', '.join(map(str, foreign[:5]))} "
+                        f"{'are' if len(foreign) > 1 else 'is'} no species of this case (types 1-{len(species)})")
+    grains = {t: np.count_nonzero(bed.types == t) / sp.n_spheres for t, sp in species.items() if sp.stream == "grains"}
+    total = sum(grains.values())
+    for t, sp in species.items():
+        sel = bed.types == t
+        radius, mass = bed.radius[sel], bed.mass[sel]
+        where = f"species '{sp.name}' (atom type {t})"
+        radii = [sp.radius] if sp.kind == "sphere" else sorted({s[3] for s in sp.spheres})
+        off = ~np.isclose(radius[:, None], np.asarray(radii, float)[None, :], rtol=SPHERE_TOLERANCE, atol=0).any(axis=1)
+        if off.any():
+            problems.append(f"{where}: {np.count_nonzero(off)} of {len(radius)} atoms have a radius of "
+                            f"{radius[off][0]:.6g} m where this case's {'is' if len(radii) == 1 else 'are'} "
+                            f"{', '.join(f'{r:.6g}' for r in radii)} m")
+        off = ~np.isclose(mass, sp.mass, rtol=SPHERE_TOLERANCE if sp.kind == "sphere" else CLUMP_MASS_TOLERANCE, atol=0)
+        if off.any():
+            k = np.flatnonzero(off)[0]
+            volume = 4.0 / 3.0 * math.pi * radius[k] ** 3 if sp.kind == "sphere" else sp.volume
+            problems.append(f"{where}: {np.count_nonzero(off)} of {len(mass)} grains weigh {mass[k]:.6g} kg (a density "
+                            f"of {mass[k] / volume:.6g} kg/m3) where this case's weigh {sp.mass:.6g} kg "
+                            f"({sp.density:.6g} kg/m3)")
+        if sp.stream == "grains":
+            share, count = total * sp.number_fraction, grains[t]
+            slack = COUNT_SIGMAS * math.sqrt(total * sp.number_fraction * (1 - sp.number_fraction)) \
+                + FILL_LOSS_LIMIT * plan.fill.count + 1
+        else:
+            share, count, slack = plan.fill.dust_count, np.count_nonzero(sel), FILL_LOSS_LIMIT * expected + 1
+        if abs(count - share) > slack:
+            problems.append(f"{where}: {count:.0f} grains where this case's mix gives {share:.0f} (+/- {slack:.0f})")
+    if isinstance(box, dict) and bed.box:
+        scale = max(abs(float(v)) for v in box.values())
+        off = [k for k, v in box.items() if not abs(float(bed.box.get(k, math.nan)) - float(v)) <= 1e-5 * scale]
+        if off:
+            problems.append("its simulation box is not this case's (" + ", ".join(
+                f"{k} {bed.box.get(k, math.nan):.6g} m, not {box[k]:.6g}" for k in off) + ")")
+    return problems
+
+
+def bed_refusal(engine, entry: Entry, plan, inputs: dict) -> str:
+    """Why the settled bed of ``entry`` is not ``plan``'s ('' when it is): the engine reads its restart
+    file back (``Engine.fill_bed``) and :func:`bed_problems` compares it with the plan and the box of
+    the key's ``inputs``. An entry's hashes prove only that nothing changed since it was stored, not
+    what was stored: a bed copied under another key, with a key and record written for it, passes them."""
+    try:
+        bed = engine.fill_bed(entry.files, plan)
+    except (OSError, SiloflowError) as exc:
+        return f"its restart file cannot be read back: {exc}"
+    engine_parts = inputs.get("engine")
+    return "; ".join(bed_problems(plan, bed, engine_parts.get("box") if isinstance(engine_parts, dict) else None))
+
+
+def run_with_cache(engine, folder, plan, cache: FillCache, progress=None, on_hit=None, on_warning=None,
+                   resume: bool = False):
     """Run the rendered ``folder`` of ``plan`` on ``engine`` through the fill cache: from the
     cached settled bed when its key is there (``on_hit(key)`` is told first), else the whole
     run, whose bed is then published. A second run of the same key waits for the first. The
     cache is an optimisation: a cache that cannot be locked, read or written (a full disk, say)
     costs the run its reuse, not its results; ``on_warning(message)`` is told, and the run
-    record says so (``fill_cache``: key, hit, published, warning). Returns the collected record."""
+    record says so (``fill_cache``: key, hit, published, warning). Returns the collected record.
+
+    ``resume``: finish the interrupted ``folder`` (``engine.resume``: from its own restart point,
+    or filling again when it was stopped before its bed settled), never from the cache (the folder
+    holds its first part's outputs), under the key's lock; its settled bed is then published when
+    the cache holds none of the key, so the runs of the same fill after it start from it. The
+    record's ``hit`` is False when it filled again, None when it went on from its restart point
+    (whether its first part took that bed from the cache is not recorded)."""
     from .atomic_files import os_error
     from .run_folder import RunFolder
     inputs = fill_key_inputs(plan, engine)
@@ -318,6 +405,7 @@ def run_with_cache(engine, folder, plan, cache: FillCache, progress=None, on_hit
             on_warning(warnings[-1])
 
     entry, published = None, False
+    hit = False if not resume or engine.restart_step(folder) is None else None
     with ExitStack() as stack:
         try:
             stack.enter_context(cache.lock(key))
@@ -326,20 +414,31 @@ def run_with_cache(engine, folder, plan, cache: FillCache, progress=None, on_hit
         except (OSError, SiloflowError) as exc:
             warn(f"the fill cache {cache.root} cannot be used: this run fills its own bed", exc)
             usable = False
-        if entry is not None:
+        refused = bed_refusal(engine, entry, plan, inputs) if entry is not None and not resume else ""
+        if refused:                     # its place is taken: this run's bed is not published either
+            warn(f"the fill cache's entry {key[:12]} ({entry.folder}) does not hold this case's settled bed, so this "
+                 f"run fills its own; the entry is left as it is ('siloflow cache clear {key[:12]}' removes it)",
+                 SetupError(refused))
+            entry, usable = None, False
+        if entry is not None and not resume:
             if on_hit is not None:
                 on_hit(key)
+            hit = True
             record = engine.start_from_fill(folder, entry.files, progress)
         else:
-            engine.execute(folder, progress)
-            record = engine.collect(folder)
-            if usable:
+            if resume:
+                record = engine.resume(folder, progress)
+            else:
+                engine.execute(folder, progress)
+                record = engine.collect(folder)
+            if usable and entry is None:
                 try:
                     cache.put(key, engine.fill_files(folder), inputs, source=str(Path(folder).absolute()))
                     published = True
                 except (OSError, SiloflowError) as exc:
                     warn(f"the settled bed was not stored in the fill cache {cache.fills}", exc)
-    record.fill_cache = {"key": key, "hit": entry is not None, "cache": str(cache.root), "published": published,
+    record.fill_cache = {"key": key, "hit": hit, "cache": str(cache.root), "published": published,
+                         **({"resumed": True} if resume else {}),
                          **({"warning": "; ".join(warnings)} if warnings else {})}
     RunFolder(folder).write_record(record)
     return record

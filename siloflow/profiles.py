@@ -129,8 +129,10 @@ def effective_case(case: Case, settings: dict | None = None) -> Case:
     try:
         return case_from_dict(data, "the case with its profile applied")
     except CaseError as exc:
-        raise CaseError([("engine.stiffness_scale", f"{s['profile']} profile "
-                          f"(stiffness x {scale:.3g}): {msg}") for field, msg in exc.problems]) from None
+        why = (", the softening the grains' impact from the silo's top needs at materials.particle's stiffness"
+               if s["profile"] == "fast" else "")
+        raise CaseError([("engine.stiffness_scale", f"{s['profile']} profile (stiffness x {scale:.3g}{why}): "
+                          f"{field}: {msg}") for field, msg in exc.problems]) from None
 
 
 def with_profile(case: Case, name: str) -> tuple[Case, list[str]]:

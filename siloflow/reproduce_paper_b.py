@@ -27,7 +27,8 @@ from pathlib import Path
 
 import yaml
 
-from .atomic_files import write_text
+from .atomic_files import read_json, write_text
+from .errors import ReadError
 
 ROOT = Path(__file__).resolve().parents[1]
 #: where the report goes, and the result tables it is made from
@@ -133,11 +134,11 @@ def measured_rate(results: Path = REPORT_DIR / RESULTS_DIR_NAME) -> tuple[float 
     """The engine's particle-steps per second measured by the quick study's runs (its committed
     study.json), and where it came from; (None, why) when there is none."""
     try:
-        study = json.loads((results / "study.json").read_text())
+        study = read_json(results / "study.json", "paper B's study", allow_nan=True)
         rate = float(study["throughput"]["particle_steps_per_s"])
         return rate, (f"measured by the quick study's {len(study['runs'])} runs on {study['throughput']['ranks']} "
                       f"rank(s) ({results.relative_to(ROOT) if results.is_relative_to(ROOT) else results}/study.json)")
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, ReadError):
         return None, "no measured rate (run `make paper-b SCALE=quick` first, or give --rate)"
 
 
@@ -210,13 +211,13 @@ def run_cg(folders: list[Path], work: Path) -> dict | None:
     cmd = siloflow_cmd("cg-scaling", *[f / "results" / "cg" for f in folders], "-o", out)
     print("$", " ".join(map(str, cmd[2:])), flush=True)
     subprocess.run(cmd, check=True, cwd=ROOT)
-    return json.loads(out.read_text())
+    return read_json(out, "the cg-scaling fit", allow_nan=True)
 
 
 def _record(folder: Path) -> dict:
     try:
-        return json.loads((folder / "run_record.json").read_text())
-    except (OSError, ValueError):
+        return read_json(folder / "run_record.json", "a run record", allow_nan=True)
+    except ReadError:
         return {}
 
 
@@ -282,7 +283,7 @@ def report_from_results(results: Path, out: Path = REPORT_DIR) -> list[Path]:
     from postprocess.report.paper_b import write_paper_b_report
 
     tables = read_tables(results)
-    study = json.loads((results / "study.json").read_text())
+    study = read_json(results / "study.json", "paper B's study", allow_nan=True)
     written = write_paper_b_report(out, analyse(tables, study), study)
     print(f"wrote {out / 'report.md'} and report.html ({len(written)} files)")
     return written

@@ -9,15 +9,23 @@ status, record and the two engine-neutral tables every engine writes:
   the force the grains exert on it (N), averaged over the plan's ``outputs.sample_steps``.
 
 A deck folder carries a manifest (``siloflow_manifest.json``) with the SHA-256 of every file
-``render`` wrote; post-processing adds what it writes under ``results/`` (``record_products``).
-The engine's outputs and siloflow's own records have fixed names (the deck names the former).
-``--force`` replaces a folder only when every file in it is one of those and unchanged since
-siloflow wrote it: a folder with anything else in it (a user's notes, an edited case, a
-symlink, a case file being read) is refused, never emptied.
+``render`` wrote; post-processing adds what it writes under ``results/`` (``record_products``),
+and every engine run the files it left that have no fixed name (``record_engine_outputs``: new
+ones, and ones siloflow recorded before that the run rewrote). siloflow's own records and the
+engine's usual outputs have fixed names (the deck names the latter; the names are also the fallback
+of a folder run by an older siloflow, whose manifest lists no engine output). ``--force`` replaces a
+folder only when every file in it is one of those and unchanged since siloflow wrote it: a folder
+with anything else in it (a user's notes, an edited case, a symlink, a case file being read) is
+refused, never emptied.
+
+One siloflow command at a time writes a run folder: ``render``, ``run`` and ``run --resume`` hold
+its lock (:func:`folder_lock`, ``flock`` on ``.<name>.siloflow-lock`` beside it) from before the
+folder check until they are done; a second command is refused.
 """
 from __future__ import annotations
 
 import errno
+import fcntl
 import hashlib
 import json
 import os
@@ -33,7 +41,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Optional
 
-from .atomic_files import os_error, write_json, write_text
+from .atomic_files import os_error, read_json, write_json, write_text
 from .engines import ENGINE_FILES
 from .errors import ReadError, SetupError
 
@@ -51,6 +59,8 @@ DUMPS = "output/dumps"
 PARTICLE_DUMPS = "dump.*.txt"
 CONTACT_DUMPS = "contacts.*.txt"
 WALL_CONTACT_DUMPS = "wall_contacts.*.txt"
+#: the touching grains of a primitive wall (LIGGGHTS: side walls), ``primitive_<fix>.<step>.txt``
+PRIMITIVE_CONTACT_DUMPS = "primitive_*.*.txt"
 #: the settled bed, written once settling (and shrinking) ended; --resume starts there
 RESTART_FILE = "output/restart/settled.restart"
 RESULTS = "results"
@@ -68,7 +78,7 @@ TOP_LEVEL_FILES = frozenset({MANIFEST_NAME, STATUS_NAME, RECORD_NAME}
                             | {name for files in ENGINE_FILES.values() for name in files.names.values()})
 #: the engine-neutral outputs the decks name, relative to the folder, then each engine's own
 ENGINE_OUTPUTS = re.compile("|".join(
-    [r"output/(flow|wall_forces)\.csv|output/dumps/(dump|contacts|wall_contacts)\.\d+\.txt"
+    [r"output/(flow|wall_forces)\.csv|output/dumps/(dump|contacts|wall_contacts|primitive_[A-Za-z0-9_]+)\.\d+\.txt"
      r"|output/restart/settled\.restart"]
     + [re.escape(t) for files in ENGINE_FILES.values() for t in files.tables]
     + [files.outputs for files in ENGINE_FILES.values() if files.outputs]))
@@ -90,8 +100,8 @@ def sha256(path: Path) -> str:
 def read_manifest(folder: Path) -> dict:
     """The folder's manifest ({} if it has none or it is not readable JSON of the right shape)."""
     try:
-        data = json.loads((Path(folder) / MANIFEST_NAME).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        data = read_json(Path(folder) / MANIFEST_NAME, "a run folder's manifest")
+    except ReadError:
         return {}
     if not isinstance(data, dict) or not isinstance(data.get("files", {}), dict) or not isinstance(
             data.get("products", {}), dict):
@@ -118,6 +128,66 @@ def record_products(folder, out_dir, since: float) -> None:
     write_json(folder / MANIFEST_NAME, {**manifest, "products": products})
 
 
+def snapshot(folder) -> dict:
+    """What ``folder`` holds before an engine run, for :func:`record_engine_outputs`: each regular
+    file's relative path -> (size, mtime ns, inode), and each folder's relative path -> None."""
+    folder = Path(folder)
+    seen: dict = {}
+    for root, dirs, files in os.walk(folder, followlinks=False):
+        base = Path(root).relative_to(folder)
+        seen.update({(base / d).as_posix(): None for d in dirs})
+        for f in files:
+            try:
+                info = (Path(root) / f).lstat()
+            except OSError:
+                continue
+            if stat.S_ISREG(info.st_mode):
+                seen[(base / f).as_posix()] = (info.st_size, info.st_mtime_ns, info.st_ino)
+    return seen
+
+
+def record_engine_outputs(folder, before: dict) -> None:
+    """Add to the manifest of run folder ``folder`` (as ``products``, with their SHA-256) the files
+    an engine run left that have no fixed name: those that were not in ``before`` (its
+    :func:`snapshot` from before the run) and those siloflow recorded before that the run rewrote.
+    A file that was there before and is not siloflow's stays the user's, and nothing is looked at
+    below a folder that was there and is not siloflow's. Nothing happens without a manifest."""
+    folder = Path(folder)
+    manifest = read_manifest(folder)
+    if not manifest:
+        return
+    known = {**manifest.get("files", {}), **manifest.get("products", {})}
+    known_dirs = _folders_of(known)
+    products = dict(manifest.get("products", {}))
+    for root, dirs, files in os.walk(folder, followlinks=False):
+        base = Path(root).relative_to(folder)
+        dirs[:] = [d for d in dirs if (base / d).as_posix() not in before or _siloflow_folder((base / d).as_posix(),
+                                                                                              known_dirs)]
+        for f in files:
+            rel, p = (base / f).as_posix(), Path(root) / f
+            if _fixed_name(rel) or _TEMP.fullmatch(f):
+                continue
+            try:
+                info = p.lstat()
+                if stat.S_ISREG(info.st_mode) and (rel not in before or (
+                        rel in known and before[rel] != (info.st_size, info.st_mtime_ns, info.st_ino))):
+                    products[rel] = sha256(p)
+            except OSError:                # gone meanwhile: nothing to record
+                continue
+    if products != manifest.get("products", {}):
+        write_json(folder / MANIFEST_NAME, {**manifest, "products": products})
+
+
+def _folders_of(paths) -> set:
+    """Every folder above the relative paths ``paths``."""
+    return {parent.as_posix() for rel in paths for parent in Path(rel).parents if parent != Path(".")}
+
+
+def _siloflow_folder(rel: str, known_dirs: set) -> bool:
+    """Whether folder ``rel`` is one siloflow makes, or holds a file the manifest lists."""
+    return rel in FOLDERS or rel.startswith("results/") or rel in known_dirs
+
+
 def _fixed_name(rel: str) -> bool:
     """Whether ``rel`` is a file siloflow writes under a fixed name (records, engine outputs)."""
     return rel in TOP_LEVEL_FILES or bool(ENGINE_OUTPUTS.fullmatch(rel))
@@ -130,12 +200,13 @@ def foreign_entries(folder: Path) -> list[str]:
     folder = Path(folder)
     manifest = read_manifest(folder)
     known = {**manifest.get("files", {}), **manifest.get("products", {})}
+    known_dirs = _folders_of(known)
     foreign = []
     for root, dirs, files in os.walk(folder, followlinks=False):
         base = Path(root).relative_to(folder)
         for d in list(dirs):
             rel = (base / d).as_posix()
-            if (Path(root) / d).is_symlink() or not (rel in FOLDERS or rel.startswith("results/")):
+            if (Path(root) / d).is_symlink() or not _siloflow_folder(rel, known_dirs):
                 foreign.append(rel + "/")
                 dirs.remove(d)                  # nothing below a foreign folder is looked at
         for f in files:
@@ -243,9 +314,7 @@ def check_free_folder(folder, force: bool, keep=()) -> None:
     folder = Path(folder)
     if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
         raise SetupError(f"{folder} exists and is not a folder (or is a symbolic link): choose another output folder")
-    for parent in folder.absolute().parents:
-        if parent.exists() and not parent.is_dir():
-            raise SetupError(f"cannot make {folder}: {parent} is a file, not a folder")
+    _check_parents(folder)
     if not folder.is_dir():
         return
     check_not_in_use(folder, keep)            # the current directory, a mount point, a file being read
@@ -256,6 +325,109 @@ def check_free_folder(folder, force: bool, keep=()) -> None:
         check_replaceable(folder)
 
 
+def _check_parents(folder: Path) -> None:
+    """Refuse (``SetupError``) a ``folder`` that cannot be made because a file is in its way."""
+    for parent in Path(folder).absolute().parents:
+        if parent.exists() and not parent.is_dir():
+            raise SetupError(f"cannot make {folder}: {parent} is a file, not a folder")
+
+
+# ------------------------------------------------------------------ one command per folder
+#: the lock file beside a run folder ``<name>``: ``.<name>.siloflow-lock``
+LOCK_SUFFIX = ".siloflow-lock"
+#: the folder locks this process holds: (pid, lock path) -> [file descriptor, depth]
+_HELD: dict = {}
+
+
+def lock_path(folder) -> Path:
+    """The lock file of run folder ``folder``: beside it (its parent resolved), so that it is the
+    same file whichever path names the folder, and survives the folder being replaced."""
+    folder = Path(os.path.abspath(folder))
+    return folder.parent.resolve() / f".{folder.name}{LOCK_SUFFIX}"
+
+
+@contextmanager
+def folder_lock(folder):
+    """Hold siloflow's lock on the run folder ``folder`` (made or not yet) for the block: a second
+    siloflow command (another process) asking for it is refused at once with a ``SetupError``
+    naming the folder. Taken again in the same process it nests. The lock (``flock`` on
+    :func:`lock_path`, its parent folders made if missing) is released and its file removed at the
+    end, with the parent folders it made when no folder was made in them; the kernel releases it
+    when the process dies."""
+    path = lock_path(folder)
+    key = (os.getpid(), str(path))
+    if key in _HELD:
+        _HELD[key][1] += 1
+        try:
+            yield
+        finally:
+            _HELD[key][1] -= 1
+        return
+    made = [p for p in path.parents if not p.exists()]       # deepest first
+    fd = _take_lock(Path(folder), path)
+    _HELD[key] = [fd, 1]
+    try:
+        yield
+    finally:
+        del _HELD[key]
+        try:
+            if _same_file(path, fd):
+                os.unlink(path)           # while still held: a waiting opener sees the path is gone and retries
+        except OSError:
+            pass
+        os.close(fd)
+        for parent in made:               # a refused command leaves no empty folders behind
+            try:
+                os.rmdir(parent)
+            except OSError:
+                break
+
+
+def _same_file(path: Path, fd: int) -> bool:
+    try:
+        info, mine = os.stat(path, follow_symlinks=False), os.fstat(fd)
+    except OSError:
+        return False
+    return (info.st_dev, info.st_ino) == (mine.st_dev, mine.st_ino)
+
+
+def _take_lock(folder: Path, path: Path) -> int:
+    """The locked file descriptor of ``path``, the lock of ``folder``; ``SetupError`` when another
+    process holds it or it cannot be made."""
+    _check_parents(folder)
+    for _ in range(50):
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+        except FileNotFoundError:              # a parent another command made was removed meanwhile
+            continue
+        except OSError as exc:
+            raise os_error(exc, f"{folder}'s lock file") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            try:
+                holder = os.read(fd, 64).decode("ascii", "replace").split()
+            except OSError:
+                holder = []
+            os.close(fd)
+            by = f" (process {holder[0]}{f' on {holder[1]}' if len(holder) > 1 else ''})" if holder else ""
+            raise SetupError(f"{folder} is in use by another siloflow command{by}: a render, run or --resume "
+                             "writes it now; wait until it ends, or choose another output folder") from None
+        except OSError as exc:
+            os.close(fd)
+            raise os_error(exc, f"{folder}'s lock file {path}", "lock") from None
+        if _same_file(path, fd):               # else its holder removed it meanwhile: take the new one
+            try:
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()} {socket.gethostname()}\n".encode())
+            except OSError:
+                pass                           # who holds it is only told, not needed
+            return fd
+        os.close(fd)
+    raise SetupError(f"cannot lock {folder}: its lock file {path} keeps being replaced; try again")
+
+
 @contextmanager
 def new_folder(folder, force: bool = False, keep=()):
     """Build a folder under a temporary name and move it into place only if the block succeeds.
@@ -264,9 +436,17 @@ def new_folder(folder, force: bool = False, keep=()):
     and it is a siloflow folder holding only siloflow's files (``keep``: paths being read,
     never inside a replaced folder); it is replaced only after the new one is complete, and
     then only siloflow's files are deleted. An OSError (disk full, read-only, ...) becomes a
-    ``SetupError`` and leaves no partial folder.
+    ``SetupError`` and leaves no partial folder. The folder's lock (:func:`folder_lock`) is held
+    throughout: another siloflow command writing it is refused.
     """
     folder = Path(folder).absolute()
+    with folder_lock(folder):                 # held from the check until the folder is in place
+        with _new_folder(folder, force, keep) as tmp:
+            yield tmp
+
+
+@contextmanager
+def _new_folder(folder: Path, force: bool, keep):
     check_free_folder(folder, force, keep)
     try:
         folder.parent.mkdir(parents=True, exist_ok=True)
@@ -376,9 +556,9 @@ def read_status(folder: Path) -> dict:
     """The folder's status.json, checked: a JSON object with a known ``state``."""
     path = Path(folder) / STATUS_NAME
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ReadError(f"no readable {STATUS_NAME} in {folder}: {getattr(exc, 'strerror', None) or exc}") from None
+        data = read_json(path, "a run's status", kind=None)
+    except ReadError as exc:
+        raise ReadError(f"no readable {STATUS_NAME} in {folder}: {exc}") from None
     if not isinstance(data, dict) or data.get("state") not in STATES:
         raise ReadError(f"{path} is not a siloflow status (expected an object with a state of "
                         f"{', '.join(STATES)}); was the folder made by siloflow?")
@@ -401,8 +581,8 @@ def run_state(folder: Path) -> dict:
         if not ran:
             return {"state": "rendered"}
         try:
-            said = json.loads((folder / RECORD_NAME).read_text(encoding="utf-8")).get("completed")
-        except (OSError, ValueError, AttributeError):
+            said = read_json(folder / RECORD_NAME, "a run record", allow_nan=True).get("completed")
+        except ReadError:
             said = None
         record = {True: f"; its {RECORD_NAME} says the engine run completed",
                   False: f"; its {RECORD_NAME} says the engine run did not complete"}.get(said, "")
@@ -446,6 +626,32 @@ class RunRecord:
         return asdict(self)
 
 
+def checked_record(data: dict, path) -> RunRecord:
+    """``run_record.json``'s object as a :class:`RunRecord`, its fields the results read checked:
+    ``stage_steps`` whole steps >= 0 by stage name, counts whole or null, ``completed`` true or false,
+    ``warnings`` texts (``ReadError`` naming the field; ``TypeError`` for fields it lacks or does not know)."""
+    def whole(v) -> bool:
+        return isinstance(v, int) and not isinstance(v, bool) and v >= 0
+
+    stages = data.get("stage_steps")
+    problems = []
+    if not isinstance(stages, dict) or not all(isinstance(k, str) and whole(v) for k, v in stages.items()):
+        bad = {k: v for k, v in stages.items() if not whole(v)} if isinstance(stages, dict) else stages
+        problems.append(f"stage_steps must map each stage to a whole step >= 0, not {str(bad)[:120]}")
+    for name in ("inserted", "templates_inserted", "returncode"):
+        v = data.get(name)
+        if v is not None and not (isinstance(v, int) and not isinstance(v, bool)):
+            problems.append(f"{name} must be a whole number or null, not {str(v)[:60]}")
+    if not isinstance(data.get("completed"), bool):
+        problems.append(f"completed must be true or false, not {str(data.get('completed'))[:60]}")
+    warnings = data.get("warnings", [])
+    if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+        problems.append("warnings must be a list of texts")
+    if problems:
+        raise ReadError(f"{path} is not a run record siloflow wrote (edited, or damaged?): " + "; ".join(problems))
+    return RunRecord(**data)
+
+
 # ------------------------------------------------------------------ engine-neutral tables
 #: ``flow``: one row per sample; masses kg, energies J, time s
 FLOW_SCHEMA = {"step": "int64", "time": "float64", "atoms": "int64", "mass_total": "float64",
@@ -476,14 +682,17 @@ def check_table(table, schema: dict, what: str):
 @dataclass(frozen=True)
 class DumpLayout:
     """What an engine's dumps hold: the species of each atom type, the column names of its
-    pair-contact and wall-contact dumps (empty when it writes none), and how the ``mass`` column
-    carries a clump's mass (``"body"``: every sphere the whole body's; ``"sum"``: each its share)."""
+    pair-contact and wall-contact dumps (empty when it writes none), how the ``mass`` column
+    carries a clump's mass (``"body"``: every sphere the whole body's; ``"sum"``: each its share),
+    and the primitive walls whose touching grains are dumped beside the wall contacts
+    (``primitive_walls``: ``{"name", "style", "args"}`` each, ``postprocess.dumps.primitive_wall_contacts``)."""
 
     engine: str
     types: dict[int, str]
     contact_columns: list[str]
     wall_contact_columns: list[str]
     clump_mass: str = "body"
+    primitive_walls: list[dict] = field(default_factory=list)
 
     def to_json(self) -> dict:
         return {**asdict(self), "types": {str(k): v for k, v in self.types.items()}}
@@ -494,7 +703,10 @@ class DumpLayout:
             return cls(engine=str(data["engine"]), types={int(k): str(v) for k, v in data["types"].items()},
                        contact_columns=[str(c) for c in data["contact_columns"]],
                        wall_contact_columns=[str(c) for c in data["wall_contact_columns"]],
-                       clump_mass=str(data["clump_mass"]))
+                       clump_mass=str(data["clump_mass"]),
+                       primitive_walls=[{"name": str(w["name"]), "style": str(w["style"]),
+                                         "args": [float(a) for a in w["args"]]}
+                                        for w in data.get("primitive_walls", [])])
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise ReadError(f"{source} is not a dump layout ({exc})") from None
 
@@ -554,8 +766,8 @@ class RunFolder:
     def dump_layout(self) -> DumpLayout:
         path = self.path / DUMP_LAYOUT_NAME
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
+            data = read_json(path, "the dumps' layout", kind=None)
+        except ReadError as exc:
             raise ReadError(f"{self.path}: no readable {DUMP_LAYOUT_NAME} ({exc})") from None
         return DumpLayout.from_json(data, str(path))
 
@@ -576,8 +788,9 @@ class RunFolder:
     def record(self) -> RunRecord:
         """The engine run's record."""
         try:
-            return RunRecord(**json.loads((self.path / RECORD_NAME).read_text()))
-        except (OSError, ValueError, TypeError) as exc:
+            return checked_record(read_json(self.path / RECORD_NAME, "the engine run's record", allow_nan=True),
+                                  self.path / RECORD_NAME)
+        except (ReadError, TypeError) as exc:
             raise ReadError(f"{self.path} has no readable {RECORD_NAME}: {exc}") from None
 
     def write_record(self, record: RunRecord) -> None:
@@ -612,9 +825,10 @@ class RunFolder:
 
     # -------------------------------------------------------------- dumps and results
     def dump_files(self, kind: str = "particles") -> Optional[list[Path]]:
-        """The dump files of ``kind`` (``particles``, ``contacts``, ``wall_contacts``) in step
+        """The dump files of ``kind`` (``particles``, ``contacts``, ``wall_contacts``, ``primitive_walls``) in step
         order, or None when the run wrote none."""
-        pattern = {"particles": PARTICLE_DUMPS, "contacts": CONTACT_DUMPS, "wall_contacts": WALL_CONTACT_DUMPS}[kind]
+        pattern = {"particles": PARTICLE_DUMPS, "contacts": CONTACT_DUMPS, "wall_contacts": WALL_CONTACT_DUMPS,
+                   "primitive_walls": PRIMITIVE_CONTACT_DUMPS}[kind]
         files = [p for p in self.dumps.glob(pattern) if p.is_file()] if self.dumps.is_dir() else []
         return sorted(files, key=lambda p: int(re.findall(r"\d+", p.name)[-1])) or None
 
@@ -622,8 +836,11 @@ class RunFolder:
         """A summary JSON of the results (``results/summary.json`` by default)."""
         path = (folder or self.results) / name
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
+            data = read_json(path, "a summary of results", kind=None, allow_nan=True)
+        except ReadError as exc:
+            if path.exists():
+                raise ReadError(f"{self.path}: no readable {path.relative_to(self.path) if self.path in path.parents else path}"
+                                f" ({exc}; run `siloflow post {self.path}` again)") from None
             raise ReadError(f"{self.path}: no readable {path.relative_to(self.path) if self.path in path.parents else path}"
                             f" (run `siloflow post {self.path}` first)") from None
         if not isinstance(data, dict):

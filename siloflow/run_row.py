@@ -7,12 +7,15 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from postprocess.flow_rate import flow_verdict
+
 from .errors import SiloflowError
 
 #: a band counts as loaded when its static pressure exceeds this fraction of the largest band's
 LOADED_BAND = 0.05
-#: the numbers of a row, each NaN (``fill_from_cache``: None) where the folder holds none
+#: the numbers of a row, each NaN (``fill_from_cache``, ``clogged``: None) where the folder holds none
 ROW_KEYS = ("wall_s", "fill_from_cache", "flow_rate", "flow_rate_stderr", "flow_rate_fit_se", "flow_rate_batch_se",
+            "clogged", "steady_t_start_s", "steady_t_end_s",
             "force_balance_ratio", "static_pressure", "dynamic_pressure_max", "solid_fraction", "coordination",
             "max_speed", "max_overlap_fraction", "speed_ratio", "overlap_ratio")
 
@@ -40,6 +43,8 @@ def _summary_numbers(s: dict) -> dict:
         row["flow_rate_fit_se"], row["flow_rate_batch_se"] = number(fr["fit_stderr"]), number(fr.get("stderr"))
     else:
         row["flow_rate_fit_se"], row["flow_rate_batch_se"] = number(fr.get("stderr")), number(fr.get("batch_stderr"))
+    verdict = flow_verdict(s)
+    row.update({key: verdict[key] for key in ("clogged", "steady_t_start_s", "steady_t_end_s")})
     row["force_balance_ratio"] = number(_section(s, "force_balance").get("ratio"))
     row["static_pressure"] = row["dynamic_pressure_max"] = nan
     bands = [b for b in s.get("bands") or [] if isinstance(b, dict) and b.get("static_pressure") is not None]
@@ -80,6 +85,8 @@ def run_row(folder) -> dict:
     time (s, from the run record, else the summary); ``fill_from_cache`` whether its settled bed
     came from the fill cache (None if unknown); ``flow_rate`` (kg/s) with ``flow_rate_stderr``
     (the summary's headline, batch means), ``flow_rate_fit_se`` and ``flow_rate_batch_se``;
+    ``clogged`` (whether its discharge clogged; None if unknown) and ``steady_t_start_s``,
+    ``steady_t_end_s`` (the steady window detected in its discharge, s; ``flow_rate.flow_verdict``);
     ``force_balance_ratio`` (the settled bed's supports over its weight); ``static_pressure`` and
     ``dynamic_pressure_max`` (Pa: means over the bands the settled bed loads); ``solid_fraction``
     (bulk, settled); ``coordination`` (settled mean); and, from the instability guard's peaks,
@@ -88,7 +95,7 @@ def run_row(folder) -> dict:
     from .run_folder import RunFolder
     run = RunFolder(Path(folder))
     row = {key: math.nan for key in ROW_KEYS}
-    row["fill_from_cache"] = None
+    row["fill_from_cache"] = row["clogged"] = None
     seen = None
     try:
         record = run.record

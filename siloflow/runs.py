@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 import time
 import warnings
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -28,11 +29,62 @@ from typing import Callable, Iterator, Optional
 import pandas as pd
 
 from .errors import CaseError, ReadError, SetupError
-from .run_folder import DUMPS, PLAN_NAME, RESULT_TABLES, RunFolder
+from .engine.tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
+from .run_folder import (
+    DUMPS,
+    FLOW_SCHEMA,
+    FLOW_TABLE,
+    PLAN_NAME,
+    RECORD_NAME,
+    RESULT_TABLES,
+    WALL_FORCE_SCHEMA,
+    WALL_FORCES_TABLE,
+    RunFolder,
+    RunRecord,
+    check_table,
+    folder_lock,
+)
 
 
 class UnfinishedRunWarning(UserWarning):
     """The results read are those of a run that is not known to have finished (``Run(unfinished=True)``)."""
+
+
+class _Unrecorded(RunFolder):
+    """A run folder whose engine run left no run record yet (running, interrupted, killed): its
+    record and engine-neutral tables as the engine's own files tell them now, read, never written."""
+
+    def __init__(self, path, engine):
+        super().__init__(path)
+        self.engine = engine
+
+    @cached_property
+    def record(self) -> RunRecord:
+        """What the engine's files tell of the run now (no stage at all when it left nothing readable)."""
+        try:
+            done = self.engine.finished(self.path, self.plan)
+        except (OSError, ReadError) as exc:
+            return RunRecord(folder=str(self.path), engine=self.engine.name, command=[], returncode=None,
+                             wall_time=float("nan"), stage_steps={}, inserted=None, settled_ke_pe=None,
+                             completed=False, warnings=[f"siloflow: the {self.engine.title} run left nothing "
+                                                        f"readable ({exc})"])
+        return RunRecord(folder=str(self.path), engine=self.engine.name, command=[], returncode=None,
+                         wall_time=float("nan"), stage_steps=dict(done.stage_steps), inserted=done.inserted,
+                         settled_ke_pe=done.settled_ke_pe, completed=done.completed, warnings=list(done.notes),
+                         templates_inserted=done.templates_inserted, short_batches=dict(done.short_batches),
+                         discharge_stop=done.discharge_stop)
+
+    def flow(self):
+        if (self.path / FLOW_TABLE).is_file():
+            return super().flow()
+        table = read_ave_time(self.path / self.engine.flow_table, FLOW_COLUMNS)
+        return check_table(neutral_flow(table, self.plan.dt), FLOW_SCHEMA, str(self.path / self.engine.flow_table))
+
+    def wall_forces(self):
+        if (self.path / WALL_FORCES_TABLE).is_file():
+            return super().wall_forces()
+        path = self.path / self.engine.wall_forces_table
+        return check_table(neutral_wall_forces(path, self.plan), WALL_FORCE_SCHEMA, str(path))
 
 
 def _path(value, what: str) -> Path:
@@ -49,7 +101,9 @@ class Run:
     The results (``summary``, ``flow``, ``wall_pressure``, ``bands``) are those of a finished run:
     of a run in any other state (running, failed, interrupted, abandoned, or ``unknown`` when its
     status.json is missing) they are refused with a ``ReadError`` saying why, unless the folder is
-    opened with ``unfinished=True``, which reads them with an :class:`UnfinishedRunWarning`."""
+    opened with ``unfinished=True``, which reads them with an :class:`UnfinishedRunWarning`; of a
+    run that left no run record yet (running, or stopped before it wrote one) the record, summary
+    and tables are then what the engine's files tell now, computed and not written."""
 
     def __init__(self, folder, unfinished: bool = False):
         self.folder = _path(folder, "the run folder")
@@ -74,13 +128,34 @@ class Run:
     def _finished(self) -> None:
         """Refuse (or, ``unfinished``, warn about) the results of a run not known to be complete."""
         status = self.status
-        if status["state"] == "complete":
+        unrecorded = self._unrecorded()
+        if status["state"] == "complete" and not unrecorded:
             return
         why = f"{self.folder} is {status['state']}" + (f" ({status['reason']})" if status.get("reason") else "")
         if not self.unfinished:
             raise ReadError(f"{why}: its results would not be those of a finished run; "
                             "siloflow.open_run(folder, unfinished=True) reads them anyway, with a warning")
-        warnings.warn(f"{why}: these results are not those of a finished run", UnfinishedRunWarning, stacklevel=3)
+        also = (f"; it has no {RECORD_NAME} yet: they are what the engine's files tell now, computed and not "
+                "written" if unrecorded else "")
+        warnings.warn(f"{why}: these results are not those of a finished run{also}", UnfinishedRunWarning,
+                      stacklevel=3)
+
+    def _unrecorded(self) -> bool:
+        """Whether the results are read from what the engine left: ``unfinished``, no run record
+        and no results written."""
+        return (self.unfinished and not (self.folder / RECORD_NAME).is_file()
+                and not self.run_folder.summary_file.is_file())
+
+    @cached_property
+    def _left(self) -> _Unrecorded:
+        from .engine import get_engine
+        return _Unrecorded(self.folder, get_engine(self.plan.engine.name))
+
+    @cached_property
+    def _computed(self):
+        """The results of an unrecorded run (``postprocess.run_results.RunResults``), in memory."""
+        from postprocess.first_results import analyse_run
+        return analyse_run(self._left)
 
     @property
     def plan(self):
@@ -90,22 +165,37 @@ class Run:
     @property
     def record(self):
         """The engine run's record (``siloflow.run_folder.RunRecord``: wall time s, stage steps, ...)."""
+        if self.unfinished and not (self.folder / RECORD_NAME).is_file():
+            self._finished()
+            return self._left.record
         return self.run_folder.record
 
     def _results(self) -> Path:
         self._finished()
         if not self.run_folder.summary_file.is_file():
-            from postprocess.report import post_process
-            post_process(self.folder)
+            if self._unrecorded():
+                raise ReadError(f"{self.folder} has no {RECORD_NAME} yet: its coarse-grained fields need a "
+                                "recorded run (finish it with siloflow run --resume); summary, flow, "
+                                "wall_pressure and bands are computed from what the engine left")
+            post_process(self.folder)              # recorded in the manifest: --force may replace them
         return self.run_folder.results
 
     @cached_property
     def summary(self) -> dict:
         """results/summary.json: flow rate (kg/s) with its standard error, bands, force balance, ..."""
+        if self._unrecorded():
+            self._finished()
+            return self._computed.summary
         self._results()
         return self.run_folder.read_summary()
 
     def _table(self, name: str) -> pd.DataFrame:
+        if self._unrecorded():
+            self._finished()
+            table = self._computed.tables.get(RESULT_TABLES[name])
+            if table is None:
+                raise ReadError(f"{self.folder}: no {name} table (its case samples no wall forces)")
+            return table
         path = self._results() / RESULT_TABLES[name]
         try:
             return pd.read_csv(path)
@@ -255,7 +345,11 @@ def open_run(folder, unfinished: bool = False) -> Run:
 class PreparedRun:
     """A run ready to start (:func:`prepare_run`, :func:`prepare_resume`): its rendered folder, the
     case and plan it was rendered from, the engine that runs it, and what the command line reports
-    before the run starts. :meth:`execute` runs it; :func:`post_process` computes its results."""
+    before the run starts. :meth:`execute` runs it; :func:`post_process` computes its results.
+
+    It holds the folder's lock (``siloflow.run_folder.folder_lock``: another siloflow command
+    writing the folder is refused) until :meth:`release`, the end of a ``with`` block on it, or
+    its collection."""
 
     folder: Path
     case: object                       # siloflow.case.Case
@@ -265,6 +359,25 @@ class PreparedRun:
     profile_replaced: list = field(default_factory=list)    # the case's fields a --profile replaced
     resuming: bool = False
     state_before: str = "rendered"     # a resumed folder's state when it was opened
+    lock: Optional[ExitStack] = field(default=None, repr=False, compare=False)    # the folder's lock, held
+
+    def release(self) -> None:
+        """Release the folder's lock (again: nothing happens)."""
+        lock, self.lock = self.lock, None
+        if lock is not None:
+            lock.close()
+
+    def __enter__(self) -> "PreparedRun":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+    def __del__(self) -> None:
+        try:
+            self.release()
+        except Exception:                   # at interpreter exit: the kernel releases the lock
+            pass
 
     def execute(self, progress: Optional[Callable[[str, int, int], None]] = None, cache=None,
                 on_cache_hit: Optional[Callable[[str], None]] = None,
@@ -273,15 +386,21 @@ class PreparedRun:
         settled bed of the same fill is reused, ``on_cache_hit(key)`` told), check what it left and
         return the run record; ``EngineRunError`` when it failed, ``KeyboardInterrupt`` (the engine
         stopped and the folder marked interrupted) when interrupted. A resumed run finishes from its
-        last restart point, without the cache."""
-        if self.resuming:
+        last restart point (or fills again when it was stopped before its bed settled), never from the
+        cache; given ``cache``, its settled bed is then published there if the cache has none of its
+        fill (``fill_cache.run_with_cache``'s ``resume``)."""
+        if self.resuming and cache is None:
             return self.engine.resume(self.folder, progress=progress)
         if cache is None:
             self.engine.execute(self.folder, progress=progress)
             return self.engine.collect(self.folder)
         from .fill_cache import FillCache, run_with_cache
-        return run_with_cache(self.engine, self.folder, self.plan, FillCache(cache), progress,
-                              on_hit=on_cache_hit, on_warning=on_warning)
+        plan = self.plan
+        if self.resuming:       # plan.json holds no wall triangles, and the fill key needs them: the case's
+            from .derived import derive
+            plan = derive(self.case)
+        return run_with_cache(self.engine, self.folder, plan, FillCache(cache), progress,
+                              on_hit=on_cache_hit, on_warning=on_warning, resume=self.resuming)
 
 
 def _case_of(case) -> tuple[object, list, str]:
@@ -327,8 +446,11 @@ def prepare_run(case, folder, force: bool = False, allow_long: bool = False, all
         raise CaseError(exc.problems, source) from None
     check_run_length(plan, allow_long)
     sizes = check_disk_space(case, plan, folder, allow_large_output)
-    folder = engine.prepare(case, folder, force=force, keep=keep, plan=plan)
-    return PreparedRun(folder, case, plan, engine, sizes, list(replaced))
+    lock = ExitStack()
+    with lock:              # released here if the render fails, else kept by the PreparedRun
+        lock.enter_context(folder_lock(folder))
+        folder = engine.prepare(case, folder, force=force, keep=keep, plan=plan)
+        return PreparedRun(folder, case, plan, engine, sizes, list(replaced), lock=lock.pop_all())
 
 
 def prepare_resume(folder, executable: Optional[str] = None) -> PreparedRun:
@@ -342,8 +464,12 @@ def prepare_resume(folder, executable: Optional[str] = None) -> PreparedRun:
     case = load_case(run_folder.case_file)
     engine = get_engine(case.engine.name, executable=executable)
     engine.preflight(case.engine.ranks)
-    state = run_state(folder).get("state")
-    return PreparedRun(folder, case, run_folder.plan, engine, resuming=True, state_before=str(state))
+    lock = ExitStack()
+    with lock:              # held until the PreparedRun is released
+        lock.enter_context(folder_lock(folder))
+        state = run_state(folder).get("state")
+        plan = run_folder.plan
+        return PreparedRun(folder, case, plan, engine, resuming=True, state_before=str(state), lock=lock.pop_all())
 
 
 def post_process(folder, measured_pressure=None) -> dict:
@@ -366,19 +492,19 @@ def run(case, folder, force: bool = False, progress=None, allow_long: bool = Fal
     pipeline: :func:`prepare_run`, :meth:`PreparedRun.execute`, :func:`post_process`); return the
     ``Run``. ``progress(stage, step, total)`` is told the engine's progress; ``cache``: a fill cache
     folder; ``post``: compute the first results now (else on first access)."""
-    prepared = prepare_run(case, folder, force=force, allow_long=allow_long, allow_large_output=allow_large_output,
-                           profile=profile, executable=executable)
-    prepared.execute(progress, cache=cache)
-    if post:
-        post_process(prepared.folder)
+    with prepare_run(case, folder, force=force, allow_long=allow_long, allow_large_output=allow_large_output,
+                     profile=profile, executable=executable) as prepared:
+        prepared.execute(progress, cache=cache)
+        if post:
+            post_process(prepared.folder)
     return Run(prepared.folder)
 
 
 def resume(folder, progress=None, executable: Optional[str] = None, post: bool = True) -> Run:
     """Finish an interrupted run folder from its last restart point (``siloflow run --resume``) and
     compute its first results; return the ``Run``."""
-    prepared = prepare_resume(folder, executable)
-    prepared.execute(progress)
-    if post:
-        post_process(prepared.folder)
+    with prepare_resume(folder, executable) as prepared:
+        prepared.execute(progress)
+        if post:
+            post_process(prepared.folder)
     return Run(prepared.folder)

@@ -39,11 +39,13 @@ TABLE_NAME = "sweep.csv"
 #: columns of the sweep table before the ``--set`` paths, and after them
 TABLE_HEAD = ("run", "name")
 TABLE_TAIL = ("seed", "fill_key", "fill_from_cache", "status", "returncode", "wall_s", "flow_rate_kg_s",
-              "flow_rate_stderr_kg_s", "force_balance_ratio", "bulk_solid_fraction", "log")
+              "flow_rate_stderr_kg_s", "clogged", "steady_t_start_s", "steady_t_end_s", "force_balance_ratio",
+              "bulk_solid_fraction", "log")
 #: sweep table column <- run_row key
 ROW_COLUMNS = {"fill_from_cache": "fill_from_cache", "wall_s": "wall_s", "flow_rate_kg_s": "flow_rate",
-               "flow_rate_stderr_kg_s": "flow_rate_stderr", "force_balance_ratio": "force_balance_ratio",
-               "bulk_solid_fraction": "solid_fraction"}
+               "flow_rate_stderr_kg_s": "flow_rate_stderr", "clogged": "clogged",
+               "steady_t_start_s": "steady_t_start_s", "steady_t_end_s": "steady_t_end_s",
+               "force_balance_ratio": "force_balance_ratio", "bulk_solid_fraction": "solid_fraction"}
 
 
 def prepare_sweep(case_file, set_specs: list[str], seeds: int, out, force: bool = False, need_binary: bool = True,
@@ -63,7 +65,9 @@ def prepare_sweep(case_file, set_specs: list[str], seeds: int, out, force: bool 
 def run_variant(case_file: Optional[Path], folder: Path, cache: Path, resuming: bool = False) -> None:
     """One run of a sweep through the run API, as ``siloflow run CASE -o FOLDER --cache CACHE`` (or
     ``siloflow run --resume FOLDER``) does it: render, run, check, first results; what the command
-    would print about it goes to stdout (the run's log). Raises ``SiloflowError`` when it fails."""
+    would print about it goes to stdout (the run's log). A resumed run's settled bed is published to
+    the cache when it has none of its fill (an interrupted fill computed again), so its group's
+    other runs start from it. Raises ``SiloflowError`` when it fails."""
     from .runs import post_process, prepare_resume, prepare_run
     if resuming:
         prepared = prepare_resume(folder)
@@ -85,10 +89,8 @@ def run_variant(case_file: Optional[Path], folder: Path, cache: Path, resuming: 
     def warn(message: str) -> None:
         print(f"warning: {message}", flush=True)
 
-    if resuming:
-        record = prepared.execute(progress)
-    else:
-        record = prepared.execute(progress, cache=cache, on_cache_hit=hit, on_warning=warn)
+    # a resumed run goes through the cache too: the group's fill it computes is published for the rest
+    record = prepared.execute(progress, cache=cache, on_cache_hit=hit, on_warning=warn)
     print(f"engine finished in {record.wall_time:.1f} s", flush=True)
     post_process(prepared.folder)
     print(f"results: {prepared.folder / 'results'}", flush=True)
@@ -109,7 +111,8 @@ class FillOrder:
     the fill to the next. Afterwards the rest of the group may start, from the cached bed.
     A resumed sweep leaves out the ``finished`` runs (name -> exit code; a group with a complete
     one is filled) and lets the ``resuming`` ones (interrupted runs, resumed from their own
-    folders) start at once, first."""
+    folders) start at once, first. A resumed run of a group not yet filled computes its fill
+    (its bed goes to the cache when it completes): the group's others wait for it as for a fill."""
 
     def __init__(self, groups: dict[str, list[Variant]], jobs: dict[str, Job], finished: Optional[dict] = None,
                  resuming: Optional[set] = None):
@@ -128,10 +131,11 @@ class FillOrder:
         """(key, variant) that may start: the resumed runs, the fills (group order), then the
         others (variant order)."""
         fills, others = [], []
+        resumed = {key for key, _ in self.resuming}      # each fills its group first, if not filled
         for key, members in self.waiting.items():
             if key in self.filled:
                 others += [(key, v) for v in members]
-            elif members and key not in self.filling:
+            elif members and key not in self.filling and key not in resumed:
                 fills.append((key, members[0]))
         return list(self.resuming) + fills + sorted(others, key=lambda kv: kv[1].index)
 
@@ -140,12 +144,9 @@ class FillOrder:
 
     def started(self, job: Job) -> None:
         key, variant = self.keys[job.name], self.variants[job.name]
-        for k, (_, v) in enumerate(self.resuming):
-            if v.name == variant.name:
-                del self.resuming[k]
-                return
+        self.resuming = [(k, v) for k, v in self.resuming if v.name != variant.name]
         self.waiting[key] = [v for v in self.waiting[key] if v.name != variant.name]
-        if key not in self.filled:
+        if key not in self.filled and key not in self.filling:
             self.filling[key] = variant.name
 
     def finished(self, job: Job, outcome: Outcome) -> None:
@@ -286,7 +287,10 @@ def sweep_table(variants: list[Variant], out: Path, keys: dict[str, str], return
     hit, None if unknown), ``status`` (complete: exit code 0; failed: another or an unknown
     one; unfinished: not in ``returncodes``, the sweep was stopped first), ``returncode``,
     ``wall_s`` (engine wall time, s), ``flow_rate_kg_s`` and ``flow_rate_stderr_kg_s`` (steady
-    flow rate, kg/s), ``force_balance_ratio`` (settled bed's supports over its weight),
+    flow rate, kg/s), ``clogged`` (whether the discharge clogged; None if unknown),
+    ``steady_t_start_s`` and ``steady_t_end_s`` (the steady window detected in the discharge, s:
+    ``siloflow beverloo`` leaves out a run that clogged or has none), ``force_balance_ratio``
+    (settled bed's supports over its weight),
     ``bulk_solid_fraction`` and ``log``; nan where a run left no value. A pandas DataFrame."""
     import pandas as pd
     out = Path(out)

@@ -14,7 +14,7 @@ from typing import Optional
 
 import yaml
 
-from .atomic_files import read_regular_bytes, write_json, write_text
+from .atomic_files import read_json, write_json, write_text
 from .errors import ReadError, SetupError
 from .sweep_plan import StageProgress, Variant
 
@@ -68,8 +68,8 @@ def read_record(out) -> Optional[dict]:
     if not os.path.lexists(path):
         return None
     try:
-        data = json.loads(read_regular_bytes(path, 1 << 24, "a sweep record"))
-    except ValueError:
+        data = read_json(path, "a sweep record", 1 << 24)
+    except ReadError:
         data = None
     files = data.get("files") if isinstance(data, dict) else None
     if not (isinstance(data, dict) and data.get("kind") == RECORD_KIND and isinstance(data.get("definition"), str)

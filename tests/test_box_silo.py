@@ -111,6 +111,32 @@ def test_box_outlet_that_cannot_be_is_refused(changes, message):
     assert info.value.problems[0][0] == "geometry"
 
 
+def test_box_wall_mesh_refusal_names_the_boxs_own_fields():
+    """Issue 55.10a: a circular outlet a hair from the wall leaves a sliver of floor that cannot be
+    meshed; the refusal named a cylinder's fields (orifice_radius, radius, mesh_segments), which a
+    box lacks, instead of the box's own."""
+    with pytest.raises(CaseError) as info:
+        derive(case_from_dict(data_of(**{**VARIANTS["circle"], "outlet_offset": A - 0.0065 - 1e-7})))
+    [(field, message)] = info.value.problems
+    assert field == "geometry.outlet_offset" and "'bottom'" in message
+    assert message.endswith("change geometry.outlet_offset or geometry.outlet_radius or geometry.width or "
+                            "geometry.depth"), message
+    for foreign in ("orifice_radius", "geometry.radius", "mesh_segments"):
+        assert foreign not in message
+
+
+def test_box_hopper_too_fine_to_mesh_is_refused_before_it_fills_memory():
+    """Found by the fuzz test of the examples' extremes: a 100 m deep hopper 5 cm wide needed a
+    hopper face of 64 million triangles (MemoryError); its trapezoids are now held to the walls'
+    triangle budget before any is made, and the refusal names the box's fields."""
+    from test_case_loading import memory_cap
+    with pytest.raises(CaseError) as info, memory_cap(2 ** 30):
+        derive(case_from_dict(data_of(depth=100.0, half_angle_deg=35.0)))
+    [(field, message)] = info.value.problems
+    assert field == "geometry.half_angle_deg" and "more than siloflow writes for one wall" in message
+    assert "geometry.depth" in message
+
+
 def test_box_refuses_clumps_naming_the_kind():
     data = data_of()
     data["particles"] = {"kind": "clumps", "shape": "wheat", "length": 0.005, "width": 0.0025}

@@ -223,10 +223,14 @@ def test_a_needle_hopper_is_refused_before_its_meshes_fill_memory(tmp_path):
     import yaml
     from conftest import ROOT
     data = yaml.safe_load((ROOT / "tests" / "data" / "slab_dust.yaml").read_text())
-    data["geometry"]["half_angle_deg"] = 6e-8
+    data["geometry"]["half_angle_deg"] = 2e-7        # 6e-8 is now below the field's own bound (MIN_HALF_ANGLE_DEG)
     with pytest.raises(CaseError) as info:
         case_from_dict(data)
     assert any(f == "geometry" and "makes the hopper" in m for f, m in info.value.problems), info.value.problems
+    data["geometry"]["half_angle_deg"] = 6e-8
+    with pytest.raises(CaseError) as info:
+        case_from_dict(data)
+    assert [f for f, _ in info.value.problems] == ["geometry.half_angle_deg"], info.value.problems
 
 
 #: every time and interval of the case schema (s): its dotted path and the case fields it needs to be read
@@ -289,3 +293,23 @@ def test_a_settling_check_longer_than_the_settling_is_refused(quick_dict):
     set_path(quick_dict, "fill.settle.check_interval", 2.0)
     with pytest.raises(CaseError, match="check_interval .* longer than the settling"):
         case_from_dict(quick_dict)
+
+
+@pytest.mark.parametrize("changes, field", [
+    ({"fill.settle.check_interval": 1.0e-308, "fill.settle.max_time": 2.0}, "fill.settle.check_interval"),
+    ({"materials.model": "hooke", "materials.characteristic_velocity": 1.0e-308}, "materials.characteristic_velocity"),
+    ({"design": {"phi_r_deg": 89.99, "material": "wheat"}}, "design.phi_r_deg"),
+    ({"design": {"phi_r_deg": 1.0e-300, "material": "wheat"}}, "design.phi_r_deg"),
+    ({"gravity": 5e-324}, "gravity"),
+    ({"sensors": {"heights": [5e-324, 0.1], "sectors": 4}}, "sensors"),
+], ids=["check-interval", "characteristic-velocity", "steep-repose", "flat-repose", "gravity", "band-boundary"])
+def test_validate_refuses_extreme_but_once_valid_numbers_by_field(quick_dict, write_case, changes, field):
+    """Issue 55.8: these passed the schema and ended in an OverflowError (check_interval, a repose
+    angle of 89.99 deg on a squat silo), a ZeroDivisionError (characteristic_velocity, gravity), an
+    OverflowError in the walls (a band 5e-324 m high) or NaN design loads (repose 1e-300 deg): each
+    is now bounded by physics in the schema, and validate names the field."""
+    for path, value in changes.items():
+        set_path(quick_dict, path, value)
+    result = runner.invoke(app, ["validate", str(write_case(quick_dict))], env={"COLUMNS": "300"})
+    assert result.exit_code == 1 and isinstance(result.exception, SystemExit), result.output
+    assert f"  {field}:" in result.output and "Traceback" not in result.output, result.output

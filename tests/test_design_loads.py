@@ -546,3 +546,34 @@ def test_design_api_is_what_the_cli_writes(tmp_path):
     assert siloflow.design(QUICK, top="heap").loads.h_o > 0
     with pytest.raises(CaseError, match="missing.yaml"):
         siloflow.design(tmp_path / "missing.yaml")
+
+
+def test_angle_of_repose_is_bounded_and_its_loads_finite(quick_dict, write_case, tmp_path):
+    """Issue 55.8: phi_r_deg 89.99 on a squat silo overflowed (OverflowError) and 1e-300 printed
+    NaN loads. The schema bounds phi_r to [5, 70] deg, and Y_R's vertical stress is evaluated without
+    a power of z_o - h_o alone and through its limit at n = -1 (where the standard's form is 0 / 0)."""
+    from siloflow.design_loads import squat_filling
+    from siloflow.errors import CaseError
+    for phi_r in (89.99, 1e-300, 4.9, 70.1):
+        quick_dict["design"] = {"material": "wheat", "phi_r_deg": phi_r}
+        with pytest.raises(CaseError) as info:
+            case_from_dict(quick_dict)
+        assert [p for p, _ in info.value.problems] == ["design.phi_r_deg"], info.value.problems
+        with pytest.raises(ValueError, match="phi_r"):
+            bulk_solid("wheat", phi_r=phi_r)
+    for phi_r in (5.0, 70.0):                        # the bounds themselves: a squat silo's loads
+        loads = design_loads(cylinder(5.0), bulk_solid("wheat", phi_r=phi_r), 8.0, "D2", top="heap")
+        below_heap = loads.z < 8.0 - loads.h_o        # p_vf is NaN inside the heap, above the wall contact
+        assert loads.classification == "squat" and np.isfinite(loads.p_hf).all() and np.isfinite(loads.p_wf).all()
+        assert np.isfinite(loads.p_vf[below_heap]).all() and below_heap.sum() > 10
+    # the formula itself, beyond the bounds: finite, and continuous through n = -1 (h_o = 0, phi_r -> 0)
+    depth = np.linspace(0.0, 8.0, 9)
+    tiny, small = (squat_filling(depth, GAMMA, 0.5, 0.4, 1.25, phi_r, 0.0) for phi_r in (1e-300, 1e-6))
+    for a, b in zip(tiny, small):
+        assert np.isfinite(a).all()
+        np.testing.assert_allclose(a, b, rtol=1e-6)
+    steep = squat_filling(depth, GAMMA, 0.5, 0.4, 1.25, 89.99, 0.0)
+    assert all(np.isfinite(a).all() for a in steep)
+    # z_V at n = -1 exactly: h_o + (z_o - h_o) ln X, X = (z - h_o) / (z_o - h_o) + 1 (h_o = 0)
+    z_o = 1.25 / (0.5 * 0.4)
+    assert tiny[2] == pytest.approx(GAMMA * z_o * np.log(depth / z_o + 1.0), rel=1e-9)

@@ -420,3 +420,131 @@ def test_cache_folders_of_any_make_end_in_a_refusal_or_a_right_answer(tmp_path_f
     kept = {path: b for path, b in before.items() if not any(f"/fills/{k}/" in path for k in intact)}
     assert {path: after.get(path) for path in kept} == kept
     assert cache.entries() == []
+
+
+# ---------------------------------------------------------------- issue 55.3: the cached bed is read back and checked
+def _bed_of(plan, **changes):
+    """The settled bed ``plan`` fills, as an engine reads it back (``SettledBed``), with ``changes``."""
+    import numpy as np
+    from siloflow.engine.base import SettledBed
+    n = plan.expected_atoms
+    sp = plan.species[0]
+    fields = {"types": np.ones(n, int), "radius": np.full(n, sp.radius), "mass": np.full(n, sp.mass),
+              "box": {"xlo": -0.02, "xhi": 0.02, "ylo": -0.02, "yhi": 0.02, "zlo": -0.03, "zhi": 0.31}}
+    return SettledBed(**{**fields, **changes})
+
+
+def test_a_bed_read_back_is_compared_with_the_plan(quick_dict):
+    """Atom count, atom types, radii, grain masses (the density they give), a size class's share
+    and the box: each one that differs is named; the plan's own bed passes."""
+    import numpy as np
+    from siloflow.fill_cache import bed_problems
+    plan = derive(case_from_dict(quick_dict))
+    bed = _bed_of(plan)
+    box = dict(bed.box)
+    assert bed_problems(plan, bed, box) == []
+    n, sp = plan.expected_atoms, plan.species[0]
+    assert bed_problems(plan, _bed_of(plan, types=np.ones(n - 10, int), radius=np.full(n - 10, sp.radius),
+                                      mass=np.full(n - 10, sp.mass)), box) == []     # lost in the fill: within 1 %
+    short = bed_problems(plan, _bed_of(plan, types=np.ones(n // 2, int), radius=np.full(n // 2, sp.radius),
+                                       mass=np.full(n // 2, sp.mass)), box)
+    assert any(f"holds {n // 2} atoms where this case's bed holds {n}" in p for p in short)
+    light = bed_problems(plan, _bed_of(plan, mass=np.full(n, sp.mass * 0.6)), box)
+    assert len(light) == 1 and "density of 1500 kg/m3" in light[0] and "(2500 kg/m3)" in light[0]
+    assert "radius of 0.002 m" in bed_problems(plan, _bed_of(plan, radius=np.full(n, 0.002)), box)[0]
+    types = np.ones(n, int)
+    types[:3] = 2
+    assert any("atom type 2 is no species" in p for p in bed_problems(plan, _bed_of(plan, types=types), box))
+    nan = np.full(n, sp.mass)
+    nan[7] = np.nan
+    assert "1 of 5000 grains weigh nan kg" in bed_problems(plan, _bed_of(plan, mass=nan), box)[0]
+    wide = bed_problems(plan, bed, {**box, "xlo": -0.03})
+    assert wide == ["its simulation box is not this case's (xlo -0.02 m, not -0.03)"]
+
+
+def test_a_size_class_far_from_its_share_is_named(quick_dict):
+    """Two sizes in equal numbers: a bed of 30 % small grains is not this case's (a share drawn at
+    random strays a few per cent at most); one of 48 % is."""
+    import numpy as np
+    from siloflow.fill_cache import bed_problems
+    quick_dict["particles"] = {"kind": "polydisperse_spheres", "radii": [0.0015, 0.0012], "fractions": [0.5, 0.5],
+                               "basis": "number"}
+    plan = derive(case_from_dict(quick_dict))
+    n = plan.expected_atoms
+    big, small = plan.species
+
+    def bed(share):
+        k = round(share * n)
+        types = np.array([1] * (n - k) + [2] * k)
+        return _bed_of(plan, types=types, radius=np.where(types == 1, big.radius, small.radius),
+                       mass=np.where(types == 1, big.mass, small.mass))
+    assert bed_problems(plan, bed(0.48)) == []
+    problems = bed_problems(plan, bed(0.3))
+    assert len(problems) == 2 and f"species '{small.name}' (atom type 2): {round(0.3 * n)} grains" in problems[1]
+
+
+@pytest.mark.engine
+@pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS is not installed")
+def test_a_forged_entry_is_refused_and_the_run_fills_its_own_bed(tmp_path):
+    """Issue 55.3: the density-1500 bed copied under the density-2500 case's key, with key.json
+    and entry.json written for that key, passes the entry's hashes; the run reads the bed back,
+    refuses it with a warning naming the density, fills its own bed (its mass, not the forged
+    one's) and publishes nothing over the forged entry. A cache hit of the true bed still runs."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    from siloflow.engine import get_engine
+
+    data = {"name": "tiny", "geometry": {"kind": "cylinder", "radius": 0.0125, "height": 0.08, "orifice_radius": 0.0055,
+                                         "mesh_segments": 24},
+            "sensors": {"bands": 2, "sectors": 4},
+            "materials": {"model": "hertz", "particle": {"density": 2500.0, "youngs_modulus": 5.0e6, "poisson_ratio": 0.3},
+                          "wall": {"youngs_modulus": 5.0e6, "poisson_ratio": 0.3},
+                          "particle_particle": {"friction": 0.5, "restitution": 0.5},
+                          "particle_wall": {"friction": 0.5, "restitution": 0.5}},
+            "particles": {"kind": "spheres", "radius": 0.00125},
+            "fill": {"count": 400, "settle": {"ke_pe_ratio": 1.0e-5, "check_interval": 0.02, "max_time": 1.0,
+                                              "static_window": 0.01}},
+            "discharge": {"duration": 0.1}, "outputs": {"sample_interval": 0.005, "dump_interval": 0.1},
+            "engine": {"ranks": 1, "timestep_fraction": 0.2}, "seed": 4242}
+    dense_case, light_case = tmp_path / "dense.yaml", tmp_path / "light.yaml"
+    dense_case.write_text(yaml.safe_dump(data))
+    light_case.write_text(yaml.safe_dump(changed(data, "materials.particle.density", 1500.0)))
+    cache = FillCache(tmp_path / "cache")
+
+    def run(case, out):
+        proc = subprocess.run([sys.executable, "-m", "siloflow.cli", "run", str(case), "-o", str(tmp_path / out),
+                               "--cache", str(cache.root)], capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr
+        assert "Traceback" not in proc.stderr
+        summary = json.loads((tmp_path / out / "results" / "summary.json").read_text())
+        return proc, json.loads((tmp_path / out / "run_record.json").read_text())["fill_cache"], summary
+
+    _, light_fill, light = run(light_case, "light")
+    engine = get_engine("liggghts")
+    inputs = fill_key_inputs(derive(case_from_dict(data)), engine)
+    dense_key = key_of(inputs)
+    forged = cache.fills / dense_key
+    shutil.copytree(cache.fills / light_fill["key"], forged)
+    (forged / "key.json").write_text(json.dumps(inputs, indent=1, sort_keys=True))
+    info = json.loads((forged / "entry.json").read_text())
+    (forged / "entry.json").write_text(json.dumps({**info, "key": dense_key}, indent=1))
+    assert cache.get(dense_key) is not None                   # the hashes cannot tell
+    before = {p.name: p.read_bytes() for p in forged.iterdir()}
+
+    proc, fill, dense = run(dense_case, "dense")
+    assert fill["hit"] is False and fill["published"] is False
+    assert "does not hold this case's settled bed" in fill["warning"] and "density of 1500 kg/m3" in fill["warning"]
+    said = " ".join(proc.stderr.split())                     # the console wraps its lines
+    assert "does not hold this case's settled bed" in said and "density of 1500 kg/m3" in said
+    assert "fill from the cache" not in proc.stdout
+    mass = 400 * 2500.0 * 4 / 3 * 3.141592653589793 * 0.00125 ** 3
+    assert dense["initial_mass_kg"] == pytest.approx(mass, rel=1e-6)
+    assert light["initial_mass_kg"] == pytest.approx(mass * 0.6, rel=1e-6)
+    assert {p.name: p.read_bytes() for p in forged.iterdir()} == before       # the forged entry is left as it was
+    # the true bed passes its check: a second light run starts from it
+    _, again, light2 = run(light_case, "light2")
+    assert again["hit"] is True and "warning" not in again
+    assert light2["initial_mass_kg"] == pytest.approx(light["initial_mass_kg"], rel=1e-12)

@@ -267,8 +267,50 @@ def test_axis_outside_the_walls_is_refused(tmp_path):
     data = yaml.safe_load(path.read_text())
     data["geometry"]["axis"] = [40.0, 0.0]
     path.write_text(yaml.safe_dump(data))
-    with pytest.raises(CaseError, match="axis"):
+    with pytest.raises(CaseError, match="axis") as err:
         derive(load_case(path))
+    assert "lies outside the vertical walls' cross-section" in str(err.value)
+
+
+def ring_cylinder(path: Path, radius: float = 12.5, hole: float = 5.5, rows=(0.0, 40.0, 80.0, 120.0, 160.0),
+                  n: int = 32) -> Path:
+    """A closed polygonal cylinder (mm) built by hand as CAD exports one: a floor annulus round the
+    outlet hole at z = 0 and the side split into rows at the heights ``rows``, so that a ring of
+    vertices lies exactly half way up the vertical wall (80 mm); normals out."""
+    th = 2 * math.pi * np.arange(n) / n
+    ring = lambda r, z: np.stack([r * np.cos(th), r * np.sin(th), np.full(n, z)], axis=1)   # noqa: E731
+    tris = []
+    for lo, hi in zip(rows, rows[1:]):
+        a, b = ring(radius, lo), ring(radius, hi)
+        for i in range(n):
+            j = (i + 1) % n
+            tris += [[a[i], a[j], b[j]], [a[i], b[j], b[i]]]
+    inner, outer = ring(hole, 0.0), ring(radius, 0.0)
+    for i in range(n):
+        j = (i + 1) % n
+        tris += [[inner[i], outer[j], outer[i]], [inner[i], inner[j], outer[j]]]
+    tris = np.array(tris)
+    m = stl_mesh.Mesh(np.zeros(len(tris), dtype=stl_mesh.Mesh.dtype))
+    m.vectors[:] = tris
+    m.save(str(path))
+    return path
+
+
+def test_vertex_ring_half_way_up_is_a_valid_silo(tmp_path):
+    """A ring of vertices exactly half way up the vertical wall (where the section is measured)
+    is a valid silo: its section is the 32-gon's, not an empty cut refused as an axis outside."""
+    ring_cylinder(tmp_path / "walls.stl")
+    data = yaml.safe_load(SMALL.read_text())
+    data.update(name="ring_silo", geometry={"kind": "mesh", "files": ["walls.stl"], "scale": 1.0 / MM,
+                                            "outlet": {"z": 0.0, "center": [0.0, 0.0], "radius": 5.5}})
+    path = tmp_path / "ring_silo.yaml"
+    path.write_text(yaml.safe_dump(data))
+    plan = derive(load_case(path))
+    g, R, n = plan.geometry, 0.0125, 32
+    assert g.kind == "mesh" and g.height == pytest.approx(0.16, rel=1e-6)
+    assert g.section_area == pytest.approx(0.5 * n * R ** 2 * math.sin(2 * math.pi / n), rel=1e-6)
+    assert g.section_perimeter == pytest.approx(2 * n * R * math.sin(math.pi / n), rel=1e-6)
+    assert len([w for w in plan.walls if w.role == "band"]) == 7 * 4
 
 
 def test_inward_normals_are_turned_out(tmp_path, cylinder_pair):

@@ -53,8 +53,8 @@ def test_a_finished_run_gives_its_headline_numbers(tmp_path):
 
 def test_a_folder_without_results_is_nan_and_a_failed_measurement_too(tmp_path):
     empty = run_row(tmp_path / "nothing")
-    assert empty["fill_from_cache"] is None
-    assert all(math.isnan(v) for k, v in empty.items() if k != "fill_from_cache")
+    assert empty["fill_from_cache"] is None and empty["clogged"] is None
+    assert all(math.isnan(v) for k, v in empty.items() if k not in ("fill_from_cache", "clogged"))
     write_record(tmp_path, hit=False)                     # ran, not post-processed
     row = run_row(tmp_path)
     assert row["wall_s"] == 12.5 and row["fill_from_cache"] is False and math.isnan(row["flow_rate"])
@@ -88,4 +88,9 @@ def test_the_three_studies_take_their_columns_from_the_row(tmp_path):
                                          "flow_rate_batch_se")}
     table = sweep._results(tmp_path)
     assert table == {"fill_from_cache": True, "wall_s": 12.5, "flow_rate_kg_s": 0.02, "flow_rate_stderr_kg_s": 0.001,
-                     "force_balance_ratio": 0.98, "bulk_solid_fraction": 0.61}
+                     "clogged": None, "steady_t_start_s": table["steady_t_start_s"],
+                     "steady_t_end_s": table["steady_t_end_s"], "force_balance_ratio": 0.98, "bulk_solid_fraction": 0.61}
+    assert math.isnan(table["steady_t_start_s"])          # this summary predates clog and window detection
+    write_summary(tmp_path, clogged=None, steady_window_detected={"t_start": 0.4, "t_end": 0.9})
+    table = sweep._results(tmp_path)
+    assert (table["clogged"], table["steady_t_start_s"], table["steady_t_end_s"]) == (False, 0.4, 0.9)

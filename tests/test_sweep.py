@@ -278,7 +278,8 @@ def test_fills_first_within_the_cores_and_a_failure_recorded(quick_dict, tmp_pat
     # the table
     assert list(table.columns) == ["run", "name", "particles.radius", "geometry.orifice_radius", "engine.ranks", "seed",
                                    "fill_key", "fill_from_cache", "status", "returncode", "wall_s", "flow_rate_kg_s",
-                                   "flow_rate_stderr_kg_s", "force_balance_ratio", "bulk_solid_fraction", "log"]
+                                   "flow_rate_stderr_kg_s", "clogged", "steady_t_start_s", "steady_t_end_s",
+                                   "force_balance_ratio", "bulk_solid_fraction", "log"]
     assert list(table.name) == [v.name for v in variants]
     assert list(table.status) == ["complete"] * 4 + ["failed", "complete"]
     assert list(table.returncode) == [0, 0, 0, 0, 1, 0]

@@ -448,3 +448,184 @@ def test_plans_are_made_once_per_case_and_silo_and_group_as_before(quick_dict, m
             assert real_derive(v.case).model_dump_json() == real_derive(v.case).model_dump_json()
         shared = real_derive(variants[5].case)
     assert shared.model_dump_json() == real_derive(variants[5].case).model_dump_json()
+
+
+# ------------------------------------------------------------------ issue 55 item 10e: a fill resumed
+class ResumingEngine:
+    """The parts of an engine a run through the fill cache asks for, without the engine. A run fills
+    (its bed: ``bed.restart``; a name in FAKE_SLOW sleeps in its fill, SIGTERM marking the folder
+    interrupted as the engine does) and discharges; a resumed run fills again when it was stopped
+    before its bed settled, else goes on from it; a run from the cache copies the bed. Each fill
+    computed is appended to FAKE_FILLS, each start to FAKE_STARTED."""
+
+    name = "fake"
+
+    def fill_key_parts(self, plan):
+        return {"name": "fake", "version": "1"}
+
+    def restart_step(self, folder):
+        return 100 if (Path(folder) / "bed.restart").is_file() else None
+
+    def _started(self, folder, how):
+        write_status(folder, "running")
+        with open(os.environ["FAKE_STARTED"], "a") as fh:
+            fh.write(Path(folder).name + "\n")
+
+    def execute(self, folder, progress=None):
+        self._started(folder, "run")
+        try:
+            time.sleep(60 if Path(folder).name in os.environ.get("FAKE_SLOW", "").split(",") else 0.05)
+        except KeyboardInterrupt:
+            write_status(folder, "interrupted")
+            raise
+        (Path(folder) / "bed.restart").write_bytes(b"settled bed")
+        with open(os.environ["FAKE_FILLS"], "a") as fh:
+            fh.write(Path(folder).name + "\n")
+
+    def collect(self, folder):
+        from siloflow.run_folder import RunRecord
+        write_status(folder, "complete")
+        return RunRecord(folder=str(folder), engine="fake", command=["fake"], returncode=0, wall_time=0.05,
+                         stage_steps={"fill": 0, "static": 100}, inserted=10, settled_ke_pe=1e-7, completed=True)
+
+    def resume(self, folder, progress=None):
+        assert run_state(folder)["state"] not in ("running", "complete")
+        if self.restart_step(folder) is None:          # stopped before its bed settled: the fill again
+            self.execute(folder, progress)
+        else:
+            self._started(folder, "resume")
+        return self.collect(folder)
+
+    def fill_files(self, folder):
+        return {"bed.restart": (Path(folder) / "bed.restart").read_bytes()}
+
+    def fill_bed(self, files, plan):
+        """The cached bed read back: the plan's own grains (one sphere species)."""
+        import numpy as np
+
+        from siloflow.engine.base import SettledBed
+        (sp,) = plan.species
+        n = plan.expected_atoms
+        return SettledBed(np.ones(n, int), np.full(n, sp.radius), np.full(n, sp.mass), {})
+
+    def start_from_fill(self, folder, files, progress=None):
+        self._started(folder, "cache")
+        (Path(folder) / "bed.restart").write_bytes(Path(files["bed.restart"]).read_bytes())
+        return self.collect(folder)
+
+
+@pytest.fixture
+def resuming_engine(tmp_path, monkeypatch, fake_run):
+    """The run API (siloflow.runs) with :class:`ResumingEngine` in place of the case's engine, as the
+    sweep's own runner (sweep.run_variant) calls it; returns a reader of the fills computed."""
+    from siloflow import runs
+    from siloflow.case_file import load_case
+    from siloflow.derived import derive
+    from siloflow.run_folder import RunFolder
+    fills = tmp_path / "fills.txt"
+    monkeypatch.setenv("FAKE_FILLS", str(fills))
+    engine = ResumingEngine()
+
+    def prepare_run(case_file, folder):
+        case = load_case(case_file)
+        plan = derive(case)
+        Path(folder).mkdir(parents=True)
+        RunFolder(folder).write_plan(plan)
+        RunFolder(folder).case_file.write_bytes(Path(case_file).read_bytes())
+        write_status(folder, "rendered")
+        return runs.PreparedRun(Path(folder), case, plan, engine)
+
+    def prepare_resume(folder):                   # as siloflow.runs': the folder's case, its plan.json
+        run = RunFolder(folder)
+        return runs.PreparedRun(Path(folder), load_case(run.case_file), run.plan, engine, resuming=True,
+                                state_before=run_state(folder)["state"])
+
+    def post_process(folder):
+        write_json_file(Path(folder) / RESULTS / SUMMARY_NAME, {"flow_rate": {"rate": 0.05, "stderr": 0.001}})
+
+    monkeypatch.setattr(runs, "prepare_run", prepare_run)
+    monkeypatch.setattr(runs, "prepare_resume", prepare_resume)
+    monkeypatch.setattr(runs, "post_process", post_process)
+    return lambda: fills.read_text().split() if fills.exists() else []
+
+
+def write_json_file(path: Path, data) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data))
+
+
+def test_a_fill_resumed_is_published_and_its_group_takes_it_from_the_cache(tmp_path, fake_run, resuming_engine,
+                                                                           monkeypatch):
+    """Issue 55 item 10e: the sweep stopped during its group's fill; resumed, the fill's run computes
+    the bed again and publishes it (before: a resumed run bypassed the cache, so the group's next
+    run filled again, beside it on a second core), and the group's other runs start from it."""
+    from siloflow.fill_cache import FillCache
+    command, starts, finished = fake_run
+    fills = resuming_engine
+    variants, groups = four_runs()
+    assert len(groups) == 1
+    out, cache = tmp_path / "sweep", tmp_path / "cache"
+    monkeypatch.setenv("FAKE_SLOW", "quick-000")
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(variants, out, cores=2, cache=cache, groups=groups, progress=interrupt_when(starts, "quick-000"))
+    assert run_state(out / "runs" / "quick-000")["state"] == "interrupted" and fills() == []
+    assert starts() == ["quick-000"] and FillCache(cache).entries() == []
+    monkeypatch.delenv("FAKE_SLOW")
+    table = run_sweep(variants, out, cores=2, cache=cache, groups=groups)
+    assert table.status.tolist() == ["complete"] * 4
+    assert fills() == ["quick-000"]                                  # one fill, computed by the resumed run
+    assert table.fill_from_cache.tolist() == [False, True, True, True]
+    entries = FillCache(cache).entries()
+    assert len(entries) == 1 and entries[0].info["source"] == str(out / "runs" / "quick-000")
+    record = json.loads((out / "runs" / "quick-000" / "run_record.json").read_text())
+    assert record["fill_cache"]["published"] is True and record["fill_cache"]["resumed"] is True
+    assert starts()[:2] == ["quick-000", "quick-000"]                # resumed before the rest of its group
+
+
+def test_a_resumed_run_never_starts_from_the_cache_and_publishes_only_a_missing_bed(tmp_path, quick_dict,
+                                                                                      monkeypatch):
+    """run_with_cache(resume=True): the folder's own bed (or its fill again), under the key's lock;
+    published when the cache has none of the key, else the entry there is kept."""
+    from siloflow.case_file import case_from_dict
+    from siloflow.derived import derive
+    from siloflow.fill_cache import FillCache, fill_key_inputs, key_of, run_with_cache
+    plan = derive(case_from_dict(quick_dict))
+    engine, cache = ResumingEngine(), FillCache(tmp_path / "cache")
+    monkeypatch.setenv("FAKE_STARTED", str(tmp_path / "started.txt"))
+    monkeypatch.setenv("FAKE_FILLS", str(tmp_path / "fills.txt"))
+    went_on = tmp_path / "went_on"                    # stopped after its bed settled: goes on from it
+    went_on.mkdir()
+    (went_on / "bed.restart").write_bytes(b"its own bed")
+    write_status(went_on, "interrupted")
+    record = run_with_cache(engine, went_on, plan, cache, resume=True)
+    assert record.fill_cache["hit"] is None and record.fill_cache["published"] is True
+    key = key_of(fill_key_inputs(plan, engine))
+    assert (cache.get(key).folder / "bed.restart").read_bytes() == b"its own bed"
+    again = tmp_path / "again"                        # stopped in its fill, the cache holding the bed
+    again.mkdir()
+    write_status(again, "interrupted")
+    hits = []
+    record = run_with_cache(engine, again, plan, cache, on_hit=hits.append, resume=True)
+    assert hits == [] and record.fill_cache["hit"] is False and record.fill_cache["published"] is False
+    assert (again / "bed.restart").read_bytes() == b"settled bed"       # filled again, not copied
+    assert (cache.get(key).folder / "bed.restart").read_bytes() == b"its own bed"
+
+
+def test_a_resumed_run_of_a_group_not_yet_filled_is_its_fill():
+    """The rest of the group waits for the resumed run as for a fill (before: the next one started its
+    own fill beside it), and takes the cache once it completed; a failed one hands the fill on."""
+    from siloflow.scheduler import Job, Outcome
+    variants, groups = four_runs()
+    jobs = {v.name: Job(v.name, lambda: None) for v in variants}
+    order = sweep.FillOrder(groups, jobs, finished={}, resuming={"quick-000"})
+    assert [j.name for j in order.ready()] == ["quick-000"]
+    order.started(jobs["quick-000"])
+    assert order.ready() == []
+    order.finished(jobs["quick-000"], Outcome(0))
+    assert [j.name for j in order.ready()] == ["quick-001", "quick-002", "quick-003"]
+    failed = sweep.FillOrder(groups, jobs, finished={}, resuming={"quick-000"})
+    failed.started(jobs["quick-000"])
+    failed.finished(jobs["quick-000"], Outcome(1))
+    assert [j.name for j in failed.ready()] == ["quick-001"]              # the next one computes the fill
+    filled = sweep.FillOrder(groups, jobs, finished={"quick-001": 0}, resuming={"quick-000"})
+    assert [j.name for j in filled.ready()] == ["quick-000", "quick-002", "quick-003"]   # as before

@@ -13,7 +13,7 @@ from stl import mesh as stl_mesh
 from siloflow.case_file import load_case
 from siloflow.derived import derive
 from siloflow.errors import CaseError
-from siloflow.geometry import rectangle
+from siloflow.geometry import MeshError, read_user_mesh, rectangle
 from siloflow.run_folder import RunFolder
 
 from conftest import ROOT, render
@@ -88,11 +88,60 @@ def test_bad_insert_files_are_refused_naming_the_insert(tmp_path):
     flat[1, 2] = flat[1, 1]                                  # two equal vertices: zero area
     assert "degenerate" in _refused(tmp_path, flat)
     assert "not an STL file" in _refused(tmp_path, raw=np.random.default_rng(1).bytes(5000))
-    assert "no triangles" in _refused(tmp_path, raw=b"solid x\n facet normal 0 0 1\n  outer loop\n   vertex 0 0\n")
+    assert "malformed ASCII STL file (it starts with 'solid'): line 4" in _refused(
+        tmp_path, raw=b"solid x\n facet normal 0 0 1\n  outer loop\n   vertex 0 0\n")
+    assert "no triangles" in _refused(tmp_path, raw=b"solid x\nendsolid x\n")
     assert "outside the silo" in _refused(tmp_path, tris, scale=10.0)
     with pytest.raises(CaseError, match="cannot read") as info:
         derive(load_case(slab_case_with(tmp_path, "missing.stl")))
     assert [field for field, _ in info.value.problems] == ["inserts[0].file"]
+
+
+GOOD_FACET = "  facet normal 0 0 1\n    outer loop\n      vertex 0 0 0\n      vertex 1 0 0\n      vertex 0 1 0\n" \
+             "    endloop\n  endfacet\n"
+
+
+@pytest.mark.parametrize("bad, line, said", [
+    ("      vertex 1 0 oops\n", 12, "'vertex 1 0 oops'"),          # a word for a number
+    ("      vertex 1 0\n", 12, "'vertex 1 0'"),                    # two coordinates (read as 'File too large, got
+    ("      vertx 1 0 0\n", 12, "'vertx 1 0 0'"),                  # 1869833326 triangles' before)
+])
+def test_a_malformed_ascii_stl_names_its_line_not_a_binary_size(tmp_path, bad, line, said):
+    """An ASCII STL (text starting with 'solid') whose parse fails is reported as a malformed
+    ASCII STL with the line, never re-read as a binary STL of billions of triangles."""
+    second = GOOD_FACET.replace("      vertex 1 0 0\n", bad)
+    path = tmp_path / "hand.stl"
+    path.write_text("solid hand\n" + GOOD_FACET + second + "endsolid hand\n")
+    with pytest.raises(MeshError) as info:
+        read_user_mesh(path)
+    message = str(info.value)
+    assert str(path) in message and f"malformed ASCII STL file (it starts with 'solid'): line {line}:" in message
+    assert said in message and "triangles" not in message
+    # through a case: the insert's field and the same message
+    assert f"line {line}:" in _refused(tmp_path, raw=path.read_bytes())
+    # a truncated ASCII file says where it ends
+    path.write_text("solid hand\n" + GOOD_FACET + "  facet normal 0 0 1\n")
+    with pytest.raises(MeshError, match=r"malformed ASCII STL .* ends after line 9 where 'outer loop' was expected"):
+        read_user_mesh(path)
+
+
+def test_stl_kind_is_told_by_content(tmp_path):
+    """A well-formed ASCII file is read as ASCII; a binary file whose header starts with 'solid'
+    (as some exporters write) is read as binary; a binary file cut short is refused by its size."""
+    path = tmp_path / "hand.stl"
+    path.write_text("solid hand\n" + GOOD_FACET + GOOD_FACET.replace("vertex 0 1 0", "vertex 1 1 0") + "endsolid\n")
+    np.testing.assert_array_equal(read_user_mesh(path)[1], [[0, 0, 0], [1, 0, 0], [1, 1, 0]])
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes().replace(b"\n", b"\r\n"))     # a BOM, Windows lines
+    np.testing.assert_array_equal(read_user_mesh(path)[1], [[0, 0, 0], [1, 0, 0], [1, 1, 0]])
+    tris = baffle()
+    write_user_stl(path, tris, Mode.BINARY)
+    raw = path.read_bytes()
+    path.write_bytes(b"solid exported".ljust(80, b" ") + raw[80:])
+    np.testing.assert_allclose(read_user_mesh(path), tris, atol=1e-9)
+    path.write_bytes(raw[:-10])
+    with pytest.raises(MeshError, match=rf"not an STL file: as a binary STL its header announces {len(tris)} "
+                                        rf"triangles \({84 + 50 * len(tris)} bytes\), but the file has {len(raw) - 10}"):
+        read_user_mesh(path)
 
 
 def test_an_insert_that_is_a_fifo_is_refused_not_read(tmp_path):

@@ -12,7 +12,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from siloflow.atomic_files import write_text
+from siloflow.atomic_files import read_json, write_text
 from siloflow.errors import ReadError
 
 from ..paper_a import (
@@ -113,10 +113,10 @@ def regenerate_paper_a_report(folder) -> list[Path]:
     """Write the report in ``folder`` again from its ``data/`` (no run)."""
     folder = Path(folder)
     try:
-        data = json.loads((folder / DATA / "claims.json").read_text(encoding="utf-8"))
+        data = read_json(folder / DATA / "claims.json", "paper A's claims", allow_nan=True)
         series = pd.read_csv(folder / DATA / "pressure_series.csv")
         chains = {m: chains_from_table(pd.read_csv(folder / DATA / f"force_chains_{m}.csv")) for m in MODELS}
         claims = [MeasuredClaim.from_json(d) for d in data["claims"]]
-    except (OSError, ValueError, KeyError) as exc:
+    except (OSError, ValueError, KeyError, ReadError) as exc:
         raise ReadError(f"{folder}: no report data to regenerate from ({exc})") from None
     return write_paper_a_report(folder, claims, data["numbers"], data["meta"], series, chains)

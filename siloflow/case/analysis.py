@@ -64,8 +64,12 @@ class Analysis(Strict):
 #: unit weight N/m3 from expanded-polystyrene beads (~150) to tungsten powder (~1e5); K from well
 #: below the Annex E solids (0.36-0.63; Jaky's 1 - sin phi_i is 0.13 at phi_i 60 deg) to 1, the
 #: hydrostatic ratio (a stored solid is not in a passive state); wall friction mu from PTFE-lined
-#: walls to tan 56 deg (a wall rougher than the solid's internal friction shears the solid instead)
-DESIGN_RANGES = {"unit_weight": (100.0, 1e5), "K": (0.1, 1.0), "mu": (0.05, 1.5)}
+#: walls to tan 56 deg (a wall rougher than the solid's internal friction shears the solid instead);
+#: the angle of repose phi_r (deg) from 5, below the 6 deg at which even frictionless spheres heap
+#: (their macroscopic friction angle), to 70, past Carr's "very, very poor" flow (> 66 deg): a
+#: steeper heap stands by cohesion, outside EN 1991-4's solids (Annex E: 29-47 deg); the squat
+#: silo's Y_R has the exponent -(1 + tan phi_r), which a phi_r near 90 deg sends to infinity
+DESIGN_RANGES = {"unit_weight": (100.0, 1e5), "K": (0.1, 1.0), "mu": (0.05, 1.5), "phi_r": (5.0, 70.0)}
 
 
 class DesignSettings(Strict):
@@ -83,7 +87,8 @@ class DesignSettings(Strict):
                                   description="lateral pressure ratio")
     mu: Optional[Positive] = Field(None, ge=DESIGN_RANGES["mu"][0], le=DESIGN_RANGES["mu"][1],
                                    description="wall friction coefficient")
-    phi_r_deg: Optional[Positive] = Field(None, lt=90, description="angle of repose, degrees")
+    phi_r_deg: Optional[Positive] = Field(None, ge=DESIGN_RANGES["phi_r"][0], le=DESIGN_RANGES["phi_r"][1],
+                                          description="angle of repose, degrees")
     C_op: Optional[NonNegative] = Field(None, le=10, description="patch load solid reference factor")
     wall_type: Literal["D1", "D2", "D3"] = Field("D2", description="wall friction category: D1 low, "
                                                    "D2 moderate (smooth steel), D3 high (concrete, rough)")

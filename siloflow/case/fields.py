@@ -42,6 +42,19 @@ MAX_YOUNGS_MODULUS = 1e13
 MIN_TIMESTEP_FRACTION = 1e-3
 #: s: the longest stage a case may ask for (discharge.duration and max_time); an interval is never longer
 MAX_STAGE_TIME = 1e5
+#: m/s2: a fifth of the weakest surface gravity of the asteroids granular DEM studies model (Bennu,
+#: 6e-5 m/s2); in weaker gravity a grain's weight is below the cohesive forces these contact laws omit
+MIN_GRAVITY = 1e-5
+#: s: the shortest settling check; a grain of 1 um (the smallest) falls its own diameter in 63 us
+#: under the strongest gravity accepted (1000 m/s2): checks 60 times more often see nothing settle
+MIN_CHECK_INTERVAL = 1e-6
+#: m/s: the slowest characteristic (impact) velocity of model hooke; grains dropped from one diameter
+#: meet at sqrt(2 g d), 6 mm/s for 1 um grains; slower, kn (which goes as V^0.4) softens the contacts
+#: until grains pass through each other (and V^2 underflows to a zero stiffness)
+MIN_CHARACTERISTIC_VELOCITY = 1e-3
+#: m: a sensor band boundary above the wall's base is at least an atom's size up (a thinner band
+#: is no band; LIGGGHTS' own precision, 1e-8 m, then refuses its mesh, naming sensors.heights)
+MIN_BAND_BOUNDARY = 1e-10
 GrainRadius = Annotated[Positive, Field(ge=MIN_GRAIN_RADIUS)]
 
 

@@ -6,11 +6,17 @@ from typing import Annotated, Literal, Optional, Union
 
 from pydantic import ConfigDict, Field, PrivateAttr, StringConstraints, ValidationInfo, field_validator, model_validator
 
-from .fields import Int, NonNegative, Positive, Real, Strict
+from .fields import MIN_BAND_BOUNDARY, FiniteFloat, Int, NonNegative, Positive, Real, Strict
 
 #: m: the tallest hopper accepted, like the wall's height bound (a half angle of 1e-7 degrees
 #: makes a hopper 1e7 m tall, whose meshes would not fit in memory)
 MAX_HOPPER_HEIGHT = 1000.0
+#: m: the tallest vertical wall (geometry.height; a mesh silo's walls as scaled)
+MAX_WALL_HEIGHT = 1000.0
+#: degrees: the steepest hopper wall; a hopper is (R - r) / tan(half angle) tall and R - r is at least
+#: a grain diameter (2 um), so below 1e-7 degrees no hopper fits in MAX_HOPPER_HEIGHT (and far below
+#: it, tan underflows to 0)
+MIN_HALF_ANGLE_DEG = 1e-7
 
 
 def _smaller(model, small: str, large: str):
@@ -49,7 +55,7 @@ class CylinderGeometry(Strict):
 
     kind: Literal["cylinder"]
     radius: Positive = Field(description="inner radius of the cylinder, m", le=100)
-    height: Positive = Field(description="height of the cylinder wall, m", le=1000)
+    height: Positive = Field(description="height of the cylinder wall, m", le=MAX_WALL_HEIGHT)
     orifice_radius: Positive = Field(description="radius of the orifice, m")
     outlet_offset: NonNegative = _outlet_offset()
     mesh_segments: Int = Field(64, ge=16, le=1024, description="facets around the circumference")
@@ -78,9 +84,9 @@ class HopperGeometry(Strict):
 
     kind: Literal["hopper"]
     radius: Positive = Field(description="inner radius of the cylinder, m", le=100)
-    height: Positive = Field(description="height of the cylinder wall above the cone, m", le=1000)
+    height: Positive = Field(description="height of the cylinder wall above the cone, m", le=MAX_WALL_HEIGHT)
     half_angle_deg: Real = Field(description="hopper half angle from the vertical, degrees",
-                                  gt=0, lt=90, allow_inf_nan=False)
+                                  ge=MIN_HALF_ANGLE_DEG, lt=90, allow_inf_nan=False)
     outlet_radius: Positive = Field(description="radius of the hopper outlet, m")
     outlet_offset: NonNegative = _outlet_offset()
     mesh_segments: Int = Field(64, ge=16, le=1024)
@@ -132,9 +138,9 @@ class PlanarGeometry(_WalledAcrossX, Strict):
 
     kind: Literal["planar"]
     width: Positive = Field(description="inner width between the side walls, m", le=100)
-    height: Positive = Field(description="height of the vertical side walls above the hopper, m", le=1000)
+    height: Positive = Field(description="height of the vertical side walls above the hopper, m", le=MAX_WALL_HEIGHT)
     thickness: Positive = Field(description="distance between the front and back faces, m", le=100)
-    half_angle_deg: Real = Field(60.0, gt=0, le=90, allow_inf_nan=False,
+    half_angle_deg: Real = Field(60.0, ge=MIN_HALF_ANGLE_DEG, le=90, allow_inf_nan=False,
                                   description="hopper half angle from the vertical, degrees (90: a flat floor)")
     outlet_width: Positive = Field(description="width of the outlet slot, m")
     outlet_offset: Real = Field(0.0, ge=-100, le=100, allow_inf_nan=False,
@@ -186,8 +192,8 @@ class BoxGeometry(_WalledAcrossX, Strict):
     kind: Literal["box"]
     width: Positive = Field(description="inner width along x, m", le=100)
     depth: Positive = Field(description="inner depth along y, m", le=100)
-    height: Positive = Field(description="height of the vertical walls above the hopper, m", le=1000)
-    half_angle_deg: Real = Field(90.0, gt=0, le=90, allow_inf_nan=False,
+    height: Positive = Field(description="height of the vertical walls above the hopper, m", le=MAX_WALL_HEIGHT)
+    half_angle_deg: Real = Field(90.0, ge=MIN_HALF_ANGLE_DEG, le=90, allow_inf_nan=False,
                                  description="hopper angle of the walls facing x, from the vertical, degrees "
                                              "(90: a flat floor)")
     outlet: Literal["rectangle", "slot", "circle"] = Field("rectangle", description="the outlet's shape")
@@ -218,9 +224,12 @@ class BoxGeometry(_WalledAcrossX, Strict):
         inside_x = abs(self.outlet_offset) + hx < 0.5 * self.width
         inside_y = self.outlet == "slot" or abs(self.outlet_offset_y) + hy < 0.5 * self.depth
         if not (inside_x and inside_y):
-            raise ValueError(f"the outlet ({2 * hx:g} x {2 * hy:g} m at x = {self.outlet_offset:g}, y = "
-                             f"{self.outlet_offset_y:g} m) must lie inside the floor ({self.width:g} x {self.depth:g} m), "
-                             "clear of the walls (an outlet across the whole depth is a slot)")
+            size = {"rectangle": "outlet_width x outlet_length", "slot": "outlet_width x depth",
+                    "circle": "2 outlet_radius"}[self.outlet]
+            raise ValueError(f"the outlet ({size}: {2 * hx:g} x {2 * hy:g} m at outlet_offset {self.outlet_offset:g}, "
+                             f"outlet_offset_y {self.outlet_offset_y:g} m) must lie inside the floor (width x depth: "
+                             f"{self.width:g} x {self.depth:g} m), clear of the walls (an outlet across the whole "
+                             "depth is a slot)")
         if self.hopper_height > MAX_HOPPER_HEIGHT:
             raise ValueError(f"half_angle_deg ({self.half_angle_deg} deg) makes the hopper {self.hopper_height:.3g} m "
                              f"tall, more than {MAX_HOPPER_HEIGHT:g} m")
@@ -245,10 +254,11 @@ class MeshOutlet(Strict):
     have this opening, and nothing below it; siloflow closes it with a plate for the fill."""
 
     z: Real = Field(allow_inf_nan=False, ge=-1e6, le=1e6, description="height of the outlet's plane, file units")
-    center: Optional[tuple[Real, Real]] = Field(None, description="circle: its centre (x, y), file units")
+    center: Optional[tuple[FiniteFloat, FiniteFloat]] = Field(None, description="circle: its centre (x, y), file "
+                                                             "units (within 1e6, as z)")
     radius: Optional[Positive] = Field(None, le=1e6, description="circle: its radius, file units")
-    polygon: Optional[list[tuple[Real, Real]]] = Field(None, min_length=3, max_length=1000,
-                                                       description="convex polygon: its corners (x, y), file units")
+    polygon: Optional[list[tuple[FiniteFloat, FiniteFloat]]] = Field(
+        None, min_length=3, max_length=1000, description="convex polygon: its corners (x, y), file units (within 1e6)")
 
     @model_validator(mode="after")
     def _one_shape(self):
@@ -309,8 +319,8 @@ class MeshGeometry(Strict):
         min_length=1, max_length=20, description="STL files of the container's walls (paths of 1 to 4096 characters)")
     scale: Positive = Field(1.0, le=1000.0, description="factor from the files' units to m (0.001 for mm)")
     outlet: MeshOutlet
-    axis: Optional[tuple[Real, Real]] = Field(None, description="the sectors' vertical axis (x, y), file units "
-                                              "(default: the outlet's centre)")
+    axis: Optional[tuple[FiniteFloat, FiniteFloat]] = Field(None, description="the sectors' vertical axis (x, y), "
+                                                            "file units (within 1e6; default: the outlet's centre)")
 
     _container: object = PrivateAttr(None)
 
@@ -410,6 +420,10 @@ class WallSensors(Strict):
                 raise ValueError("'heights' needs at least two boundaries")
             if any(b <= a for a, b in zip(self.heights, self.heights[1:])):
                 raise ValueError("'heights' must be strictly increasing")
+            low = [h for h in self.heights if 0 < h < MIN_BAND_BOUNDARY]
+            if low:
+                raise ValueError(f"'heights' has a boundary {low[0]:g} m above the wall's base: give 0 or at least "
+                                 f"{MIN_BAND_BOUNDARY:g} m (an atom's size)")
         return self
 
 

@@ -7,6 +7,7 @@ from pydantic import Field, model_validator
 
 from .fields import (
     MAX_YOUNGS_MODULUS,
+    MIN_CHARACTERISTIC_VELOCITY,
     MIN_DENSITY,
     MIN_YOUNGS_MODULUS,
     NonNegative,
@@ -67,7 +68,7 @@ class Materials(Strict):
     tangential_damping_ratio: Real = Field(
         0.1, ge=0, le=1, allow_inf_nan=False, description="gamma_t / gamma_n (linear and hooke models)")
     characteristic_velocity: Optional[Positive] = Field(
-        None, le=1000, description="impact speed that sets kn of model 'hooke', m/s")
+        None, ge=MIN_CHARACTERISTIC_VELOCITY, le=1000, description="impact speed that sets kn of model 'hooke', m/s")
     tangential_stiffness_ratio: Real = Field(
         2.0 / 7.0, gt=0, le=1, allow_inf_nan=False, description="kt / kn (model 'hooke'; paper B: 2/7)")
 

@@ -9,8 +9,8 @@ from pydantic import Field, model_validator
 from ..packaged_profile import packaged_fast_profile
 from .analysis import Analysis, DesignSettings, WallInsert
 from .engine_settings import EngineSettings
-from .fields import Int, Positive, SafeName, Strict
-from .geometry import Geometry, WallSensors
+from .fields import MIN_GRAVITY, Int, Positive, SafeName, Strict
+from .geometry import MAX_HOPPER_HEIGHT, MAX_WALL_HEIGHT, Geometry, WallSensors
 from .materials import Materials, _contact_problems
 from .outputs import RESULTS, Outputs
 from .particles import Particles
@@ -107,7 +107,7 @@ class Case(Strict):
 
     name: SafeName
     description: str = Field("", max_length=2000, description="free text, never written into a deck")
-    gravity: Positive = Field(9.81, le=1000, description="m/s2, acting along -z")
+    gravity: Positive = Field(9.81, ge=MIN_GRAVITY, le=1000, description="m/s2, acting along -z")
     geometry: Geometry
     sensors: WallSensors
     materials: Materials
@@ -130,10 +130,9 @@ class Case(Strict):
         problems += _particle_problems(self)
         d = 2 * p.max_radius
         field = {"spheres": "particles.radius", "clumps": "particles.length"}.get(p.kind, "particles.radii")
-        outlet = "geometry.outlet_width" if g.kind == "planar" else "outlet radius"
         if p.max_radius >= g.outlet_radius:
-            problems.append(f"{field} ({p.max_radius:.6g} m) must be smaller than the {outlet} "
-                            f"(half width {g.outlet_radius} m): nothing could leave")
+            problems.append(f"{field} ({p.max_radius:.6g} m) must be smaller than the outlet's half width "
+                            f"({g.outlet_radius} m, {_outlet_fields(g)}): nothing could leave")
         if g.kind == "planar":
             # the grains' thickness across the slab: spheres their diameter, wheat lies flat in it
             across = p.width if p.kind == "clumps" and p.shape == "wheat" else 2 * p.max_radius
@@ -170,6 +169,19 @@ class Case(Strict):
         return self
 
 
+def _wall_height_field(g) -> str:
+    """The field that sets a geometry's vertical wall height, for messages."""
+    return "the vertical walls of geometry.files" if g.kind == "mesh" else "geometry.height"
+
+
+def _outlet_fields(g) -> str:
+    """The fields that size a geometry's outlet, for messages."""
+    if g.kind == "box":
+        return "geometry.outlet_radius" if g.outlet == "circle" else "geometry.outlet_width"
+    return {"cylinder": "geometry.orifice_radius", "hopper": "geometry.outlet_radius",
+            "planar": "geometry.outlet_width / 2", "mesh": "geometry.outlet times geometry.scale"}[g.kind]
+
+
 def shape_problems(case: "Case") -> list[str]:
     """The checks that need the silo's size (its half width, hopper and wall heights): of a mesh
     silo, once its files are read (``siloflow.derived.measured``)."""
@@ -177,12 +189,17 @@ def shape_problems(case: "Case") -> list[str]:
     d = 2 * p.max_radius
     field = {"spheres": "particles.radius", "clumps": "particles.length"}.get(p.kind, "particles.radii")
     problems = []
+    if g.kind == "mesh" and (g.height > MAX_WALL_HEIGHT or g.hopper_height > MAX_HOPPER_HEIGHT):
+        problems.append(f"geometry.scale ({g.scale:g}) makes the walls of geometry.files {g.height:.4g} m tall above a "
+                        f"floor or hopper {g.hopper_height:.4g} m tall: at most {MAX_WALL_HEIGHT:g} m and "
+                        f"{MAX_HOPPER_HEIGHT:g} m, as a cylinder's (is the scale right? 0.001 for mm)")
     if 3 * d > g.half_width:
         problems.append(f"{field} ({p.max_radius:.6g} m) is too large for a silo of half width "
                         f"{g.half_width:.6g} m (need >= 3 particle diameters)")
     top = g.hopper_height + g.height
     if f.height is not None and f.height >= top:
-        problems.append(f"fill.height ({f.height} m) must be below the top of the silo ({top:.6g} m)")
+        problems.append(f"fill.height ({f.height} m) must be below the top of the silo ({top:.6g} m: the hopper and "
+                        f"{_wall_height_field(g)})")
     zmin, zmax = f.insertion_z_min, f.insertion_z_max
     if zmax is not None and zmax > top:
         problems.append(f"fill.insertion_z_max ({zmax} m) is above the top of the silo ({top:.6g} m)")
@@ -195,7 +212,7 @@ def shape_problems(case: "Case") -> list[str]:
     # (a mesh silo's height holds its STL's float32 rounding: 1e-6 of it is not above)
     if case.sensors.heights is not None and case.sensors.heights[-1] > g.height * (1 + 1e-6):
         problems.append(f"sensors.heights: last boundary ({case.sensors.heights[-1]} m) is above "
-                        f"the vertical wall ({g.height:.6g} m)")
+                        f"the vertical wall ({_wall_height_field(g)}, {g.height:.6g} m)")
     return problems
 
 

@@ -5,14 +5,14 @@ from typing import Literal, Optional
 
 from pydantic import Field, model_validator
 
-from .fields import Fraction, Int, Positive, Real, Strict
+from .fields import MIN_CHECK_INTERVAL, Fraction, Int, Positive, Real, Strict
 
 
 class Settle(Strict):
     """Settling ends when kinetic / potential energy (above the outlet) drops below ``ke_pe_ratio``."""
 
     ke_pe_ratio: Real = Field(1e-5, gt=0, lt=1, allow_inf_nan=False)
-    check_interval: Positive = Field(0.02, description="time between checks, s", le=10)
+    check_interval: Positive = Field(0.02, description="time between checks, s", ge=MIN_CHECK_INTERVAL, le=10)
     max_time: Positive = Field(2.0, description="cap on settling time, s", le=1e4)
     static_window: Positive = Field(None, description="time the settled bed is sampled for static "
                                     "wall loads before the orifice opens, s; default: STATIC_WINDOW_SAMPLES "

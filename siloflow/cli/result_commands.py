@@ -3,14 +3,16 @@ loads, and ParaView files."""
 from __future__ import annotations
 
 import time
+import warnings
 from pathlib import Path
 from typing import List, Optional
 
+import numpy as np
 import typer
 
 from ..errors import ReadError, SiloflowError
 from ..run_folder import RunFolder
-from .app import _fail, app, out, printable
+from .app import _fail, app, err, out, printable
 from .run_commands import _post
 
 
@@ -25,12 +27,21 @@ def post(source: str = typer.Argument(..., help="a finished run folder, or dump 
          measured: Optional[Path] = typer.Option(None, help="measured wall pressure CSV (time, band_<k> in Pa) "
                                                  "to compare a run with"),
          output: Optional[Path] = typer.Option(None, "-o", "--output",
-                                               help="results folder for a dump source (default: <dumps>/siloflow_post)")) -> None:
+                                               help="results folder for a dump source (default: <dumps>/siloflow_post)"),
+         bands: Optional[str] = typer.Option(
+             None, help="re-bin a finished run's wall pressure into bands with these edges, m above the side wall's "
+                        "base, e.g. 0,0.02,0.04,0.1 (from its dumped wall contacts: results/rebinned_bands.csv)"),
+         sectors: Optional[int] = typer.Option(None, help="sectors of a cylinder's re-binned bands (default: the run's)")) -> None:
     """(Re)compute the results of a run folder, or analyse dump files written by any LIGGGHTS/LAMMPS run."""
     path = Path(source)
     if path.is_dir() and RunFolder(path).is_run_folder():
-        _post(path, measured)
+        if bands is not None or sectors is not None:
+            _rebin(path, bands, sectors)
+        else:
+            _post(path, measured)
         return
+    if bands is not None or sectors is not None:
+        _fail(ReadError(f"{source} is not a siloflow run folder: --bands and --sectors re-bin a finished run"))
     from postprocess.any_dump import parse_sphere
     from postprocess.dumps import local_columns
     from postprocess.report.dumps import analyse_any
@@ -49,6 +60,33 @@ def post(source: str = typer.Argument(..., help="a finished run folder, or dump 
         c = summary["coordination_last"]
         out.print(f"coordination number (last frame, from {c['source']}): {c['z_mean']:.3f} (mechanical {c['z_mech']:.3f})")
     out.print(f"results: {target}")
+def _rebin(folder: Path, bands: Optional[str], sectors: Optional[int]) -> None:
+    """Re-bin a finished run's side-wall contacts into ``bands`` (comma-separated edges, m) and ``sectors``."""
+    from postprocess.rebin import rebin_run
+    from postprocess.report.rebin import write_rebinned
+    if bands is None:
+        _fail(ReadError("--sectors re-bins the run's wall pressure: give the bands' edges with --bands too"))
+    try:
+        heights = [float(h) for h in bands.split(",")]
+    except ValueError:
+        _fail(ReadError(f"--bands: {bands!r} is not a comma-separated list of heights in m"))
+    try:
+        rebinned = rebin_run(folder, heights, sectors)
+        path = write_rebinned(folder, rebinned)
+    except SiloflowError as exc:
+        _fail(exc)
+    t = rebinned.table
+    out.print(f"{len(rebinned.totals)} dump frames; {len(heights) - 1} bands x {rebinned.sectors} sectors; "
+              f"errors: {rebinned.error_method}")
+    for band, grp in t.groupby("band"):
+        p, se = grp.static_pressure.mean(), float(np.sqrt((grp.static_pressure_stderr ** 2).sum())) / len(grp)
+        frames = int(grp.static_frames.min())
+        static = f"static {p:.1f} +/- {se:.1f} Pa ({frames} frames)" if frames else "static: no frame in the static window"
+        out.print(f"  band {band}: z {grp.z_lo.iloc[0]:.4g}-{grp.z_hi.iloc[0]:.4g} m, {static}, "
+                  f"discharge {grp.dynamic_pressure.mean():.1f} Pa")
+    out.print(f"results: {path}")
+
+
 @app.command()
 def cg(source: str = typer.Argument(..., help="a finished run folder, or dump file(s): a file, glob or folder"),
        output: Optional[Path] = typer.Option(None, "-o", "--output", help="results folder (default <run>/results/cg)"),
@@ -120,6 +158,8 @@ def cg(source: str = typer.Argument(..., help="a finished run folder, or dump fi
         _fail(exc)
     except ValueError as exc:
         _fail(SiloflowError(str(exc)))
+    except MemoryError:
+        _fail(SiloflowError(f"out of memory coarse-graining on {nr} x {nz} cells (--nr, --nz): choose fewer cells"))
     out.print(f"coarse-grained {summary['frames']} frames (steps {summary['steps'][0]}-{summary['steps'][1]}) "
               f"on a {grid} grid ({summary['method']} sums) with a {summary['kernel']} kernel; contacts: {summary['contacts']}, "
               f"wall contacts: {summary['wall_contacts']}")
@@ -152,7 +192,9 @@ def cg_scaling(folders: List[Path] = typer.Argument(..., help="cg result folders
 def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folders (different orifices or grains), "
                                                   "or one sweep table (sweep.csv: its complete runs)"),
              output: Path = typer.Option(Path("beverloo.csv"), "-o", "--output", help="table of the runs and the fit")) -> None:
-    """Fit Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) across runs: C and k with standard errors."""
+    """Fit Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) across runs: C and k with standard errors.
+    A run that clogged or never flowed steadily is left out, and named; a fit of fewer than 3 runs,
+    or missing them by more than 20 % (rms), is refused."""
     from ..answers import beverloo as fit_runs
     from ..atomic_files import write_json, write_text
     try:
@@ -161,10 +203,14 @@ def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folder
         _fail(exc)
     except ValueError as exc:
         _fail(SiloflowError(str(exc)))
+    left = {row.run: row.left_out for row in table.itertuples() if row.left_out}
     write_text(output, table.to_csv(index=False))
     write_json(output.with_suffix(".json"), {"C": fit.C, "C_stderr": fit.C_stderr, "k": fit.k,
                                              "k_stderr": fit.k_stderr, "runs": fit.n_runs,
-                                             "rms_relative_residual": fit.rms_relative_residual})
+                                             "rms_relative_residual": fit.rms_relative_residual,
+                                             "left_out": left})
+    for run, why in left.items():
+        out.print(printable(f"left out of the fit: {run}: {why}"), markup=False, highlight=False)
     out.print(f"Beverloo over {fit.n_runs} runs: C = {fit.C:.3f} +/- {fit.C_stderr:.3f}, "
               f"k = {fit.k:.2f} +/- {fit.k_stderr:.2f} (rms residual {fit.rms_relative_residual:.1%})")
     out.print(f"table: {output}; fit: {output.with_suffix('.json')}")
@@ -223,10 +269,12 @@ def vtk(source: Path = typer.Argument(..., help="a run folder, or a coarse-grain
         cg: bool = typer.Option(True, help="also write every results/**/fields.nc as VTK beside it")) -> None:
     """ParaView files of a run (either engine): particles from the dumps, walls with their sensor
     pressures, and the coarse-grained fields, in .pvd collections with times in seconds."""
-    from postprocess.report.paraview import write_cg_vtk, write_run_paraview
+    from postprocess.report.paraview import EmptyDumpWarning, write_cg_vtk, write_run_paraview
     try:
         if source.is_dir() and RunFolder(source).is_run_folder():
-            summary = write_run_paraview(source, output, every, wall_every, theta, cg)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", EmptyDumpWarning)      # said below, from the summary
+                summary = write_run_paraview(source, output, every, wall_every, theta, cg)
         elif source.name == "fields.nc" or (source / "fields.nc").is_file():
             written = write_cg_vtk(source, theta)
             out.print(f"written: {', '.join(str(p) for p in written)}")
@@ -237,8 +285,15 @@ def vtk(source: Path = typer.Argument(..., help="a run folder, or a coarse-grain
         _fail(exc)
     except ValueError as exc:
         _fail(SiloflowError(str(exc)))
+    except MemoryError:
+        _fail(SiloflowError(f"out of memory writing the VTK files of {source} (--theta {theta}: fewer sectors?)"))
     target = output or source / "results" / "paraview"
     p = summary["particles"]
+    if p["skipped_empty_dumps"]:
+        skipped = p["skipped_empty_dumps"]
+        err.print(printable(f"warning: {len(skipped)} empty particle dump file(s) skipped (no frame in them): "
+                            f"{', '.join(skipped)}; listed in {target / 'paraview.json'}"),
+                  style="yellow", markup=False, highlight=False)
     line = f"{p['frames']} particle frames"
     if p["frames"]:
         line += f" ({p['times_s'][0]:.4g} s to {p['times_s'][-1]:.4g} s)"

@@ -63,8 +63,9 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
         except SiloflowError as exc:
             _fail(exc)
         signal.signal(signal.SIGTERM, _interrupt)
-        out.print(f"resuming {resume} (it was {prepared.state_before})")
-        _drive(prepared.folder, prepared.execute, post_process)
+        with prepared:                  # the folder's lock, held until the results are written
+            out.print(f"resuming {resume} (it was {prepared.state_before})")
+            _drive(prepared.folder, prepared.execute, post_process)
         return
     if case_file is None or output is None:
         _fail(SiloflowError("give a case file and -o/--output (or --resume DIR)"))
@@ -74,6 +75,12 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     except SiloflowError as exc:
         _fail(exc)
     signal.signal(signal.SIGTERM, _interrupt)
+    with prepared:                      # the folder's lock, held until the results are written
+        _run_prepared(prepared, profile, cache, post_process)
+
+
+def _run_prepared(prepared, profile: Optional[str], cache: Optional[Path], post_process: bool) -> None:
+    """What ``siloflow run`` prints before the run, then the run and its first results."""
     derived, folder, sizes = prepared.plan, prepared.folder, prepared.output_estimate
     if prepared.profile_replaced:
         out.print(f"--profile {profile} replaces the case's {', '.join(prepared.profile_replaced)}")

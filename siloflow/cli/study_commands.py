@@ -101,6 +101,9 @@ def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
     for row in table[table.status != "complete"].head(5).itertuples():
         out.print(printable(f"failed: {row.name} (exit code {row.returncode}), see {row.log}"), markup=False,
                   highlight=False)
+    for row in table[table.clogged.eq(True)].itertuples():
+        out.print(printable(f"clogged: {row.name} (its discharge stopped with grains left: no steady flow rate; "
+                            f"siloflow beverloo leaves it out)"), markup=False, highlight=False)
     out.print(f"table: {output / 'sweep.csv'} (siloflow beverloo {output / 'sweep.csv'} fits it)")
 
 

@@ -14,9 +14,12 @@ import os
 import shutil
 import time
 from abc import ABC, abstractmethod
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Optional
+
+import numpy as np
 
 from ..case import Case
 from ..errors import EngineRunError, SetupError
@@ -25,7 +28,10 @@ from ..run_folder import (
     RunFolder,
     RunRecord,
     check_plain_tree,
+    folder_lock,
+    record_engine_outputs,
     run_state,
+    snapshot,
     write_status,
 )
 from .processes import DISK_FIX, FILL_LOSS_LIMIT, disk_full, not_settled, read_plan
@@ -48,6 +54,24 @@ class LaunchProfile:
     def environment(self) -> Optional[dict]:
         """The engine's environment (None: siloflow's own)."""
         return {**os.environ, **self.env} if self.env else None
+
+
+@contextmanager
+def engine_writes(folder: Path):
+    """The block writes ``folder`` as siloflow and its engine: under the folder's lock (another
+    siloflow command is refused), and whatever new file it leaves (or file of siloflow's it
+    rewrites) is recorded in the manifest as siloflow's when it ends, even interrupted, so that
+    ``--force`` replaces an engine's output of any name and still refuses a user's file."""
+    folder = Path(folder)
+    with folder_lock(folder):
+        before = snapshot(folder)
+        try:
+            yield
+        finally:
+            try:
+                record_engine_outputs(folder, before)
+            except OSError:              # unrecorded, the files stay the user's: --force refuses, never deletes
+                pass
 
 
 def check_case(case: Case, engine: "Engine", plan=None) -> None:
@@ -94,6 +118,19 @@ class Finished:
     notes: list = field(default_factory=list)        # warnings for the record (each once)
     escaped: Optional[int] = None
     log_tail: str = ""
+
+
+@dataclass(frozen=True)
+class SettledBed:
+    """A cached settled bed as the engine itself read it back from its restart file
+    (:meth:`Engine.fill_bed`): per atom its type (the plan's species k is type k + 1), radius (m)
+    and grain mass (kg; a clump's sphere carries its clump's), and the simulation box (``xlo`` ...
+    ``zhi``, m)."""
+
+    types: np.ndarray
+    radius: np.ndarray
+    mass: np.ndarray
+    box: dict
 
 
 class Engine(ABC):
@@ -197,6 +234,12 @@ class Engine(ABC):
         :attr:`fill_targets`); ``SetupError`` when the run wrote none."""
         raise SetupError(f"the {self.name} engine has no fill cache: run without --cache")
 
+    def fill_bed(self, files: dict, plan) -> SettledBed:
+        """The settled bed of a cached fill (``files``: :meth:`fill_files`' names -> paths) as the
+        engine reads its restart file, for the cache to compare with ``plan`` before a run starts from
+        it (``ReadError`` when the engine cannot read it)."""
+        raise SetupError(f"the {self.name} engine has no fill cache: run without --cache")
+
     # ------------------------------------------------------------------ the run (the base's)
     def prepare(self, case: Case, folder: Path, force: bool = False, keep=(), plan=None) -> Path:
         """Check ``case`` against this engine and write its run folder; return its path. Needs
@@ -208,8 +251,9 @@ class Engine(ABC):
         extra = [w for w in self.plan_warnings(case, plan) if w not in plan.warnings]
         if extra:
             plan = plan.model_copy(update={"warnings": [*plan.warnings, *extra]})
-        folder = render(case, folder, force=force, keep=keep, plan=plan, engine=self)
-        write_status(folder, "rendered")
+        with folder_lock(folder):              # the status too is written before another command may look
+            folder = render(case, folder, force=force, keep=keep, plan=plan, engine=self)
+            write_status(folder, "rendered")
         return folder
 
     def check_folder(self, folder: Path, plan, resume: bool = False) -> None:
@@ -237,6 +281,10 @@ class Engine(ABC):
         """Run the engine in a prepared folder (``resume``: from its settled bed) and write the run
         record; raise ``EngineRunError`` if it fails (the folder's status says why)."""
         folder = Path(folder)
+        with engine_writes(folder):
+            return self._execute(folder, progress, resume)
+
+    def _execute(self, folder: Path, progress: Optional[ProgressCallback], resume: bool) -> RunRecord:
         plan = read_plan(folder)
         self.check_folder(folder, plan, resume)
         start = time.perf_counter()
@@ -348,9 +396,13 @@ class Engine(ABC):
     def resume(self, folder: Path, progress: Optional[ProgressCallback] = None) -> RunRecord:
         """Finish an interrupted run: from the settled bed's restart point if the run got that far
         (the static, opening and discharge stages are run again), else from the start."""
+        folder = Path(folder)
+        with engine_writes(folder):
+            return self._resume(folder, progress)
+
+    def _resume(self, folder: Path, progress: Optional[ProgressCallback]) -> RunRecord:
         from ..deck import verify_deck
         from .registry import get_engine
-        folder = Path(folder)
         state = run_state(folder).get("state")
         if state in ("running", "complete"):
             raise SetupError(f"{folder} is {state}: there is nothing to resume")
@@ -371,13 +423,15 @@ class Engine(ABC):
         paths, placed as :attr:`fill_targets` says) through the resume path: static, opening and
         discharge stages."""
         folder = Path(folder)
-        for name, target in self.fill_targets.items():
-            shutil.copyfile(files[name], folder / target)
-        return self.resume(folder, progress)
+        with engine_writes(folder):
+            for name, target in self.fill_targets.items():
+                shutil.copyfile(files[name], folder / target)
+            return self.resume(folder, progress)
 
     def run(self, case: Case, folder: Path, force: bool = False,
             progress: Optional[ProgressCallback] = None) -> RunRecord:
-        """prepare, execute, collect."""
-        folder = self.prepare(case, folder, force=force)
-        self.execute(folder, progress=progress)
-        return self.collect(folder)
+        """prepare, execute, collect (under the folder's lock throughout)."""
+        with folder_lock(folder):
+            folder = self.prepare(case, folder, force=force)
+            self.execute(folder, progress=progress)
+            return self.collect(folder)

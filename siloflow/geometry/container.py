@@ -258,12 +258,32 @@ def read_container(files, scale: float, outline: Outline, origin: tuple[float, f
     walls = tris[vertical]
     xy = np.concatenate([walls[:, [0, 1]], walls[:, [1, 2]], walls[:, [2, 0]]])[..., :2]
     inscribed = float(_segment_distance(xy).min())
-    mid = base + 0.5 * (top - base)
+    mid = _section_height(tris, base, top, tol)
     mid_section = section(tris, mid)
-    if not mid_section[0] > 0 or not _inside(tris, mid):
-        raise MeshError("the sectors' axis (geometry.axis, default the outlet's centre) is not inside the walls")
+    if not mid_section[0] > 0:
+        raise MeshError(f"the vertical walls' cross-section at z = {mid:.6g} m (silo frame) encloses no area: the "
+                        "walls above the floor or hopper must go all round the silo")
+    if not _inside(tris, mid):
+        raise MeshError(f"the sectors' axis (geometry.axis, default the outlet's centre; x = y = 0 in the silo "
+                        f"frame) lies outside the vertical walls' cross-section at z = {mid:.6g} m: give "
+                        "geometry.axis inside the walls, in the files' units")
     return Container(tris, top, base, inscribed, float(np.hypot(verts[:, 0], verts[:, 1]).max()),
                      rim, outline, source_tris, mid_section)
+
+
+def _section_height(tris: np.ndarray, base: float, top: float, tol: float) -> float:
+    """Where the vertical walls' cross-section is measured, m: half way up, or, when vertices lie
+    within ``tol`` of that height (CAD exports often put a ring of them there), the middle of the
+    nearest gap between the vertices' heights. Above ``base`` every triangle is vertical, so the
+    section is the same at any height between base and top; a cut through vertices would miss
+    the triangles that only touch it."""
+    mid = base + 0.5 * (top - base)
+    z = tris[..., 2].ravel()
+    if np.abs(z - mid).min() > tol:
+        return mid
+    levels = np.unique(np.concatenate([[base, top], z[(z > base) & (z < top)]]))
+    centres = 0.5 * (levels[:-1] + levels[1:])[np.diff(levels) > 2 * tol]
+    return float(centres[np.argmin(np.abs(centres - mid))]) if len(centres) else mid
 
 
 def _xyz(p) -> str:
@@ -313,7 +333,8 @@ def _rim(verts, edges, owner, boundary, top: float, tol: float, outline: Outline
         a, b = verts[edges[k]]
         raise MeshError(f"{source.name(int(owner[k]))} has an open edge from ({_xyz(a)}) to ({_xyz(b)}) m in the silo "
                         f"frame (z = 0 the outlet): the walls may be open only at the top (z = {top:.6g} m) and at "
-                        f"the outlet; close the gap (or {len(open_edges) - 1} more) in the CAD model")
+                        f"the outlet (the plane geometry.outlet.z); close the gap (or {len(open_edges) - 1} more) in "
+                        "the CAD model, or give the opening's plane")
     rim_edges = boundary[at_outlet]
     if len(rim_edges) == 0:
         raise MeshError("the walls have no opening at the outlet's plane: geometry.outlet.z must be the plane of "

@@ -36,6 +36,10 @@ from .triangulation import (
 from .wall_mesh import WallMesh
 
 
+#: the most rings tried for a flat disc's fewest-triangle mesh before the near-equilateral rings
+FEWEST_RINGS_TRIED = 4
+
+
 def band_boundaries(height: float, bands: int, heights: Sequence[float] | None = None) -> list[float]:
     """Band boundaries in m above the side wall's base (the top of the hopper, if any): the given
     ``heights``, else ``bands`` equal bands over the side wall's ``height`` (m)."""
@@ -186,9 +190,18 @@ def cylinder_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outl
     if bounds[-1] < g.height:
         cylinder_piece("wall_above", "wall", base + bounds[-1], base + g.height, 0.0, 2 * math.pi, n_ring)
 
-    def disc_tris(radius, z, inner=0.0):
+    def disc_tris(radius, z, inner=0.0, fewest=True):
+        # flat: the fewest rings whose triangles are good (a fan, one ring of long triangles), as a
+        # mesh wall's cost grows with its triangles (issue 56: the demo's floor, plate and counting
+        # disc went from 1,680 triangles to 192, 6 % of its loop); else (and for an eccentric floor,
+        # whose annulus is then sheared: ``fewest`` False) rings of near-equilateral triangles, else
+        # graded rings
         h = 2 * math.pi * radius / n_ring
         n_r = max(1, math.ceil((radius - inner) / h))
+        for rows in range(1, min(n_r, FEWEST_RINGS_TRIED) + 1 if fewest else 1):
+            tris = disc(radius, z, n_ring, inner_radius=inner, rows=rows)
+            if _good(tris):
+                return tris
         count = 2 * n_ring * n_r if inner > 0 else n_ring * (2 * n_r - 1)
         return _structured_or_graded(count, lambda: disc(radius, z, n_ring, inner_radius=inner),
                                      lambda: graded_disc(inner, radius, z, n_ring))
@@ -201,7 +214,7 @@ def cylinder_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outl
             2 * n_ring * n_ax, lambda: surface_of_revolution(r_out, 0.0, R, base, 0.0, 2 * math.pi, n_ring, n_ax),
             lambda: revolution_rows(r_out, 0.0, R, base, n_ring))))
     else:
-        meshes.append(_wall("bottom", "bottom", lambda: disc_tris(R, 0.0, r_out)))
+        meshes.append(_wall("bottom", "bottom", lambda: disc_tris(R, 0.0, r_out, fewest=not g.outlet_offset)))
     meshes.append(_wall("plate", "plate", lambda: disc_tris(r_out, 0.0)))
     meshes.append(_wall("outlet", "outlet", lambda: disc_tris(outlet_radius, outlet_z)))
     if g.outlet_offset:
@@ -336,7 +349,9 @@ def slab_meshes(silo: Silo, band_bounds: Sequence[float], outlet_z: float, outle
 
 def _trapezoid(bottom0, bottom1, top0, top1, n_u: int, n_v: int) -> np.ndarray:
     """Triangles of the planar quadrilateral with the parallel edges bottom0-bottom1 and top0-top1
-    (m), on an n_u (along the edges) x n_v grid of straight rows."""
+    (m), on an n_u (along the edges) x n_v grid of straight rows (``MeshQualityError`` beyond
+    ``MAX_MESH_TRIANGLES``, before any is made)."""
+    _budget(2 * n_u * n_v, f"a trapezoid of {n_u} x {n_v} facets")
     u = np.linspace(0.0, 1.0, n_u + 1)[:, None]
     lo = np.asarray(bottom0, float) + u * (np.asarray(bottom1, float) - bottom0)
     hi = np.asarray(top0, float) + u * (np.asarray(top1, float) - top0)

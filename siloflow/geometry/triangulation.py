@@ -40,17 +40,18 @@ def surface_of_revolution(r0: float, z0: float, r1: float, z1: float, theta0: fl
     return _grid_triangles(pts)
 
 
-def disc(radius: float, z: float, n_theta: int, inner_radius: float = 0.0) -> np.ndarray:
+def disc(radius: float, z: float, n_theta: int, inner_radius: float = 0.0, rows: int | None = None) -> np.ndarray:
     """Triangles of a horizontal disc (or annulus when ``inner_radius`` > 0) at height z.
 
-    Radial rings keep the triangles' aspect ratio near 1.
+    Radial rings keep the triangles' aspect ratio near 1; ``rows``: that many rings instead (1: a
+    disc is a fan about its centre, an annulus one ring of long triangles).
     """
     h = 2 * math.pi * radius / n_theta
     if inner_radius > 0:
-        n_r = max(1, math.ceil((radius - inner_radius) / h))
+        n_r = rows or max(1, math.ceil((radius - inner_radius) / h))
         return surface_of_revolution(inner_radius, z, radius, z, 0.0, 2 * math.pi, n_theta, n_r)
     # centre fan plus rings
-    n_r = max(1, math.ceil(radius / h))
+    n_r = rows or max(1, math.ceil(radius / h))
     r_in = radius / n_r
     theta = np.linspace(0.0, 2 * math.pi, n_theta + 1)
     ring = np.stack([r_in * np.cos(theta), r_in * np.sin(theta), np.full_like(theta, z)], -1)

@@ -1,11 +1,11 @@
 """Walls from the user's STL files (inserts, baffles): read, checked, placed inside the silo."""
 from __future__ import annotations
 
-import io
+import codecs
+import re
 from pathlib import Path
 
 import numpy as np
-from stl import mesh as stl_mesh
 
 from ..plan import Silo
 from .quality import LIGGGHTS_CURVATURE_DEG, as_written, min_angles
@@ -20,6 +20,107 @@ class MeshError(ValueError):
 MAX_USER_MESH_BYTES = 50_000_000
 
 
+#: a binary STL: an 80-byte header, a little-endian uint32 triangle count, then 50 bytes per
+#: triangle (normal, three vertices as float32, a uint16 attribute)
+_BINARY_HEAD = 84
+_BINARY_TRIANGLE = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attribute", "<u2")])
+#: bytes no text file holds (control characters other than tab, newlines, form feed, vertical tab)
+_BINARY_BYTE = re.compile(rb"[\x00-\x08\x0e-\x1f\x7f]")
+
+
+def _shown(line: bytes) -> str:
+    text = line.strip().decode("utf-8", "replace")
+    return repr(text if len(text) <= 60 else text[:60] + "...")
+
+
+def _ascii_triangles(raw: bytes, path: Path) -> np.ndarray:
+    """Triangles (n, 3, 3) of an ASCII STL (one or more ``solid ... endsolid`` blocks of
+    ``facet normal / outer loop / vertex x3 / endloop / endfacet``), checked line by line;
+    ``MeshError`` naming the line that breaks the grammar."""
+    def fail(lineno: int, what: str, line: bytes | None = None):
+        found = f", found {_shown(line)}" if line is not None else ""
+        return MeshError(f"{path} is a malformed ASCII STL file (it starts with 'solid'): line {lineno}: "
+                         f"expected {what}{found}; fix or re-export the file")
+
+    def numbers(words: list, lineno: int, line: bytes, what: str) -> list[float]:
+        try:
+            if len(words) != 3:
+                raise ValueError
+            return [float(w) for w in words]
+        except ValueError:
+            raise fail(lineno, f"{what} followed by three numbers", line) from None
+
+    # states: the keyword the next non-blank line must start with
+    expect, vertices, last, in_facet = "solid", [], 0, 0
+    for lineno, line in enumerate(raw.split(b"\n"), start=1):
+        words = line.lower().split()
+        if not words:
+            continue
+        last = lineno
+        if expect == "solid":
+            if words[0] != b"solid":
+                raise fail(lineno, "'solid' (a new solid) or the end of the file", line)
+            expect = "facet"
+        elif expect == "facet":
+            if words[0] == b"endsolid" or words[:2] == [b"end", b"solid"]:
+                expect = "solid"
+            elif words[:2] == [b"facet", b"normal"]:
+                numbers(words[2:], lineno, line, "'facet normal'")
+                expect = "outer loop"
+            else:
+                raise fail(lineno, "'facet normal nx ny nz' or 'endsolid'", line)
+        elif expect == "outer loop":
+            if words != [b"outer", b"loop"]:
+                raise fail(lineno, "'outer loop'", line)
+            expect, in_facet = "vertex", 0
+        elif expect == "vertex":
+            if words[0] != b"vertex":
+                raise fail(lineno, f"'vertex x y z' (vertex {in_facet + 1} of 3)", line)
+            vertices.append(numbers(words[1:], lineno, line, "'vertex'"))
+            in_facet += 1
+            if in_facet == 3:
+                expect = "endloop"
+        elif expect == "endloop":
+            if words != [b"endloop"]:
+                raise fail(lineno, "'endloop' after three vertices (a facet is a triangle)", line)
+            expect = "endfacet"
+        elif expect == "endfacet":
+            if words != [b"endfacet"]:
+                raise fail(lineno, "'endfacet'", line)
+            expect = "facet"
+    if expect != "solid":
+        what = {"facet": "'endsolid'"}.get(expect, f"'{expect}'")
+        raise MeshError(f"{path} is a malformed ASCII STL file (it starts with 'solid'): it ends after line {last} "
+                        f"where {what} was expected (truncated file?)")
+    return np.asarray(vertices, dtype=float).reshape(-1, 3, 3)
+
+
+def stl_triangles(raw: bytes, path) -> np.ndarray:
+    """Triangles (n, 3, 3) of the STL file ``path`` whose bytes are ``raw``, ASCII or binary told
+    apart by their content, not by the first word alone: text starting with ``solid`` is ASCII
+    (a parse error names its line; it is never re-read as binary); otherwise the file must be a
+    binary STL whose size is 84 + 50 x its triangle count (binary files whose header starts with
+    ``solid`` too). Raises ``MeshError`` naming the file and what is wrong."""
+    path = Path(path)
+    if raw.startswith(codecs.BOM_UTF8):            # a text editor's byte-order mark before 'solid'
+        raw = raw[len(codecs.BOM_UTF8):]
+    starts_solid = raw.lstrip()[:5].lower() == b"solid"
+    binary = _BINARY_BYTE.search(raw) if starts_solid else None
+    if starts_solid and binary is None:
+        return _ascii_triangles(raw, path)
+    if len(raw) < _BINARY_HEAD:
+        raise MeshError(f"{path} is not an STL file: {len(raw)} bytes, too short for a binary STL (84-byte header "
+                        "and triangle count) and not an ASCII STL (text starting with 'solid')")
+    count = int(np.frombuffer(raw, "<u4", 1, 80)[0])
+    expected = _BINARY_HEAD + _BINARY_TRIANGLE.itemsize * count
+    if len(raw) != expected:
+        ascii_note = (f"; it starts with 'solid' like an ASCII STL but holds a binary byte at offset {binary.start()}"
+                      if starts_solid else "")
+        raise MeshError(f"{path} is not an STL file: as a binary STL its header announces {count} triangles "
+                        f"({expected} bytes), but the file has {len(raw)} bytes{ascii_note}; re-export it as STL")
+    return np.frombuffer(raw, _BINARY_TRIANGLE, count, _BINARY_HEAD)["vertices"].astype(float)
+
+
 def read_user_mesh(path, scale: float = 1.0) -> np.ndarray:
     """Triangles (n, 3, 3), m, of a user's ASCII or binary STL file, checked: finite vertices and
     no degenerate (zero-area) triangle. Raises ``MeshError`` saying what is wrong."""
@@ -29,10 +130,7 @@ def read_user_mesh(path, scale: float = 1.0) -> np.ndarray:
         raw = read_regular_bytes(path, MAX_USER_MESH_BYTES, "a mesh")
     except ValueError as exc:
         raise MeshError(str(exc)) from None
-    try:
-        tris = np.array(stl_mesh.Mesh.from_file(str(path), fh=io.BytesIO(raw)).vectors, dtype=float)
-    except Exception as exc:        # numpy-stl raises many kinds on foreign bytes
-        raise MeshError(f"{path} is not an STL file ({type(exc).__name__}: {str(exc)[:120]})") from None
+    tris = stl_triangles(raw, path)
     if tris.ndim != 3 or len(tris) == 0:
         raise MeshError(f"{path} holds no triangles")
     tris = tris * scale

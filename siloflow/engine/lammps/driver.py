@@ -26,7 +26,7 @@ from typing import Callable, Optional
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ...atomic_files import write_text
+from ...atomic_files import read_json, write_text
 from ...errors import ReadError
 from ...fill_placement import FILL_OVERTIME, fill_batches, fill_order, fill_steps, place
 from ...guard import RunGuard
@@ -294,7 +294,7 @@ class Driver:
             self.save_state()    # the restart point is known even if the run is killed from here on
 
     def _resume(self) -> None:
-        before = json.loads((self.folder / STATE_NAME).read_text())
+        before = read_json(self.folder / STATE_NAME, "the LAMMPS run's state", allow_nan=True)   # checked: resume_state
         step = before["restart_step"]
         self.state.restart_step = step       # kept, whatever happens to this attempt
         for key in ("inserted", "templates_inserted", "settled_ke_pe", "lost_at_restart", "warnings"):

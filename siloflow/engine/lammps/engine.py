@@ -10,13 +10,16 @@ import sys
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
+
+from ...atomic_files import read_json
 from ...case import Case
 from ...deck import DeckError, check_deck_file
 from ...engines import ENGINE_FILES
 from ...errors import ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
 from ...run_folder import RESTART_FILE, write_status
-from ..base import Engine, Finished, Launched, ProgressCallback
+from ..base import Engine, Finished, Launched, ProgressCallback, SettledBed
 from . import deck as lammps_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, RESUME_LOG_NAME
 from .driver import AFTER_RESTART, FLOW_FILE, STATE_NAME, WALL_FORCES_FILE, rows_up_to
@@ -207,6 +210,30 @@ class LammpsEngine(Engine):
                 "flow.txt": rows_up_to(folder / FLOW_FILE, step).encode(),
                 "wall_forces.txt": rows_up_to(folder / WALL_FORCES_FILE, step).encode()}
 
+    def fill_bed(self, files: dict, plan: RunPlan) -> SettledBed:
+        """The cached bed's restart file as LAMMPS reads it (in this process, as a run on one rank
+        does; about a second with the module's import): its atoms' type, radius and mass, and the box.
+        ``ReadError`` when LAMMPS cannot read it."""
+        import tempfile
+        lammps = load_lammps()
+        with tempfile.TemporaryDirectory(prefix="siloflow-bed-") as scratch:
+            link = Path(scratch) / "bed.restart"            # a name LAMMPS' command line reads whatever the cache's path
+            os.symlink(Path(files["settled.restart"]).absolute(), link)
+            lmp = lammps.lammps(cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+            try:
+                lmp.command(f'read_restart "{link}"')
+                n = lmp.extract_global("nlocal")
+                columns = [np.array(lmp.numpy.extract_atom(name)[:n], dtype=dtype)
+                           for name, dtype in (("type", int), ("radius", float), ("rmass", float))]
+                lo, hi = lmp.extract_box()[:2]
+            except Exception as exc:          # LAMMPS' own error, as a plain exception carrying its message
+                raise ReadError(f"LAMMPS did not read the restart file {files['settled.restart']} "
+                                f"({str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__})") from None
+            finally:
+                lmp.close()
+        box = {f"{a}{end}": float(v[k]) for k, a in enumerate("xyz") for end, v in (("lo", lo), ("hi", hi))}
+        return SettledBed(types=columns[0], radius=columns[1], mass=columns[2], box=box)
+
     def finished(self, folder: Path, plan: RunPlan) -> Finished:
         """What the driver's state file tells of the run."""
         state = _read_state(folder)
@@ -252,12 +279,10 @@ def resume_state(folder: Path) -> dict:
     if not path.exists():
         return {}
     try:
-        state = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ReadError(f"{path} is not readable JSON ({exc}): it records where the run can resume; "
+        state = read_json(path, "the LAMMPS run's state", allow_nan=True)
+    except ReadError as exc:
+        raise ReadError(f"{STATE_NAME} is not readable JSON ({exc}): it records where the run can resume; "
                         "run the case anew") from None
-    if not isinstance(state, dict):
-        raise ReadError(f"{path} is not a siloflow LAMMPS state (a JSON object): run the case anew")
     step = state.get("restart_step")
     if step is None:
         return state                    # no restart point: the resume starts from the beginning
@@ -343,8 +368,8 @@ def restart_file_step(path: Path) -> Optional[int]:
 
 def _read_state(folder: Path) -> dict:
     try:
-        return json.loads((Path(folder) / STATE_NAME).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        return read_json(Path(folder) / STATE_NAME, "the LAMMPS run's state", allow_nan=True)
+    except ReadError:
         return {}
 
 

@@ -20,6 +20,7 @@ from ...geometry import write_stl
 from ...plan import RunPlan
 from ...run_folder import RESTART_FILE, DumpLayout, RunFolder
 from .encoding import LiggghtsEncoding, encode
+from .side_walls import binned_pieces, on_primitive, primitive_sides, sampled_walls
 from .tables import CONTACT_KEYWORDS, WALL_CONTACT_KEYWORDS, local_columns
 
 DECK_NAME = ENGINE_FILES["liggghts"].names["deck"]
@@ -237,9 +238,14 @@ def deck_context(plan: RunPlan, enc: LiggghtsEncoding, monte_carlo_tries: int, r
         "timestep": plan.dt, "gravity": plan.gravity,
         "walls": [{"name": w.name, "fid": fix_id(w.name, w.role, resume),
                    "type": enc.face_type if w.role == "face" else enc.wall_type, "stress": plan.outputs.wall_forces,
-                   "move": floor_offset(plan, w.role) if resume else None} for w in plan.walls if w.is_wall],
-        "sensed_walls": [{"fid": fix_id(w.name, w.role, resume)} for w in plan.walls
-                         if w.is_wall and plan.outputs.wall_forces],
+                   "move": floor_offset(plan, w.role) if resume else None}
+                  for w in plan.walls if w.is_wall and not on_primitive(plan, w)],
+        # the side walls as primitives, their pieces' forces binned in the engine (.side_walls)
+        "primitive_sides": primitive_sides(plan),
+        "binned_pieces": binned_pieces(plan) if plan.outputs.wall_forces else [],
+        "sampled_walls": sampled_walls(plan, lambda w: fix_id(w.name, w.role, resume))
+        if plan.outputs.wall_forces else [],
+        "store_side_force": plan.outputs.wall_forces or plan.outputs.contacts,
         "outlet_id": fix_id("outlet", "outlet", resume), "plate_id": fix_id("plate", "plate", resume),
         "planar": plan.planar,
         "seeds": enc.seeds, "density": plan.grains[0].density, "radius": plan.particle_radius,
@@ -341,7 +347,9 @@ def write_deck(plan: RunPlan, folder: Path) -> None:
     RunFolder(folder).write_dump_layout(DumpLayout(
         engine="liggghts", types={t: name for name, t in enc.types.items()},
         contact_columns=contact_columns(plan), wall_contact_columns=contact_columns(plan, wall=True),
-        clump_mass="body"))         # multisphere: every sphere carries its clump's mass
+        clump_mass="body",          # multisphere: every sphere carries its clump's mass
+        primitive_walls=[{"name": w["fid"], "style": w["style"], "args": w["args"]} for w in primitive_sides(plan)]
+        if plan.outputs.contacts else []))
 
 
 def write_resume_deck(plan: RunPlan, folder) -> Path:
@@ -349,3 +357,16 @@ def write_resume_deck(plan: RunPlan, folder) -> Path:
     path = Path(folder) / RESUME_DECK_NAME
     write_text(path, render_deck_text(plan, resume=True))
     return path
+
+
+#: the deck that reads a cached settled bed back (siloflow.fill_cache checks it against the plan before a
+#: run starts from it): the restart file ``bed.restart`` in, its atoms' type, radius and mass out, full precision
+BED_DECK_NAME = "in.bed.liggghts"
+BED_RESTART = "bed.restart"
+BED_DUMP = "bed.txt"
+BED_DECK = f"""# siloflow: a cached settled bed read back for its check against the case (siloflow.fill_cache)
+atom_modify     map array
+units           si
+read_restart    {BED_RESTART}
+write_dump      all custom {BED_DUMP} type radius mass modify format "%d %.17g %.17g"
+"""

@@ -8,23 +8,28 @@ import subprocess
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
+
 from ...atomic_files import write_text
 from ...case import Case
 from ...deck import check_deck_file
 from ...engines import ENGINE_FILES
-from ...errors import CaseError, SetupError
+from ...errors import CaseError, ReadError, SetupError
 from ...fill_placement import fill_batches
 from ...guard import RunGuard
 from ...plan import RunPlan
 from ...run_folder import RESTART_FILE
-from ..base import Engine, Finished, Launched, ProgressCallback
+from ..base import Engine, Finished, Launched, ProgressCallback, SettledBed
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
 from .insertion import short_batches_note
 from .log import LogState, decode, diagnose, parse_log_text
+from .side_walls import primitive_sides
 
 FILES = ENGINE_FILES["liggghts"]
+#: s: the longest ``liggghts -h`` may take to print its banner (its MPI start takes about a second)
+VERSION_TIMEOUT = 10.0
 LIGGGHTS_FILES, LIGGGHTS_TABLES = FILES.names, FILES.tables
 LOG_NAME = LIGGGHTS_FILES["log"]
 SCREEN_NAME = LIGGGHTS_FILES["screen"]
@@ -87,17 +92,31 @@ class LiggghtsEngine(Engine):
         return os.path.abspath(path)
 
     def version(self) -> str:
-        """The binary's version line. ``liggghts -h`` writes ``log.liggghts`` where it runs, so it
-        runs in a scratch folder: never in the user's current directory, whose log it would replace."""
+        """The binary's version banner (``LIGGGHTS (Version LIGGGHTS-PUBLIC 3.8.0, ...)``, the first
+        line ``liggghts -h`` prints). ``liggghts -h`` writes ``log.liggghts`` where it runs, so it
+        runs in a scratch folder: never in the user's current directory, whose log it would replace.
+        ``SetupError`` when the configured binary cannot be run within ``VERSION_TIMEOUT`` s or prints
+        no such banner: it is not LIGGGHTS (``SILOFLOW_LIGGGHTS=/bin/false`` is not)."""
         import tempfile
         exe = self._which(self.profile.executable, "LIGGGHTS binary")
-        with tempfile.TemporaryDirectory(prefix="siloflow-version-") as scratch:
-            proc = subprocess.run([exe, "-h"], capture_output=True, timeout=60, stdin=subprocess.DEVNULL, cwd=scratch,
-                                  env=self.profile.environment())
+        fix = ("name the LIGGGHTS 3.8 binary with --liggghts PATH or SILOFLOW_LIGGGHTS=PATH ('liggghts -h' prints its "
+               "banner)")
+        try:
+            with tempfile.TemporaryDirectory(prefix="siloflow-version-") as scratch:
+                proc = subprocess.run([exe, "-h"], capture_output=True, timeout=VERSION_TIMEOUT,
+                                      stdin=subprocess.DEVNULL, cwd=scratch, env=self.profile.environment())
+        except subprocess.TimeoutExpired:
+            raise SetupError(f"'{exe}' -h did not answer within {VERSION_TIMEOUT:g} s: it is not LIGGGHTS; "
+                             f"{fix}") from None
+        except OSError as exc:
+            raise SetupError(f"'{exe}' cannot be run ({exc.strerror or exc}); {fix}") from None
         for line in decode(proc.stdout).splitlines():
-            if "LIGGGHTS" in line and ("version" in line.lower() or "(" in line):
+            if line.startswith("LIGGGHTS") and "version" in line.lower():
                 return line.strip()
-        return "LIGGGHTS (version not reported)"
+        said = next((ln.strip() for ln in decode(proc.stdout + proc.stderr).splitlines() if ln.strip()), "")
+        raise SetupError(f"'{exe}' is not LIGGGHTS: '{exe} -h' printed no LIGGGHTS version banner (exit code "
+                         f"{proc.returncode}; " + (f"it printed {said[:80]!r}" if said else "it printed nothing")
+                         + f"); {fix}")
 
     def check(self, case: Case, plan: Optional[RunPlan] = None) -> list[tuple[str, str]]:
         """LIGGGHTS-PUBLIC's limits: its multisphere (clumps) runs on one MPI rank; its neighbour
@@ -198,11 +217,13 @@ class LiggghtsEngine(Engine):
 
     # ------------------------------------------------------------------ fill cache
     def fill_key_parts(self, plan: RunPlan) -> dict:
-        """What of this engine defines a fill (siloflow.fill_cache): its version, and the box and
-        skin of the plan's encoding (the restart file carries the box)."""
+        """What of this engine defines a fill (siloflow.fill_cache): its version, the box and skin of
+        the plan's encoding (the restart file carries the box), and its primitive side walls (a bed
+        settled against the sensor meshes of older decks is another bed)."""
         enc = encode(plan)
+        sides = [{"style": w["style"], "args": w["args"]} for w in primitive_sides(plan)]
         return {"name": self.name, "version": self.version(), "ranks": plan.engine.ranks,
-                "box": enc.box, "skin": enc.skin}
+                "box": enc.box, "skin": enc.skin, **({"primitive_side_walls": sides} if sides else {})}
 
     def fill_files(self, folder: Path) -> dict[str, bytes]:
         """The settled bed of a finished run, as the files a later run starts from: the restart
@@ -218,6 +239,30 @@ class LiggghtsEngine(Engine):
                                                               and ln.split()[0].isdigit() and int(ln.split()[0]) <= mark[1])]
         return {"settled.restart": restart.read_bytes(), "log.liggghts": ("\n".join(lines[:mark[0] + 1]) + "\n").encode(),
                 "flow.txt": "".join(kept).encode()}
+
+    def fill_bed(self, files: dict, plan: RunPlan) -> SettledBed:
+        """The cached bed's restart file as LIGGGHTS reads it: in a scratch folder, LIGGGHTS reads it
+        and writes its atoms' type, radius and mass (``in.bed.liggghts``; about 0.5 s, most of it
+        LIGGGHTS' start). The dump is taken when it is whole, whatever LIGGGHTS' exit code: LIGGGHTS
+        3.8 crashes while quitting after it read a multisphere restart it did not run
+        (docs/engine_facts.md). ``ReadError`` when LIGGGHTS could not read it."""
+        import tempfile
+        with tempfile.TemporaryDirectory(prefix="siloflow-bed-") as scratch:
+            scratch = Path(scratch)
+            os.symlink(Path(files["settled.restart"]).absolute(), scratch / liggghts_deck.BED_RESTART)
+            write_text(scratch / liggghts_deck.BED_DECK_NAME, liggghts_deck.BED_DECK)
+            try:
+                proc = subprocess.run(self.command(1, liggghts_deck.BED_DECK_NAME, "log.bed"), cwd=scratch,
+                                      capture_output=True, timeout=600, stdin=subprocess.DEVNULL,
+                                      env=self.profile.environment())
+            except (OSError, subprocess.TimeoutExpired) as exc:
+                raise ReadError(f"LIGGGHTS could not be run to read the settled bed back ({exc})") from None
+            try:
+                return read_bed_dump(scratch / liggghts_deck.BED_DUMP)
+            except ReadError as exc:
+                said = [ln.strip() for ln in decode(proc.stdout + proc.stderr).splitlines() if "ERROR" in ln]
+                raise ReadError(f"LIGGGHTS did not read the restart file {files['settled.restart']} "
+                                f"({said[0] if said else exc}; exit code {proc.returncode})") from None
 
     def finished(self, folder: Path, plan: RunPlan) -> Finished:
         """What the run's log (both parts of a resumed run) tells: stages, insertion, settling."""
@@ -247,6 +292,21 @@ class LiggghtsEngine(Engine):
         if len(lost) and lost.max() > 0:
             return None, int(after_fill[lost > 0].iloc[0].step)
         return None
+
+
+def read_bed_dump(path: Path) -> SettledBed:
+    """The bed LIGGGHTS wrote with :data:`~.deck.BED_DECK` (``ReadError`` unless it is whole)."""
+    try:
+        lines = path.read_text(encoding="ascii").splitlines()
+        count = int(lines[3])
+        bounds = [[float(v) for v in ln.split()[:2]] for ln in lines[5:8]]
+        if lines[8].split()[2:] != ["type", "radius", "mass"] or len(lines) != 9 + count:
+            raise ValueError("cut short")
+        data = np.array(" ".join(lines[9:]).split(), dtype=float).reshape(count, 3)
+    except (OSError, UnicodeDecodeError, ValueError, IndexError) as exc:
+        raise ReadError(f"no whole dump of the bed ({exc})") from None
+    box = {f"{a}{end}": bounds[k][e] for k, a in enumerate("xyz") for e, end in enumerate(("lo", "hi"))}
+    return SettledBed(types=data[:, 0].astype(int), radius=data[:, 1], mass=data[:, 2], box=box)
 
 
 _RESTART_MARK = "SILOFLOW_RESTART "

@@ -1,0 +1,158 @@
+"""Does the deck at the engine's speed measure what the sensor-mesh deck did? (issue 56)
+
+The quick case (``decks/quick.yaml``) on LIGGGHTS, seed by seed, with today's deck (primitive side
+wall, band forces binned in the engine, few-triangle floor, plate and counting disc) and with a
+baseline revision's deck (52-piece sensor meshes; ``--baseline-tree``: a checkout of it, e.g. ``git
+worktree add /tmp/baseline bbe14bc``). The same seed places the same fill in both (the placed fill is
+siloflow's, not the engine's), so the runs are paired by seed. Per run: the steady flow rate, the
+settled bed's force balance, and each band's static and discharge (steady-window mean) pressure.
+
+Resumable: each finished run's row is appended to ``benchmarks/results/deck_equivalence/runs.csv``,
+and a run already there is not run again. ``--table`` writes ``comparison.csv``: per quantity the
+two decks' means, the mean paired difference and its standard error over seeds (sd / sqrt(n)), and
+whether the difference lies within 2 standard errors.
+
+    .venv/bin/python benchmarks/deck_equivalence.py --baseline-tree /tmp/baseline --seeds 1-10
+    .venv/bin/python benchmarks/deck_equivalence.py --table
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "benchmarks" / "results" / "deck_equivalence"
+WORK = ROOT / "runs" / "deck_equivalence"
+CASE = ROOT / "decks" / "quick.yaml"
+
+#: a run of either deck, in a fresh interpreter (the baseline's code on its PYTHONPATH)
+RUN_ONE = """
+import sys
+from siloflow.runs import run
+run(sys.argv[1], sys.argv[2], force=True)
+"""
+
+
+def case_file(seed: int) -> Path:
+    data = yaml.safe_load(CASE.read_text())
+    data["seed"] = seed
+    data["name"] = f"quick_s{seed}"
+    WORK.mkdir(parents=True, exist_ok=True)
+    path = WORK / f"quick_s{seed}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def baseline_env(tree: Path) -> dict:
+    """The environment that imports siloflow from the baseline checkout ``tree``: its package folders
+    first on the path, its templates and example cases linked where the package looks for them."""
+    for name in ("templates", "decks"):
+        link = tree / "siloflow" / name
+        if not link.exists():
+            link.symlink_to(tree / name)
+    return {**os.environ, "PYTHONPATH": str(tree)}
+
+
+def run_row(folder: Path, seed: int, deck: str) -> dict:
+    """A finished run's numbers: flow rate, force balance, each band's static and discharge pressure."""
+    summary = yaml.safe_load((folder / "results" / "summary.json").read_text())
+    bands = pd.read_csv(folder / "results" / "bands.csv")
+    row = {"seed": seed, "deck": deck, "clogged": summary.get("clogged") is not None,
+           "flow_rate": summary["flow_rate"]["rate"],
+           "flow_rate_stderr": summary["flow_rate"]["stderr"],
+           "force_balance": (summary.get("force_balance") or {}).get("ratio", math.nan)}
+    for _, b in bands.iterrows():
+        row[f"static_band{int(b.band):02d}"] = b.static_pressure
+        row[f"dynamic_band{int(b.band):02d}"] = b.dynamic_mean_pressure
+    return row
+
+
+def run_one(seed: int, deck: str, tree: Path | None) -> dict:
+    folder = WORK / f"{deck}_s{seed}"
+    env = baseline_env(tree) if deck == "sensor_meshes" else dict(os.environ)
+    cmd = [sys.executable, "-c", RUN_ONE, str(case_file(seed)), str(folder)]
+    done = subprocess.run(cmd, env=env, cwd=WORK, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{deck} seed {seed} failed:\n{done.stderr[-3000:]}")
+    return run_row(folder, seed, deck)
+
+
+def comparison(runs: pd.DataFrame) -> pd.DataFrame:
+    """Per quantity: each deck's mean over the seeds both have, the paired difference (primitive -
+    sensor meshes) with its standard error, relative to the sensor meshes' mean, and the verdict."""
+    runs = with_clogged(runs)
+    a = runs[runs.deck == "sensor_meshes"].set_index("seed")
+    b = runs[runs.deck == "primitive"].set_index("seed")
+    seeds = a.index.intersection(b.index)
+    # a clogged discharge has no steady flow: its seed leaves the flow and discharge comparisons
+    flowing = [s for s in seeds if not (a.loc[s, "clogged"] or b.loc[s, "clogged"])]
+    rows = []
+    for q in [c for c in runs.columns if c not in ("seed", "deck", "flow_rate_stderr", "clogged")]:
+        seeds_q = seeds if q.startswith("static") or q == "force_balance" else pd.Index(flowing)
+        x, y = a.loc[seeds_q, q].astype(float), b.loc[seeds_q, q].astype(float)
+        ok = np.isfinite(x) & np.isfinite(y)
+        d = (y - x)[ok]
+        n = int(ok.sum())
+        se = float(d.std(ddof=1) / math.sqrt(n)) if n >= 2 else math.nan
+        mean_d = float(d.mean()) if n else math.nan
+        ref = float(x[ok].mean()) if n else math.nan
+        rows.append({"quantity": q, "seeds": n, "sensor_meshes_mean": ref, "primitive_mean": float(y[ok].mean()) if n else math.nan,
+                     "difference": mean_d, "difference_stderr": se,
+                     "relative_difference": mean_d / ref if ref else math.nan,
+                     "relative_stderr": se / abs(ref) if ref else math.nan,
+                     "within_2_stderr": bool(abs(mean_d) <= 2 * se) if np.isfinite(se) else None})
+    return pd.DataFrame(rows)
+
+
+def with_clogged(runs: pd.DataFrame) -> pd.DataFrame:
+    """``runs`` with its ``clogged`` column, read from the run folders' summaries for rows that lack it."""
+    runs = runs.copy()
+    if "clogged" not in runs:
+        runs["clogged"] = np.nan
+    for i, r in runs[runs.clogged.isna()].iterrows():
+        summary = WORK / f"{r.deck}_s{int(r.seed)}" / "results" / "summary.json"
+        if not summary.exists():
+            raise SystemExit(f"{summary} is missing: the row of {r.deck} seed {int(r.seed)} has no clogged column")
+        runs.loc[i, "clogged"] = yaml.safe_load(summary.read_text()).get("clogged") is not None
+    runs["clogged"] = runs.clogged.astype(bool)
+    return runs
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--baseline-tree", type=Path, help="a checkout of the sensor-mesh revision (bbe14bc)")
+    ap.add_argument("--seeds", default="1-10", help="seeds a-b (inclusive)")
+    ap.add_argument("--table", action="store_true", help="only write comparison.csv from the committed runs")
+    args = ap.parse_args()
+    OUT.mkdir(parents=True, exist_ok=True)
+    table = OUT / "runs.csv"
+    runs = pd.read_csv(table) if table.exists() else pd.DataFrame(columns=["seed", "deck"])
+    if not args.table:
+        lo, hi = (int(s) for s in args.seeds.split("-"))
+        for seed in range(lo, hi + 1):
+            for deck in ("primitive", "sensor_meshes"):
+                if ((runs.seed == seed) & (runs.deck == deck)).any():
+                    continue
+                if deck == "sensor_meshes" and args.baseline_tree is None:
+                    raise SystemExit("the sensor-mesh runs need --baseline-tree")
+                row = run_one(seed, deck, args.baseline_tree)
+                runs = pd.concat([runs, pd.DataFrame([row])], ignore_index=True)
+                runs.to_csv(table, index=False)
+                print(f"seed {seed} {deck}: flow {row['flow_rate'] * 1000:.2f} g/s, balance {row['force_balance']:.4f}",
+                      flush=True)
+    comp = comparison(runs)
+    comp.to_csv(OUT / "comparison.csv", index=False)
+    with pd.option_context("display.width", 200, "display.max_columns", 20):
+        print(comp.to_string(index=False))
+
+
+if __name__ == "__main__":
+    main()
