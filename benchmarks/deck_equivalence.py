@@ -1,27 +1,24 @@
-"""Does the deck at the engine's speed measure what the sensor-mesh deck did? (issue 56)
+"""Does the deck at the engine's speed measure what the sensor-mesh deck does? (issue 56)
 
-The quick case (``decks/quick.yaml``) on LIGGGHTS, seed by seed, with today's deck (primitive side
-wall, band forces binned in the engine, few-triangle floor, plate and counting disc) and with a
-baseline revision's deck (52-piece sensor meshes; ``--baseline-tree``: a checkout of it, e.g. ``git
-worktree add /tmp/baseline bbe14bc``). The same seed places the same fill in both (the placed fill is
-siloflow's, not the engine's), so the runs are paired by seed. Per run: the steady flow rate, the
-settled bed's force balance, and each band's static and discharge (steady-window mean) pressure.
+The quick case (``decks/quick.yaml``) on LIGGGHTS, seed by seed, with its side walls as sensor
+meshes (``engine.side_walls: meshes``, the default) and as primitive walls whose band forces are
+binned in the engine (``engine.side_walls: primitive``). The same seed places the same fill in both
+(the placed fill is siloflow's, not the engine's), so the runs are paired by seed. Per run: whether it
+clogged, the steady flow rate, the settled bed's force balance, and each band's static and discharge
+(steady-window mean) pressure.
 
 Resumable: each finished run's row is appended to ``benchmarks/results/deck_equivalence/runs.csv``,
 and a run already there is not run again. ``--table`` writes ``comparison.csv``: per quantity the
 two decks' means, the mean paired difference and its standard error over seeds (sd / sqrt(n)), and
-whether the difference lies within 2 standard errors.
+whether the difference lies within 2 standard errors (clogged seeds leave the flow and discharge rows).
 
-    .venv/bin/python benchmarks/deck_equivalence.py --baseline-tree /tmp/baseline --seeds 1-10
+    .venv/bin/python benchmarks/deck_equivalence.py --seeds 1-10
     .venv/bin/python benchmarks/deck_equivalence.py --table
 """
 from __future__ import annotations
 
 import argparse
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -33,32 +30,19 @@ OUT = ROOT / "benchmarks" / "results" / "deck_equivalence"
 WORK = ROOT / "runs" / "deck_equivalence"
 CASE = ROOT / "decks" / "quick.yaml"
 
-#: a run of either deck, in a fresh interpreter (the baseline's code on its PYTHONPATH)
-RUN_ONE = """
-import sys
-from siloflow.runs import run
-run(sys.argv[1], sys.argv[2], force=True)
-"""
+#: the decks compared: name -> the case's engine.side_walls
+DECKS = {"primitive": "primitive", "sensor_meshes": "meshes"}
 
 
-def case_file(seed: int) -> Path:
+def case_file(seed: int, deck: str) -> Path:
     data = yaml.safe_load(CASE.read_text())
     data["seed"] = seed
-    data["name"] = f"quick_s{seed}"
+    data["name"] = f"quick_{deck}_s{seed}"
+    data.setdefault("engine", {})["side_walls"] = DECKS[deck]
     WORK.mkdir(parents=True, exist_ok=True)
-    path = WORK / f"quick_s{seed}.yaml"
+    path = WORK / f"{data['name']}.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
-
-
-def baseline_env(tree: Path) -> dict:
-    """The environment that imports siloflow from the baseline checkout ``tree``: its package folders
-    first on the path, its templates and example cases linked where the package looks for them."""
-    for name in ("templates", "decks"):
-        link = tree / "siloflow" / name
-        if not link.exists():
-            link.symlink_to(tree / name)
-    return {**os.environ, "PYTHONPATH": str(tree)}
 
 
 def run_row(folder: Path, seed: int, deck: str) -> dict:
@@ -75,13 +59,14 @@ def run_row(folder: Path, seed: int, deck: str) -> dict:
     return row
 
 
-def run_one(seed: int, deck: str, tree: Path | None) -> dict:
+def run_one(seed: int, deck: str) -> dict:
+    from siloflow.errors import SiloflowError
+    from siloflow.runs import run
     folder = WORK / f"{deck}_s{seed}"
-    env = baseline_env(tree) if deck == "sensor_meshes" else dict(os.environ)
-    cmd = [sys.executable, "-c", RUN_ONE, str(case_file(seed)), str(folder)]
-    done = subprocess.run(cmd, env=env, cwd=WORK, capture_output=True, text=True)
-    if done.returncode != 0:
-        raise SystemExit(f"{deck} seed {seed} failed:\n{done.stderr[-3000:]}")
+    try:
+        run(case_file(seed, deck), folder, force=True)
+    except SiloflowError as exc:
+        raise SystemExit(f"{deck} seed {seed} failed: {exc}") from None
     return run_row(folder, seed, deck)
 
 
@@ -128,7 +113,6 @@ def with_clogged(runs: pd.DataFrame) -> pd.DataFrame:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--baseline-tree", type=Path, help="a checkout of the sensor-mesh revision (bbe14bc)")
     ap.add_argument("--seeds", default="1-10", help="seeds a-b (inclusive)")
     ap.add_argument("--table", action="store_true", help="only write comparison.csv from the committed runs")
     args = ap.parse_args()
@@ -141,9 +125,7 @@ def main() -> None:
             for deck in ("primitive", "sensor_meshes"):
                 if ((runs.seed == seed) & (runs.deck == deck)).any():
                     continue
-                if deck == "sensor_meshes" and args.baseline_tree is None:
-                    raise SystemExit("the sensor-mesh runs need --baseline-tree")
-                row = run_one(seed, deck, args.baseline_tree)
+                row = run_one(seed, deck)
                 runs = pd.concat([runs, pd.DataFrame([row])], ignore_index=True)
                 runs.to_csv(table, index=False)
                 print(f"seed {seed} {deck}: flow {row['flow_rate'] * 1000:.2f} g/s, balance {row['force_balance']:.4f}",

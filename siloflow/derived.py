@@ -371,7 +371,10 @@ def physics_warnings(case: Case, d: RunPlan) -> list[str]:
 def _engine_options(case) -> dict[str, int]:
     """The case's settings only some engine reads (``EngineChoice.options``)."""
     tries = getattr(case.particles, "monte_carlo_tries", None)
-    return {} if tries is None else {"monte_carlo_tries": tries}
+    out = {} if tries is None else {"monte_carlo_tries": tries}
+    if case.engine.side_walls == "primitive":     # LIGGGHTS' primitive side walls (engine.liggghts.side_walls)
+        out["primitive_side_walls"] = 1
+    return out
 
 
 def derive(case: Case) -> RunPlan:

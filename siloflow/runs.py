@@ -31,7 +31,6 @@ import pandas as pd
 from .errors import CaseError, ReadError, SetupError
 from .engine.tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_time
 from .run_folder import (
-    DUMPS,
     FLOW_SCHEMA,
     FLOW_TABLE,
     PLAN_NAME,
@@ -221,15 +220,8 @@ class Run:
     def frames(self, columns: Optional[list[str]] = None, every: int = 1) -> Iterator:
         """The particle dump frames (``postprocess.dumps.Frame``), one at a time."""
         from postprocess.dumps import read_frames
-        files = self.run_folder.dump_files("particles")
-        if files is None:
-            if self.plan.outputs.dump_every is None:
-                raise ReadError(f"{self.folder} has no particle dumps: its case asked for none (no "
-                                "outputs.dump_interval and no result that needs frames in outputs.results)")
-            raise ReadError(f"{self.folder} has no particle dumps in {DUMPS}, though the run was to write one every "
-                            f"{self.plan.outputs.dump_every} steps: they are missing (deleted or moved), or the run "
-                            f"({self.state}) stopped before the first")
-        return read_frames(files, columns=columns, every=every)
+        from postprocess.paraview import particle_dump_files
+        return read_frames(particle_dump_files(self.run_folder), columns=columns, every=every)
 
     # ------------------------------------------------------------ coarse-graining and MDAnalysis
     def cg(self, stored: Optional[bool] = None, **settings):

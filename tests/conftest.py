@@ -13,6 +13,19 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = ROOT / "decks" / "quick.yaml"
 SMALL = ROOT / "tests" / "data" / "small_silo.yaml"
+#: a LIGGGHTS run of a few seconds: 400 spheres settled in a small silo, 0.1 s of discharge
+TINY = {"name": "tiny", "geometry": {"kind": "cylinder", "radius": 0.0125, "height": 0.08, "orifice_radius": 0.0055,
+                                     "mesh_segments": 24},
+        "sensors": {"bands": 2, "sectors": 4},
+        "materials": {"model": "hertz", "particle": {"density": 2500.0, "youngs_modulus": 5.0e6, "poisson_ratio": 0.3},
+                      "wall": {"youngs_modulus": 5.0e6, "poisson_ratio": 0.3},
+                      "particle_particle": {"friction": 0.5, "restitution": 0.5},
+                      "particle_wall": {"friction": 0.5, "restitution": 0.5}},
+        "particles": {"kind": "spheres", "radius": 0.00125},
+        "fill": {"count": 400, "settle": {"ke_pe_ratio": 1.0e-5, "check_interval": 0.02, "max_time": 1.0,
+                                          "static_window": 0.01}},
+        "discharge": {"duration": 0.1}, "outputs": {"sample_interval": 0.005, "dump_interval": 0.05},
+        "engine": {"ranks": 1, "timestep_fraction": 0.2}, "seed": 4242}
 
 
 def needs_liggghts(test):

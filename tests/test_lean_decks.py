@@ -41,9 +41,8 @@ def commands(text: str) -> set[str]:
 CONTACT_RESULTS = ("coordination", "force_chains", "coarse_graining")
 GUARD_PAIRS = "compute         contacts all pair/gran/local delta"
 ADDS = {
-    # the side wall's force: its primitive's stored grain forces summed in the engine (issue 56)
-    "force_balance": {"fix mesh/surface/stress", "fix ave/time wall_forces", "compute reduce/region"},
-    "wall_pressure": {"fix mesh/surface/stress", "fix ave/time wall_forces", "compute reduce/region"},
+    "force_balance": {"fix mesh/surface/stress", "fix ave/time wall_forces"},
+    "wall_pressure": {"fix mesh/surface/stress", "fix ave/time wall_forces"},
     "porosity": {"dump custom"},
     "free_surface": {"dump custom"},
     "coordination": {"dump custom", "dump local", "compute wall/gran/local"},

@@ -287,8 +287,7 @@ def test_extreme_geometries_give_good_conforming_meshes(geometry, sensors):
 
 def test_existing_cases_keep_their_meshes_and_all_are_good():
     """The decks and test cases were already good: their meshes are the structured ones (the decks'
-    byte-identical tests rely on it; a flat plate is the fan about its centre, the fewest good
-    triangles, issue 56) and pass the same checks."""
+    byte-identical tests rely on it) and pass the same checks."""
     for path in sorted(list((ROOT / "decks").glob("*.yaml")) + list((ROOT / "tests" / "data").glob("*.yaml"))):
         case = load_case(path)
         if case.geometry.kind == "mesh":      # the user's own triangles: tests/test_mesh_silo.py
@@ -300,12 +299,12 @@ def test_existing_cases_keep_their_meshes_and_all_are_good():
             n = math.ceil(g.mesh_segments / case.sensors.sectors) * case.sensors.sectors
             plate = next(w for w in walls if w.name == "plate")
             if not g.outlet_offset:
-                np.testing.assert_array_equal(plate.triangles, disc(g.outlet_radius, 0.0, n, rows=1))
+                np.testing.assert_array_equal(plate.triangles, disc(g.outlet_radius, 0.0, n))
                 continue
             # eccentric: the same disc turned by half a sector and moved to the outlet
             a = -math.pi / case.sensors.sectors
             turn = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
-            np.testing.assert_allclose(plate.triangles, disc(g.outlet_radius, 0.0, n, rows=1) @ turn.T
+            np.testing.assert_allclose(plate.triangles, disc(g.outlet_radius, 0.0, n) @ turn.T
                                        + [g.outlet_offset, 0, 0], atol=1e-15)
 
 

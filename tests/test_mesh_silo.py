@@ -50,7 +50,7 @@ def mesh_case(source: Path, folder: Path, outlet: dict, edit=None, name: str = "
     return path
 
 
-SMALL_OUTLET = {"z": 0.0, "center": [0.0, 0.0], "radius": 6.0}
+SMALL_OUTLET = {"z": 0.0, "center": [0.0, 0.0], "radius": 5.5}
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +112,7 @@ def test_volume_and_section_of_a_hopper(tmp_path):
     volume below any height is the polygonal frustum's plus the prism above."""
     data = yaml.safe_load(SMALL.read_text())
     data["geometry"] = {"kind": "hopper", "radius": 0.0125, "height": 0.1, "half_angle_deg": 30.0,
-                        "outlet_radius": 0.006, "mesh_segments": 32}
+                        "outlet_radius": 0.0055, "mesh_segments": 32}
     data["sensors"] = {"bands": 4, "sectors": 4}
     src = tmp_path / "hopper.yaml"
     src.write_text(yaml.safe_dump(data))
@@ -121,7 +121,7 @@ def test_volume_and_section_of_a_hopper(tmp_path):
     hh = hopper.geometry.hopper_height
     assert mesh.geometry.hopper_height == pytest.approx(hh, rel=1e-6)
     assert [w.role for w in mesh.walls].count("hopper") == 1
-    n, r0, R = 32, 0.006, 0.0125
+    n, r0, R = 32, 0.0055, 0.0125
     k = 0.5 * n * math.sin(2 * math.pi / n)                 # a regular n-gon's area over r^2
     case = load_case(tmp_path / "mesh_silo.yaml")
     from siloflow.derived import bed_volume, measured
@@ -385,7 +385,7 @@ def test_run_folder_holds_the_walls_and_renders_again(tmp_path):
     folder = render(load_case(case_file), tmp_path / "run")
     stored = yaml.safe_load((folder / "case.yaml").read_text())["geometry"]
     assert stored["files"] == ["meshes/container.stl"] and stored["scale"] == 1.0
-    assert stored["outlet"]["radius"] == pytest.approx(0.006)
+    assert stored["outlet"]["radius"] == pytest.approx(0.0055)
     shutil.move(tmp_path / "walls.stl", tmp_path / "elsewhere.stl")
     verify_deck(folder, get_engine)                   # renders the folder's own case anew: same bytes
     assert (tmp_path / "elsewhere.stl").read_bytes() == before

@@ -490,7 +490,7 @@ def test_frames_say_the_dumps_are_missing_not_unset(tmp_path, quick_dict):
     folder = _finished_looking(tmp_path, quick_dict)                  # quick: outputs.dump_interval 0.1 s
     with pytest.raises(ReadError) as info:
         siloflow.open_run(folder).frames()
-    assert "they are missing" in str(info.value) and "was not set" not in str(info.value)
+    assert "the particle dumps are missing" in str(info.value) and "was not set" not in str(info.value)
     quick_dict["outputs"] = {"sample_interval": 0.005}                  # no dumps asked for
     folder = _finished_looking(tmp_path / "none", quick_dict)
     with pytest.raises(ReadError, match="asked for none"):

@@ -66,6 +66,10 @@ class EngineSettings(Strict):
     fast_profile: Optional[PinnedProfile] = Field(None, description="the fast profile's settings and bounds "
                                                   "(filled in from siloflow's benchmarked profile when not given)")
     guard: Guard = Guard()
+    side_walls: Literal["meshes", "primitive"] = Field(
+        "meshes", description="LIGGGHTS: the side walls of a generated silo as sensor meshes (each band sector a "
+        "mesh), or as primitive walls whose band forces are binned in the engine (issue 56: 2.8x the demo's "
+        "loop rate; its equivalence with the meshes over seeds is being measured, docs/engines.md)")
 
     @model_validator(mode="before")
     @classmethod

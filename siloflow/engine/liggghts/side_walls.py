@@ -19,6 +19,8 @@ piece of a side reaches down and the highest up without bound, and a grain count
 (one on a boundary, a set of measure zero, in both). The sampled force is the force the grains
 exert on the wall (the stored force, negated), as a mesh sensor's.
 
+A case chooses it with ``engine.side_walls: primitive``; the default stays ``meshes`` (one sensor mesh
+per band sector) until the equivalence campaign (``benchmarks/deck_equivalence.py``) has its seeds.
 A user's STL silo (``kind: mesh``) keeps its walls as meshes: its sensor pieces are its own
 triangles. ``compute wall/gran/local`` reports mesh walls only, so a deck that dumps contacts also
 dumps each primitive's touching grains (``side_contacts``), which the dump reader turns into
@@ -43,6 +45,8 @@ def primitive_sides(plan: RunPlan) -> list[dict]:
     (what the dump reader needs to place a contact: ``{"style", "args"}``). Empty for a user's
     STL silo, whose walls stay meshes."""
     g = plan.geometry
+    if not plan.engine.options.get("primitive_side_walls"):       # the case's engine.side_walls: meshes
+        return []
     if g.kind in ("cylinder", "hopper"):
         return [{"fid": "side", "style": "zcylinder", "args": [g.radius, 0.0, 0.0], "sector": None}]
     if g.kind == "planar":
