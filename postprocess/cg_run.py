@@ -47,6 +47,13 @@ class CgSetup:
     primitive_walls: list = field(default_factory=list)   # [(layout's primitive wall, its dump files)]: more wall contacts
 
 
+def primitive_wall_files(run: RunFolder) -> list[tuple[dict, list]]:
+    """Each primitive wall of the run's dump layout with its touching-grain dump files in step order
+    (``output/dumps/primitive_<name>.<step>.txt``)."""
+    files = run.dump_files("primitive_walls") or []
+    return [(w, [f for f in files if f.name.startswith(f"primitive_{w['name']}.")]) for w in run.dump_layout.primitive_walls]
+
+
 def setup_from_run(folder) -> CgSetup:
     """Grid and window of a siloflow run: the silo radius, the outlet region to the settled
     surface, and the steady-flow window of its results."""
@@ -59,8 +66,7 @@ def setup_from_run(folder) -> CgSetup:
     layout = run.dump_layout
     contacts = run.dump_files("contacts")
     walls = run.dump_files("wall_contacts") if layout.wall_contact_columns else None
-    primitives = [(w, [f for f in run.dump_files("primitive_walls") or [] if f.name.startswith(f"primitive_{w['name']}.")])
-                  for w in layout.primitive_walls] if walls else []
+    primitives = primitive_wall_files(run) if walls else []
     g = plan.geometry
     top = summary.get("frame_analyses", {}).get("settled_surface_height_m") or g.top
     densities = {sp.density for sp in plan.species}

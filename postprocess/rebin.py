@@ -22,6 +22,7 @@ from siloflow.errors import ReadError
 from siloflow.run_folder import RunFolder
 
 from .batch_means import batch_means_stderr
+from .cg_run import primitive_wall_files
 from .dumps import PRIMITIVE_CONTACT_COLUMNS, frames_by_step, primitive_wall_contacts, read_frames
 
 
@@ -49,8 +50,7 @@ def _side_frames(run: RunFolder):
         raise ReadError(f"{run.path}: the run dumped no wall contacts (outputs.contacts and outputs.dump_interval): "
                         "nothing to re-bin")
     streams = [read_frames(walls, columns=layout.wall_contact_columns)]
-    for w in layout.primitive_walls:
-        files = [f for f in run.dump_files("primitive_walls") or [] if f.name.startswith(f"primitive_{w['name']}.")]
+    for w, files in primitive_wall_files(run):
         if files:
             streams.append(primitive_wall_contacts(f, w["style"], w["args"])
                            for f in read_frames(files, columns=PRIMITIVE_CONTACT_COLUMNS))
