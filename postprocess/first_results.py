@@ -24,7 +24,7 @@ from .batch_means import batch_means_stderr
 from .discharge import clog, discharge_table, steady_flow_rate
 from .dump_results import MIN_STEADY_SAMPLES, analyse_dumps, steady_resolution
 from .en_verdicts import band_verdicts, bed_state, compare_with_dem
-from .flow_rate import rate_series, steady_window
+from .flow_rate import beverloo_prediction, rate_series, steady_window
 from .janssen import compare_with_measurement
 from .run_results import RunResults
 from .wall_pressure import band_mean, band_pressures, vertical_load, wide_forces
@@ -64,6 +64,12 @@ def static_window(forces: pd.DataFrame, run: RunOutputs) -> pd.Series:
     lo = run.stage_steps["static"] + run.sample_steps
     hi = run.stage_steps["open"]
     return (forces.step > lo) & (forces.step <= hi)
+
+
+def discharge_window(forces: pd.DataFrame, run: RunOutputs) -> pd.Series:
+    """Samples averaged wholly after the opening: the whole discharge, over which a band's maximum
+    dynamic pressure is taken."""
+    return forces.step > run.stage_steps["open"] + run.sample_steps
 
 
 def dynamic_window(forces: pd.DataFrame, run: RunOutputs, window: dict | None) -> pd.Series:
@@ -134,26 +140,35 @@ def band_statistics(bands: pd.DataFrame, dynamic_mask, static_mask, sector_means
     return pd.DataFrame.from_dict(rows, orient="index", columns=BAND_STATISTICS).rename_axis("band")
 
 
-def sector_statistics(sectors: pd.DataFrame, walls, static_mask, dynamic_mask) -> pd.DataFrame:
+def sector_statistics(sectors: pd.DataFrame, walls, static_mask, dynamic_mask, discharge_mask=None) -> pd.DataFrame:
     """Per (band, sector) of a tidy sector table (step, band, sector, z_mid, pressure Pa): the
-    sector's azimuth (deg, the middle of its arc; a slab's side walls at 180 and 0), and the mean
-    pressure (Pa) over the static window and over the dynamic window, each with its batch-means
-    standard error (:func:`batch_means_stderr`: the samples are autocorrelated) and sample count.
-    ``walls``: the plan's walls (their theta0..theta1, or their normal for a slab)."""
-    azimuth = {}
+    sector's height range z0..z1 (m), azimuth (deg, the middle of its arc; a slab's or box's side
+    wall: the direction of its normal, a slab's at 180 and 0) and arc (deg; NaN for a flat wall), the mean pressure (Pa) over the static
+    window and over the dynamic window, each with its batch-means standard error
+    (:func:`batch_means_stderr`: the samples are autocorrelated) and sample count, and the largest
+    sample over ``discharge_mask`` (the whole discharge, as a band's max dynamic pressure; NaN
+    without a mask). ``walls``: the plan's walls (their theta0..theta1, or their normal)."""
+    azimuth, heights, arcs = {}, {}, {}
+    nan = float("nan")
     for w in walls:
         if w.role == "band":
             tc = 0.5 * (w.theta0 + w.theta1) if w.theta0 is not None else math.atan2(w.normal[1], w.normal[0])
             azimuth[(w.band, w.sector)] = math.degrees(tc) % 360.0
+            heights[(w.band, w.sector)] = (w.z0, w.z1)
+            arcs[(w.band, w.sector)] = math.degrees(w.theta1 - w.theta0) if w.theta0 is not None else nan
     rows = []
     for (band, sector), grp in sectors.groupby(["band", "sector"]):
+        z0, z1 = heights.get((band, sector), (nan, nan))
         row = {"band": band, "sector": sector, "z_mid": float(grp.z_mid.iloc[0]),
-               "azimuth_deg": azimuth.get((band, sector), float("nan"))}
+               "z0": nan if z0 is None else float(z0), "z1": nan if z1 is None else float(z1),
+               "azimuth_deg": azimuth.get((band, sector), nan), "arc_deg": arcs.get((band, sector), nan)}
         for name, mask in (("static", static_mask), ("dynamic", dynamic_mask)):
             x = grp[np.asarray(mask, bool)[grp.index]].sort_values("step").pressure.to_numpy(float)
             se, _ = batch_means_stderr(x)
-            row.update({f"{name}_mean_pressure": float(x.mean()) if len(x) else float("nan"),
+            row.update({f"{name}_mean_pressure": float(x.mean()) if len(x) else nan,
                         f"{name}_mean_stderr": se, f"{name}_samples": len(x)})
+        during = grp[np.asarray(discharge_mask, bool)[grp.index]].pressure if discharge_mask is not None else ()
+        row["discharge_max_pressure"] = float(np.max(during)) if len(during) else nan
         rows.append(row)
     return pd.DataFrame(rows)
 
@@ -263,8 +278,7 @@ def analyse_run(folder, measured_pressure=None) -> RunResults:
                             "make fill.settle.static_window longer than outputs.sample_interval")
         static = bands[static_mask].groupby("band").agg(z_mid=("z_mid", "first"), static_pressure=("pressure", "mean"),
                                                         static_shear=("shear_force", "mean"))
-        dynamic = bands[bands.step > run.stage_steps["open"] + run.sample_steps].groupby("band").agg(
-            max_dynamic_pressure=("pressure", "max"))
+        dynamic = bands[discharge_window(bands, run)].groupby("band").agg(max_dynamic_pressure=("pressure", "max"))
         table = static.join(dynamic)
         with np.errstate(divide="ignore", invalid="ignore"):
             table["discharge_factor"] = table.max_dynamic_pressure / table.static_pressure
@@ -273,7 +287,8 @@ def analyse_run(folder, measured_pressure=None) -> RunResults:
         dyn_mask = dynamic_window(bands, run, window)
         sector_static = static_window(sectors, run)
         sector_means = sectors[sector_static].groupby(["band", "sector"]).pressure.mean()
-        sector_table = sector_statistics(sectors, run.walls, sector_static, dynamic_window(sectors, run, window))
+        sector_table = sector_statistics(sectors, run.walls, sector_static, dynamic_window(sectors, run, window),
+                                         discharge_window(sectors, run))
         table = table.join(band_statistics(bands, dyn_mask, static_mask, sector_means)).reset_index()
         n_dyn = int(table.dynamic_samples.min()) if len(table) else 0
         pressure_stats = {
@@ -321,6 +336,9 @@ def analyse_run(folder, measured_pressure=None) -> RunResults:
         **({"discharge_stop": run.record.discharge_stop} if run.record.discharge_stop else {}),
         **({"fill_cache": run.record.fill_cache} if run.record.fill_cache else {}),
         "engine_warnings": run.record.warnings,
+        "guard": {"stopped": run.record.guard, "peaks": run.record.guard_peaks,
+                  "smallest_radius_m": min(sp.radius for sp in run.plan.species)},
+        "planned_bed": {"grains": run.plan.fill.count, "mass_kg": run.plan.expected_mass},
     }
     # the tables, and what the figures show, for the report layer to write
     results = RunResults(run.folder, run.run.results, summary, {RESULT_TABLES["flow"]: dis},
@@ -336,6 +354,7 @@ def analyse_run(folder, measured_pressure=None) -> RunResults:
             summary["eccentric_discharge"] = eccentric_discharge(sector_table, run.plan.sensors.sectors, offset,
                                                                  geo.kind, offset_y)
     summary["frame_analyses"] = analyse_dumps(run, table, dis, rate, results)
+    summary["beverloo_prediction"] = beverloo_prediction(run.plan, summary, folder)
     summary["design_loads"] = en1991_comparison(run, table, summary, results)
     if measured_pressure is not None:
         summary["pressure_comparison"] = measured_comparison(folder, measured_pressure, bands, t_open, results)

@@ -287,35 +287,64 @@ def beverloo_diameter(plan, folder) -> tuple[float, float, str]:
     return d, density, f"mass-weighted mean diameter of {len(grains)} sizes"
 
 
+#: Beverloo's constants for spheres through a round orifice (../shared/REFERENCES.md: C about 0.58, k about
+#: 1.5), with which a run's own flow rate is set beside the law's prediction
+BEVERLOO_C, BEVERLOO_K = 0.58, 1.5
+
+
+def beverloo_inputs(plan, summary: dict, folder) -> dict:
+    """What Beverloo's law needs of a run (its plan and ``results/summary.json``): orifice diameter
+    D0 (a slab's slot width), grain diameter d (several sizes: their mass-weighted mean, ``d_is``
+    says which; :func:`beverloo_diameter`), outlet length L (a slab's depth, a box's rectangle or slot;
+    NaN for a round orifice) (m), L_ends (the outlet's length ends at walls or edges: Beverloo's
+    L - k d), D0_is (what D0 is: a silo from STL with a polygon outlet gives its hydraulic diameter
+    4 A / P, the round law approximated), bulk density rho_b (kg/m3, measured in the settled bed when
+    dumps exist, else packing fraction x rho_p, ``rho_b_source`` says which) and gravity g (m/s2).
+    ``ReadError`` for grains of no one diameter (clumps)."""
+    d, density, d_is = beverloo_diameter(plan, folder)
+    fa = summary.get("frame_analyses") or {}
+    measured = fa.get("bulk_density_kg_m3")
+    measured = measured if isinstance(measured, (int, float)) and not isinstance(measured, bool) else None
+    rho_b = measured or plan.fill.packing_fraction * density
+    g = plan.geometry
+    L = g.thickness if g.kind == "planar" else 2 * g.outlet_half_y if g.kind == "box" and g.outlet != "circle" \
+        else np.nan
+    return {"D0": 2 * g.outlet_radius, "d": d, "d_is": d_is, "L": L, "L_ends": g.kind == "box",
+            "D0_is": "hydraulic diameter 4A/P of a polygon outlet (the round law approximated)"
+            if g.kind == "mesh" and g.outlet == "polygon" else "outlet width or diameter",
+            "rho_b": float(rho_b), "g": plan.gravity,
+            "rho_b_source": "measured" if measured else "case packing fraction"}
+
+
+def beverloo_prediction(plan, summary: dict, folder, C: float = BEVERLOO_C, k: float = BEVERLOO_K) -> dict:
+    """Beverloo's flow rate for a run (kg/s) with the literature's C and k for spheres
+    (:data:`BEVERLOO_C`, :data:`BEVERLOO_K`) and the run's own D0, d and bulk density
+    (:func:`beverloo_inputs`): {rate, C, k, D0, d, L, rho_b, rho_b_source, d_is, D0_is}, or
+    {error} where the law has no one grain diameter. A prediction, not a measurement: C and k
+    vary with the grains (C 0.55-0.65, k 1.3-2.9 in the literature)."""
+    try:
+        x = beverloo_inputs(plan, summary, folder)
+    except ReadError as exc:
+        return {"error": str(exc).removeprefix(f"{folder}: ")}
+    slot = bool(np.isfinite(x["L"]))
+    rate = float(beverloo(x["D0"], x["d"], C, k, x["rho_b"], x["g"], x["L"] if slot else None, x["L_ends"]))
+    return {"rate": rate, "C": C, "k": k, **{key: x[key] for key in ("D0", "d", "L", "rho_b", "rho_b_source", "d_is",
+                                                                    "D0_is")}}
+
+
 def beverloo_table(folders) -> pd.DataFrame:
-    """One row per analysed run folder: orifice diameter D0 (a slab's slot width), grain diameter d
-    (several sizes: their mass-weighted mean, ``d_is`` says which; :func:`beverloo_diameter`),
-    outlet length L (a slab's depth, a box's rectangle or slot; NaN for a round orifice) (m), L_ends (the
-    outlet's length ends at walls or edges: Beverloo's L - k d), D0_is (what D0 is: a silo from STL
-    with a polygon outlet gives its hydraulic diameter 4 A / P, the round law approximated), bulk density
-    rho_b (kg/m3, measured in the settled bed when dumps exist, else packing fraction x rho_p),
-    steady flow rate W and its standard error (kg/s), gravity (m/s2), ``clogged`` and ``left_out``:
-    why the run is no point of a fit ('' when it is one: :func:`flow_verdict`; W is NaN when it
-    has none)."""
+    """One row per analysed run folder: :func:`beverloo_inputs` (D0, d, L, rho_b, g, what they are),
+    steady flow rate W and its standard error (kg/s), ``clogged`` and ``left_out``: why the run is no
+    point of a fit ('' when it is one: :func:`flow_verdict`; W is NaN when it has none)."""
     rows = []
     for folder in folders:
         run = RunFolder(folder)
         summary = run.read_summary()
-        plan = run.plan
-        d, density, d_is = beverloo_diameter(plan, folder)
-        fa = summary.get("frame_analyses", {})
-        rho_b = fa.get("bulk_density_kg_m3") or plan.fill.packing_fraction * density
         verdict = flow_verdict(summary)
         rate = summary.get("flow_rate") if isinstance(summary.get("flow_rate"), dict) else {}
-        g = plan.geometry
-        L = g.thickness if g.kind == "planar" else 2 * g.outlet_half_y if g.kind == "box" and g.outlet != "circle" \
-            else np.nan
-        rows.append({"run": str(folder), "D0": 2 * g.outlet_radius, "d": d, "d_is": d_is,
-                     "L": L, "L_ends": g.kind == "box",
-                     "D0_is": "hydraulic diameter 4A/P of a polygon outlet (the round law approximated)"
-                     if g.kind == "mesh" and g.outlet == "polygon" else "outlet width or diameter",
-                     "rho_b": float(rho_b), "W": _finite(rate.get("rate")), "W_stderr": _finite(rate.get("stderr")),
-                     "g": plan.gravity,
-                     "rho_b_source": "measured" if fa.get("bulk_density_kg_m3") else "case packing fraction",
-                     "clogged": verdict["clogged"], "left_out": verdict["unsteady"]})
+        x = beverloo_inputs(run.plan, summary, folder)
+        rows.append({"run": str(folder), **{key: x[key] for key in ("D0", "d", "d_is", "L", "L_ends", "D0_is",
+                                                                  "rho_b")},
+                     "W": _finite(rate.get("rate")), "W_stderr": _finite(rate.get("stderr")), "g": x["g"],
+                     "rho_b_source": x["rho_b_source"], "clogged": verdict["clogged"], "left_out": verdict["unsteady"]})
     return pd.DataFrame(rows)

@@ -429,6 +429,13 @@ class RunPlan(Frozen):
         per_grain = sum(sp.number_fraction * sp.n_spheres for sp in self.grains)
         return round(self.fill.count * per_grain) + self.fill.dust_count
 
+    @property
+    def expected_mass(self) -> float:
+        """kg the fill inserts: the grains at their number fractions (an expectation where each grain's
+        size class is drawn at random), and the dust."""
+        grains = self.fill.count * sum(sp.number_fraction * sp.mass for sp in self.grains)
+        return float(grains + (self.fill.dust_count * self.dust.mass if self.dust is not None else 0.0))
+
     def pair(self, a: str, b: str) -> PairParameters:
         """The contact parameters of species ``a`` against ``b`` (a species, ``"wall"`` or ``"faces"``)."""
         for p in self.contacts:

@@ -394,15 +394,19 @@ class FakeRun:
         out = np.clip(0.02 * (t - 0.25), 0, None)
         self.flow = pd.DataFrame({"step": steps, "discharged_mass": out, "mass_silo": 0.07 - out,
                                   "mass_total": 0.07 - out, "atoms": np.full(len(t), 5000)})
+        grain = SimpleNamespace(kind="sphere", radius=0.0011, density=2500.0, number_fraction=1.0,
+                                mass=0.07 / 5000)          # the 70 g bed below, as planned
         self.plan = SimpleNamespace(gravity=G, outputs=SimpleNamespace(results=None), design=None,
-                                    fill=SimpleNamespace(bed_height_estimate=0.2, packing_fraction=0.6),
-                                    grains=[SimpleNamespace(density=2500.0)],
+                                    fill=SimpleNamespace(bed_height_estimate=0.2, packing_fraction=0.6, count=5000),
+                                    grains=[grain], species=[grain], expected_mass=5000 * grain.mass,
                                     pairs={"particle_particle": SimpleNamespace(friction=0.5),
                                            "particle_wall": SimpleNamespace(friction=0.5)},
-                                    geometry=SimpleNamespace(kind="planar"),   # EN 1991-4: not computed
+                                    geometry=SimpleNamespace(kind="planar", thickness=0.01, outlet_radius=0.006),
+                                    # a slab: EN 1991-4 not computed; Beverloo's slot law
                                     engine=SimpleNamespace(name="liggghts", ranks=1))
         self.record = SimpleNamespace(engine="liggghts", inserted=5000, fill_losses=0, settled_ke_pe=1e-6, wall_time=1.0,
-                                      discharge_stop=None, fill_cache=None, warnings=[])
+                                      discharge_stop=None, fill_cache=None, warnings=[], guard=None,
+                                      guard_peaks={"max_speed": 1.2, "max_overlap": 1.5e-5})
 
     def stage_time(self, stage):
         return self.stage_steps[stage] * self.dt

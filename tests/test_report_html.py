@@ -92,7 +92,7 @@ def markdown_strings(md: str) -> list[str]:
         if line.startswith("|"):
             out += [c.strip() for c in line.strip().strip("|").split(" | ")]
         else:
-            out.append(re.sub(r"^(# |- |  - )", "", line))
+            out.append(re.sub(r"^(# |## |- |  - )", "", line))
     return out
 
 
@@ -115,9 +115,11 @@ def test_report_html_holds_report_md_and_its_figures_and_nothing_else(fake_repor
     assert re.findall(r"http(?!-equiv)", without_images) == [] and "file://" not in without_images
     # every figure the run wrote, embedded byte for byte
     pngs = sorted(p.name for p in out.glob("*.png"))
-    assert pngs == ["first_results.png"]
+    assert pngs == ["first_results.png", "wall_map.png"]
     embedded = [base64.b64decode(v[len(DATA_PNG):]) for _, _, v in links.urls]
-    assert embedded == [(out / "first_results.png").read_bytes()]
+    # the wall unrolled right below the summary card, the other figures after the report's text
+    assert embedded == [(out / "wall_map.png").read_bytes(), (out / "first_results.png").read_bytes()]
+    assert page.index('id="summary-card"') < page.index('alt="wall_map.png"') < page.index("The run in full")
     # every table written beside it, as an HTML table (a long one as its statistics)
     for name in ("bands.csv", "discharge.csv", "wall_pressure.csv", "wall_pressure_sectors.csv"):
         assert f"<h3>{name}</h3>" in page
@@ -236,15 +238,33 @@ class DevTools:
             os.close(self.out_r)
 
 
-def render(page: Path, screenshot: Path, tmp: Path, width: int = 1200, height: int = 3000) -> dict:
+def console_errors(events: list[dict]) -> list[str]:
+    """The errors a page gave its console (DevTools events): console.error and assert calls, uncaught
+    exceptions, and the browser's own error entries (a resource that failed to load, a request the
+    Content-Security-Policy refused)."""
+    out = []
+    for e in events:
+        method, params = e.get("method"), e.get("params", {})
+        if method == "Runtime.consoleAPICalled" and params.get("type") in ("error", "assert"):
+            out.append(" ".join(str(a.get("value", a.get("description", ""))) for a in params.get("args", [])))
+        elif method == "Runtime.exceptionThrown":
+            out.append(params.get("exceptionDetails", {}).get("text", "exception"))
+        elif method == "Log.entryAdded" and params.get("entry", {}).get("level") == "error":
+            out.append(params["entry"].get("text", ""))
+    return out
+
+
+def render(page: Path, screenshot: Path, tmp: Path, width: int = 1200, height: int = 3000, boxes=()) -> dict:
     """Load ``page`` (file://) in headless Chromium at ``width`` x ``height`` CSS pixels, save a
     screenshot; return {requests: every URL the page asked for (Network.requestWillBeSent, the
-    page's own included, whether or not a policy then blocked it), images: [(loaded, natural width)]}."""
+    page's own included, whether or not a policy then blocked it), images: [(loaded, natural width)],
+    console: :func:`console_errors`, boxes: {selector: [top, bottom] in CSS pixels from the page's top,
+    or None where nothing matches} of each CSS selector in ``boxes``}."""
     browser = DevTools(tmp / "profile", tmp / "chromium.log")
     try:
         target = browser.send("Target.createTarget", {"url": "about:blank"})["targetId"]
         session = browser.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
-        for method in ("Network.enable", "Page.enable"):
+        for method in ("Network.enable", "Page.enable", "Runtime.enable", "Log.enable"):
             browser.send(method, session=session)
         browser.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": height, "deviceScaleFactor": 1,
                                                             "mobile": False}, session=session)
@@ -253,12 +273,18 @@ def render(page: Path, screenshot: Path, tmp: Path, width: int = 1200, height: i
         images = browser.send("Runtime.evaluate", {"expression": "JSON.stringify(Array.from(document.images).map("
                                                    "i => [i.complete, i.naturalWidth]))", "returnByValue": True},
                               session=session)["result"]["value"]
+        found = browser.send("Runtime.evaluate", {"expression": "JSON.stringify(" + json.dumps(list(boxes)) + ".map(s => {"
+                                                  "const e = document.querySelector(s); if (!e) return null; "
+                                                  "const r = e.getBoundingClientRect(); "
+                                                  "return [r.top + window.scrollY, r.bottom + window.scrollY]; }))",
+                                                  "returnByValue": True}, session=session)["result"]["value"]
         png = browser.send("Page.captureScreenshot", {"format": "png"}, session=session)["data"]
         screenshot.write_bytes(base64.b64decode(png))
         requests = [e["params"]["request"]["url"] for e in browser.events if e.get("method") == "Network.requestWillBeSent"]
     finally:
         browser.close()
-    return {"requests": requests, "images": json.loads(images)}
+    return {"requests": requests, "images": json.loads(images), "console": console_errors(browser.events),
+            "boxes": dict(zip(boxes, json.loads(found)))}
 
 
 def leaving(requests: list[str], page: Path) -> list[str]:
@@ -276,6 +302,7 @@ def test_chromium_renders_the_report_and_no_request_leaves_it(fake_report, tmp_p
     assert page.resolve().as_uri() in seen["requests"], seen["requests"]
     assert leaving(seen["requests"], page) == []
     assert seen["images"] and all(done and w > 0 for done, w in seen["images"]), seen["images"]   # decoded
+    assert seen["console"] == []
     assert shot.stat().st_size > 20_000
     rgb = (matplotlib.image.imread(shot)[:, :, :3] * 255).astype(np.uint32)
     assert rgb.shape == (3000, 1200, 3)
@@ -298,6 +325,7 @@ def test_chromium_check_catches_a_page_that_asks_for_a_file_or_the_network(tmp_p
         seen = render(page, tmp_path / f"{name}.png", tmp_path, width=400, height=300)
         assert sorted(leaving(seen["requests"], page)) == sorted([(tmp_path / "other.png").as_uri(),
                                                                   "http://example.com/x.png"]), seen["requests"]
+        assert seen["console"], name         # the missing file (and the refused requests) are console errors
         assert any(u.startswith(DATA_PNG) for u in seen["requests"])
 
 

@@ -12,7 +12,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
+from matplotlib.collections import LineCollection, PatchCollection  # noqa: E402
+from matplotlib.colors import TwoSlopeNorm  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
 
 from siloflow.atomic_files import atomic_path  # noqa: E402
 
@@ -102,6 +104,69 @@ def sector_plot(sectors: pd.DataFrame):
            ylabel="dynamic mean wall pressure (Pa)", title="Wall pressure around the silo during discharge")
     ax.set_xticks(range(0, 361, 45))
     ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+#: a flat wall's name by the direction of its normal (deg): the side of the silo it closes
+FACE_NAMES = {0: "+x wall", 90: "+y wall", 180: "-x wall", 270: "-y wall"}
+
+
+def _wall_cells(sectors: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, list, str]:
+    """Each sector's cell on the unrolled wall: x0..x1 (a cylinder's arc in degrees; a flat wall one unit
+    wide, in the order of its normal's azimuth), the x tick positions and labels, and the x axis' label."""
+    if sectors.arc_deg.notna().all():
+        x0 = (sectors.azimuth_deg - sectors.arc_deg / 2).to_numpy(float)
+        x1 = (sectors.azimuth_deg + sectors.arc_deg / 2).to_numpy(float)
+        ticks = np.arange(0, 361, 45)
+        return x0, x1, [ticks, [f"{t:.0f}" for t in ticks]], "azimuth (deg; +x at 0, +y at 90)"
+    faces = sorted(sectors.azimuth_deg.round(6).unique())
+    index = sectors.azimuth_deg.round(6).map({a: k for k, a in enumerate(faces)}).to_numpy(float)
+    labels = [FACE_NAMES.get(int(round(a)) % 360, f"wall at {a:.0f} deg") for a in faces]
+    return index, index + 1, [np.arange(len(faces)) + 0.5, labels], "side wall (by the direction it faces out)"
+
+
+def wall_map_plot(sectors: pd.DataFrame, en_bands: list | None = None):
+    """The wall unrolled: height (m) against the azimuth (a cylinder's or hopper's sectors) or the side
+    (a box's or slab's flat walls), each sensor sector a cell coloured by its pressure: the settled bed's
+    static mean, the steady discharge's mean, the discharge's largest sample (Pa, one colour scale), and,
+    with EN 1991-4's loads per band (``en_bands``: the summary's design_loads bands), static / p_hf and
+    largest dynamic / p_he (1 = EN's load). ``sectors``: sectors.csv. Returns the Figure."""
+    sectors = sectors.reset_index(drop=True)
+    x0, x1, (tick_at, tick_labels), xlabel = _wall_cells(sectors)
+    z0, z1 = sectors.z0.to_numpy(float), sectors.z1.to_numpy(float)
+    en = {int(b["band"]): b for b in (en_bands or [])}
+    p_hf = sectors.band.map(lambda k: en.get(int(k), {}).get("en_p_hf", np.nan)).to_numpy(float)
+    p_he = sectors.band.map(lambda k: en.get(int(k), {}).get("en_p_he", np.nan)).to_numpy(float)
+    panels = [("static (settled bed)", sectors.static_mean_pressure.to_numpy(float), "Pa"),
+              ("discharge: steady mean", sectors.dynamic_mean_pressure.to_numpy(float), "Pa"),
+              ("discharge: largest sample", sectors.discharge_max_pressure.to_numpy(float), "Pa")]
+    if np.isfinite(p_hf).any():
+        with np.errstate(divide="ignore", invalid="ignore"):
+            panels += [("static / EN p_hf", panels[0][1] / p_hf, "ratio"),
+                       ("largest dynamic / EN p_he", panels[2][1] / p_he, "ratio")]
+    pa_max = max([np.nanmax(v) for _, v, u in panels if u == "Pa" and np.isfinite(v).any()] or [1.0])
+    ratios = np.concatenate([v[np.isfinite(v)] for _, v, u in panels if u == "ratio"] or [np.array([1.0])])
+    r_hi = max(2.0, float(ratios.max()) if len(ratios) else 2.0)
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.3 * len(panels) + 1.2, 4.6), sharey=True, squeeze=False)
+    for ax, (title, values, unit) in zip(axes[0], panels):
+        cells = [Rectangle((a, b), c - a, d - b) for a, b, c, d in zip(x0, z0, x1, z1)]
+        cmap = plt.get_cmap("viridis" if unit == "Pa" else "RdBu_r").with_extremes(bad="#dddddd")
+        coll = PatchCollection(cells, cmap=cmap, edgecolor="white", linewidth=0.5)
+        coll.set_array(np.ma.masked_invalid(values))
+        if unit == "Pa":
+            coll.set_clim(0.0, pa_max)
+        else:
+            coll.set_norm(TwoSlopeNorm(vcenter=1.0, vmin=0.0, vmax=r_hi))
+        ax.add_collection(coll)
+        ax.set_xlim(np.nanmin(x0), np.nanmax(x1))
+        ax.set_ylim(np.nanmin(z0), np.nanmax(z1))
+        ax.set_xticks(tick_at, tick_labels, fontsize=7, rotation=0 if len(tick_labels) > 4 or len(tick_labels) < 3 else 20)
+        ax.set(title=title, xlabel=xlabel if ax is axes[0][0] else "")
+        fig.colorbar(coll, ax=ax, label="pressure (Pa)" if unit == "Pa" else "DEM / EN (1 = EN's load)",
+                     shrink=0.85)
+    axes[0][0].set_ylabel("height of the wall (m)")
+    fig.suptitle("The wall unrolled: each sensor sector's pressure (grey: no data)", fontsize=10)
     fig.tight_layout()
     return fig
 

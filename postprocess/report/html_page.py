@@ -9,10 +9,13 @@ import html
 
 import pandas as pd
 
-from .text import Items, Table, Title
+from .card import Card
+from .text import CARD_HEADER, Heading, Items, Table, Title
 
 #: report.html allows nothing but data: images and its own inline style
 CONTENT_SECURITY_POLICY = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
+#: the figures report.html shows right below the summary card: the wall unrolled
+LEAD_FIGURES = ("wall_map.png",)
 #: report.html shows a table of at most this many rows whole, a longer one as per-column statistics
 HTML_TABLE_ROWS = 200
 
@@ -26,6 +29,13 @@ th { background: #f0f0f0; } td:first-child, th:first-child { text-align: left; }
 figure { margin: 1em 0; } img { max-width: 100%; height: auto; border: 1px solid #ddd; }
 figcaption { font-size: 0.85em; color: #555; } .note { color: #555; font-size: 0.9em; }
 .wide { overflow-x: auto; }
+section.card { border: 2px solid #2b5d8a; border-radius: 6px; padding: 0.3em 0.8em; margin: 0.8em 0 1.5em;
+  background: #f5f9fc; }
+table.card { border: none; width: 100%; margin: 0.3em 0; font-size: 0.95em; }
+table.card th, table.card td { border: none; border-bottom: 1px solid #d5e0ea; text-align: left; padding: 0.35em 0.5em; }
+table.card thead th { background: none; color: #555; font-weight: normal; font-size: 0.85em; }
+table.card tbody th { white-space: nowrap; width: 14em; } table.card td.value { font-weight: bold; font-size: 1.1em; width: 22em; }
+table.card td.detail { color: #444; font-size: 0.85em; }
 """
 
 
@@ -47,12 +57,25 @@ def _html_items(b: Items) -> str:
     return (f"<p>{_esc(b.lead)}</p>\n" if b.lead else "") + f"<ul>\n{lis}</ul>"
 
 
+def _html_card(card: Card) -> str:
+    """The summary card: a table of one row per answer (id ``card-<key>``), the value set large."""
+    head = "".join(f"<th>{_esc(h)}</th>" for h in CARD_HEADER)
+    rows = "".join(f'<tr id="card-{_esc(r.key)}"><th scope="row">{_esc(r.label)}</th><td class="value">{_esc(r.value)}'
+                   f'</td><td class="detail">{_esc(r.detail)}</td></tr>\n' for r in card.rows)
+    return (f'<section class="card" id="summary-card">\n<table class="card">\n<thead><tr>{head}</tr></thead>\n'
+            f"<tbody>\n{rows}</tbody>\n</table>\n</section>")
+
+
 def html_blocks(blocks) -> str:
     """The blocks as HTML, every text escaped."""
     out = []
     for b in blocks:
         if isinstance(b, Title):
             out.append(f"<h1>{_esc(b.text)}</h1>")
+        elif isinstance(b, Heading):
+            out.append(f"<h2>{_esc(b.text)}</h2>")
+        elif isinstance(b, Card):
+            out.append(_html_card(b))
         elif isinstance(b, Items):
             out.append(_html_items(b))
         elif isinstance(b, Table):
@@ -75,20 +98,30 @@ def _html_table(name: str, table: pd.DataFrame) -> str:
             f'<div class="wide">{table.describe().to_html(border=0, na_rep="nan", escape=True)}</div>')
 
 
-def report_html(blocks, name: str, tables: dict, figures: dict, title: str | None = None) -> str:
+def _html_figure(fname: str, png: bytes) -> str:
+    """One figure, embedded as a base64 ``data:`` URL, captioned with its file name."""
+    return (f'<figure><img src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}" '
+            f'alt="{html.escape(fname, quote=True)}"><figcaption>{_esc(fname)}</figcaption></figure>')
+
+
+def report_html(blocks, name: str, tables: dict, figures: dict, title: str | None = None,
+                lead_figures=LEAD_FIGURES) -> str:
     """report.html: the report's blocks, every figure (``figures``: file name -> PNG bytes)
     embedded as a base64 ``data:`` URL, and every CSV table (``tables``: file name -> DataFrame).
-    ``title``: the page's title (default "Run report: ``name``")."""
-    figs = "\n".join(
-        f'<figure><img src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}" '
-        f'alt="{html.escape(fname, quote=True)}"><figcaption>{_esc(fname)}</figcaption></figure>'
-        for fname, png in figures.items())
+    The figures named in ``lead_figures`` follow the summary card (the blocks' first :class:`Card`),
+    the others come after the blocks. ``title``: the page's title (default "Run report: ``name``")."""
+    blocks = list(blocks)
+    cut = next((k + 1 for k, b in enumerate(blocks) if isinstance(b, Card)), 0)
+    lead = {f: figures[f] for f in lead_figures if f in figures and cut}
+    figs = "\n".join(_html_figure(fname, png) for fname, png in figures.items() if fname not in lead)
     csvs = "\n".join(_html_table(fname, t) for fname, t in tables.items() if fname.endswith(".csv"))
     return (
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
         f"<meta http-equiv=\"Content-Security-Policy\" content=\"{CONTENT_SECURITY_POLICY}\">\n"
         f"<title>{_esc(title or f'Run report: {name}')}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n"
-        f"{html_blocks(blocks)}\n"
+        f"{html_blocks(blocks[:cut])}\n"
+        + "".join(f"{_html_figure(fname, png)}\n" for fname, png in lead.items())
+        + f"{html_blocks(blocks[cut:])}\n"
         + (f"<h2>Figures</h2>\n{figs}\n" if figs else "")
         + (f"<h2>Tables</h2>\n<p class=\"note\">The tables written beside this report (results/).</p>\n{csvs}\n"
            if csvs else "")

@@ -9,7 +9,7 @@ from siloflow.run_folder import RESULT_TABLES, SUMMARY_NAME
 
 from ..first_results import analyse_run
 from ..run_results import RunResults
-from .figures import analysis_figure, design_plot, first_results_plot, force_chain_plot, plt, sector_plot
+from .figures import analysis_figure, design_plot, first_results_plot, force_chain_plot, plt, sector_plot, wall_map_plot
 from .files import write_figures, write_tables
 from .html_page import report_html
 from .text import markdown, report_blocks
@@ -19,11 +19,16 @@ REPORT_MD, REPORT_HTML = "report.md", "report.html"
 
 
 def run_figures(results: RunResults) -> dict:
-    """The figures of a run's results, drawn, by file name in report order: first_results.png,
+    """The figures of a run's results, drawn, by file name in report order: wall_map.png (the wall
+    unrolled, when it has sensor sectors), first_results.png,
     each frame analysis' (``<name>.png``), the force chains, sectors.png (an eccentric outlet's),
     design_loads.png."""
     figures: dict = {}
     try:
+        sectors = results.tables.get(RESULT_TABLES["sectors"])
+        if sectors is not None and len(sectors) and "arc_deg" in sectors:
+            en = results.summary.get("design_loads") or {}
+            figures["wall_map.png"] = wall_map_plot(sectors, en.get("bands") if en.get("computed") else None)
         figures["first_results.png"] = first_results_plot(results.bands, results.discharge, results.band_table,
                                                           results.t_open)
         for analysis in results.analyses:
@@ -32,7 +37,6 @@ def run_figures(results: RunResults) -> dict:
                 figures[f"{analysis.name}.png"] = fig
         for name, chains in results.force_chains.items():
             figures[name] = force_chain_plot(chains)
-        sectors = results.tables.get(RESULT_TABLES["sectors"])
         if results.summary.get("eccentric_discharge") and sectors is not None:
             figures["sectors.png"] = sector_plot(sectors)
         if results.design is not None:

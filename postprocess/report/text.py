@@ -15,11 +15,17 @@ from siloflow.plan import unbounded_note
 from siloflow.run_folder import SUMMARY_NAME
 
 from ..numbers import mass_rate, pressure
+from .card import Card, en_count_text, en_counts, summary_card
 
 # ---------------------------------------------------------------- the blocks of a report
 
 class Title(NamedTuple):
     """The report's heading."""
+    text: str
+
+
+class Heading(NamedTuple):
+    """A section's heading."""
     text: str
 
 
@@ -40,6 +46,15 @@ class Table(NamedTuple):
     rows: list
 
 
+#: the summary card's header, as a table (report.md) and in report.html
+CARD_HEADER = ["Summary", "answer", "what it rests on"]
+
+
+def card_table(card: Card) -> Table:
+    """The summary card as a table of strings: label, value, detail per row."""
+    return Table(CARD_HEADER, [[r.label, r.value, r.detail] for r in card.rows])
+
+
 def markdown(blocks) -> str:
     """report.md: the blocks separated by blank lines."""
     def md(b) -> str:
@@ -50,6 +65,10 @@ def markdown(blocks) -> str:
         if isinstance(b, Table):
             return "\n".join([f"| {' | '.join(b.header)} |", "|" + "---|" * len(b.header),
                               *(f"| {' | '.join(row)} |" for row in b.rows)])
+        if isinstance(b, Card):
+            return md(card_table(b))
+        if isinstance(b, Heading):
+            return f"## {b.text}"
         return b.text
     return "\n\n".join(md(b) for b in blocks) + "\n"
 
@@ -226,18 +245,10 @@ def console_lines(summary: dict) -> list[str]:
     fit = janssen_lines((summary.get("frame_analyses") or {}).get("janssen_static", {}))
     if fit:
         lines.append(fit[0].removeprefix("- "))
-    en = summary.get("design_loads") or {}
-    rows = [b for b in en.get("bands", []) if b.get("static_verdict") and math.isfinite(b.get("en_p_hf", math.nan))]
-    if rows:
-        def counted(verdict: str, ratio: str, words: tuple) -> str:
-            """How many bands' ``verdict`` begins with each of ``words``, with the range of their ``ratio``."""
-            hits = {w: [b[ratio] for b in rows if str(b.get(verdict)).startswith(w)] for w in words}
-            return ", ".join(f"{len(h)} {w}" + (f" ({min(h):.2f}-{max(h):.2f} x)" if h else "") for w, h in hits.items())
-        lines.append(f"EN 1991-4 ({len(rows)} bands under the fill): static against p_hf: "
-                     + counted("static_verdict", "static_over_p_hf", ("above", "agrees", "below"))
-                     + "; maximum dynamic against p_he: "
-                     + counted("dynamic_verdict", "max_dynamic_over_p_he", ("above", "within"))
-                     + "; the measured causes per band: report.html")
+    counts = en_counts(summary.get("design_loads") or {})
+    if counts:
+        lines.append(f"EN 1991-4 ({counts['bands']} bands under the fill): {en_count_text(counts)}"
+                     "; the measured causes per band: report.html")
     return lines
 
 
@@ -380,7 +391,7 @@ def report_blocks(summary: dict, name: str) -> list:
     """The report of a run named ``name`` (its folder's name) from its summary, as blocks
     (:class:`Title`, :class:`Items`, :class:`Text`, :class:`Table`) that :func:`markdown` and
     :func:`html_blocks` render."""
-    blocks = [Title(f"Run report: {name}"), Items(_facts(summary))]
+    blocks = [Title(f"Run report: {name}"), summary_card(summary), Heading("The run in full"), Items(_facts(summary))]
     if summary["bands"]:
         blocks += _band_blocks(summary)
     blocks += _eccentric_blocks(summary)
