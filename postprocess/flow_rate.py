@@ -214,12 +214,18 @@ def flow_verdict(summary: dict) -> dict:
 
 @dataclass
 class BeverlooFit:
+    """C and k of Beverloo's law fitted over ``n_runs`` runs, with their standard errors and their
+    covariance ``C_k_covariance``; ``errors_given``: the covariance is from the runs' own flow-rate
+    errors (absolute), else scaled by the fit's residuals (then Student's t with n - 2 degrees of
+    freedom, not the normal law, gives its intervals)."""
     C: float
     C_stderr: float
     k: float
     k_stderr: float
     n_runs: int
     rms_relative_residual: float
+    C_k_covariance: float = float("nan")
+    errors_given: bool = False
 
 
 def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=None, slot_ends=False) -> BeverlooFit:
@@ -253,9 +259,11 @@ def fit_beverloo(D0, d, W, rho_b, g: float = 9.81, W_stderr=None, slot_length=No
     X = np.vstack([D0, d, rho_b] + ([] if L is None else [L]))
     popt, pcov = curve_fit(model, X, W, p0=[c0, k0], sigma=sigma, absolute_sigma=sigma is not None, maxfev=20000)
     res = (W - model(X, *popt)) / W
-    err = np.sqrt(np.diag(pcov)) if np.all(np.isfinite(pcov)) else np.array([np.nan, np.nan])
+    finite = bool(np.all(np.isfinite(pcov)))
+    err = np.sqrt(np.diag(pcov)) if finite else np.array([np.nan, np.nan])
     return BeverlooFit(float(popt[0]), float(err[0]), float(popt[1]), float(err[1]), len(W),
-                       float(np.sqrt(np.mean(res ** 2))))
+                       float(np.sqrt(np.mean(res ** 2))), float(pcov[0, 1]) if finite else float("nan"),
+                       sigma is not None)
 
 
 def check_beverloo_fit(fit: BeverlooFit, max_residual: float = MAX_RMS_RELATIVE_RESIDUAL) -> None:

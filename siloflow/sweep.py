@@ -10,8 +10,9 @@ resumes the sweep: finished runs are kept (their results read into the table), i
 resumed, missing ones run. :func:`sweep` is the whole of ``siloflow sweep`` from Python.
 
 The sweep folder ``OUT`` (:mod:`siloflow.sweep_folder`) holds ``sweep.json``,
-``cases/<name>.yaml``, ``runs/<name>/`` (each run folder), ``logs/`` (each run's output) and
-``sweep.csv``; :mod:`siloflow.slurm` writes the sweep as Slurm job arrays instead.
+``cases/<name>.yaml``, ``runs/<name>/`` (each run folder), ``logs/`` (each run's output),
+``sweep.csv`` and the sweep's page ``report.html`` (``postprocess.report.sweep_page.write_sweep_report``,
+which ``siloflow sweep`` writes after the table); :mod:`siloflow.slurm` writes the sweep as Slurm job arrays instead.
 """
 from __future__ import annotations
 
@@ -34,8 +35,8 @@ from .sweep_plan import (StageProgress, Variant, check_engine, expand, group_by_
 SweepProgress = Callable[[int, int, list], None]
 #: a variant's run, called in its worker: (case file or None when resuming, run folder, fill cache, resuming)
 Runner = Callable[[Optional[Path], Path, Path, bool], object]
-#: the table of results
-TABLE_NAME = "sweep.csv"
+#: the table of results, and the sweep's page (``postprocess.report.sweep_page``)
+TABLE_NAME, PAGE_NAME = "sweep.csv", "report.html"
 #: columns of the sweep table before the ``--set`` paths, and after them
 TABLE_HEAD = ("run", "name")
 TABLE_TAIL = ("seed", "fill_key", "fill_from_cache", "status", "returncode", "wall_s", "flow_rate_kg_s",
@@ -192,8 +193,10 @@ def run_sweep(variants: list[Variant], out: Path, cores: int, cache: Path, runne
     ------
     SetupError
         before anything runs: for a folder of another sweep, a run needing more ranks than
-        ``cores``, run folders that are running or not siloflow's, a ``sweep.csv`` siloflow did
-        not write; or a log that cannot be written, a worker that cannot be started.
+        ``cores``, run folders that are running or not siloflow's, a ``sweep.csv`` or a
+        ``report.html`` siloflow did not write (or that changed since: the page is written after
+        the table, ``postprocess.report.sweep_page.write_sweep_report``); or a log that cannot be written, a worker that
+        cannot be started.
     """
     import shlex
     out = Path(out).absolute()
@@ -203,7 +206,7 @@ def run_sweep(variants: list[Variant], out: Path, cores: int, cache: Path, runne
         groups = group_by_fill(variants, sweep_engine(variants))
     keys = variant_keys(groups, variants)
     record = open_record(out, variants)
-    check_owned(out, record, {TABLE_NAME: None})
+    check_owned(out, record, {TABLE_NAME: None, PAGE_NAME: None})
     finished, resuming = previous_runs(out, variants)
     check_cases(out, variants)
     out.mkdir(parents=True, exist_ok=True)

@@ -24,7 +24,7 @@ from postprocess.report.figures import plt, wall_map_plot
 from siloflow.case_file import case_from_dict, load_case
 from siloflow.derived import derive
 from conftest import QUICK, needs_liggghts
-from test_report_html import fake_report, needs_chromium, render, with_en  # noqa: F401  (fixture)
+from test_report_html import fake_report, leaving, needs_chromium, render, with_en  # noqa: F401  (fixture)
 
 NUMBER = r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?"
 
@@ -230,3 +230,14 @@ def test_a_real_run_s_card_and_wall_map(small_run):
     assert summary["initial_mass_kg"] == pytest.approx(summary["planned_bed"]["mass_kg"], rel=0.02)
     assert (folder / "results" / "wall_map.png").stat().st_size > 10_000
     assert page.index('id="summary-card"') < page.index('alt="wall_map.png"')
+
+
+@needs_chromium
+@pytest.mark.parametrize("report", ["paper_a", "paper_b"])
+def test_chromium_renders_the_committed_claims_reports_without_console_errors(report, tmp_path):
+    """The claims reports in reports/ (make paper-a-report / paper-b-report): no console error, no
+    request leaving the page, every figure decoded."""
+    page = QUICK.parents[1] / "reports" / report / "report.html"
+    seen = render(page, tmp_path / f"{report}.png", tmp_path, width=1280, height=900)
+    assert seen["console"] == [] and leaving(seen["requests"], page) == []
+    assert seen["images"] and all(done and w > 0 for done, w in seen["images"])

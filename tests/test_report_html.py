@@ -248,9 +248,10 @@ def console_errors(events: list[dict]) -> list[str]:
         if method == "Runtime.consoleAPICalled" and params.get("type") in ("error", "assert"):
             out.append(" ".join(str(a.get("value", a.get("description", ""))) for a in params.get("args", [])))
         elif method == "Runtime.exceptionThrown":
-            out.append(params.get("exceptionDetails", {}).get("text", "exception"))
+            details = params.get("exceptionDetails", {})
+            out.append(str(details.get("exception", {}).get("description") or details.get("text", "exception")))
         elif method == "Log.entryAdded" and params.get("entry", {}).get("level") == "error":
-            out.append(params["entry"].get("text", ""))
+            out.append(f"{params['entry'].get('text', '')} ({params['entry'].get('url', '')})")
     return out
 
 

@@ -10,7 +10,7 @@ import html
 import pandas as pd
 
 from .card import Card
-from .text import CARD_HEADER, Heading, Items, Table, Title
+from .text import CARD_HEADER, Heading, Items, Link, Table, Title
 
 #: report.html allows nothing but data: images and its own inline style
 CONTENT_SECURITY_POLICY = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
@@ -66,6 +66,13 @@ def _html_card(card: Card) -> str:
             f"<tbody>\n{rows}</tbody>\n</table>\n</section>")
 
 
+def _html_cell(cell) -> str:
+    """A table cell: its text escaped; a :class:`Link` as ``<a href>`` (its URL escaped too)."""
+    if isinstance(cell, Link):
+        return f'<a href="{html.escape(cell.href, quote=True)}">{_esc(cell.text)}</a>'
+    return _esc(cell)
+
+
 def html_blocks(blocks) -> str:
     """The blocks as HTML, every text escaped."""
     out = []
@@ -80,7 +87,7 @@ def html_blocks(blocks) -> str:
             out.append(_html_items(b))
         elif isinstance(b, Table):
             head = "".join(f"<th>{_esc(h)}</th>" for h in b.header)
-            body = "".join("<tr>" + "".join(f"<td>{_esc(c)}</td>" for c in row) + "</tr>\n" for row in b.rows)
+            body = "".join("<tr>" + "".join(f"<td>{_html_cell(c)}</td>" for c in row) + "</tr>\n" for row in b.rows)
             out.append(f"<table>\n<thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody>\n</table>")
         else:
             out.append(f"<p>{_esc(b.text)}</p>")
@@ -105,11 +112,12 @@ def _html_figure(fname: str, png: bytes) -> str:
 
 
 def report_html(blocks, name: str, tables: dict, figures: dict, title: str | None = None,
-                lead_figures=LEAD_FIGURES) -> str:
+                lead_figures=LEAD_FIGURES, tables_where: str = "beside this report (results/)") -> str:
     """report.html: the report's blocks, every figure (``figures``: file name -> PNG bytes)
     embedded as a base64 ``data:`` URL, and every CSV table (``tables``: file name -> DataFrame).
     The figures named in ``lead_figures`` follow the summary card (the blocks' first :class:`Card`),
-    the others come after the blocks. ``title``: the page's title (default "Run report: ``name``")."""
+    the others come after the blocks. ``title``: the page's title (default "Run report: ``name``");
+    ``tables_where``: where the tables are, as the Tables section says."""
     blocks = list(blocks)
     cut = next((k + 1 for k, b in enumerate(blocks) if isinstance(b, Card)), 0)
     lead = {f: figures[f] for f in lead_figures if f in figures and cut}
@@ -123,6 +131,6 @@ def report_html(blocks, name: str, tables: dict, figures: dict, title: str | Non
         + "".join(f"{_html_figure(fname, png)}\n" for fname, png in lead.items())
         + f"{html_blocks(blocks[cut:])}\n"
         + (f"<h2>Figures</h2>\n{figs}\n" if figs else "")
-        + (f"<h2>Tables</h2>\n<p class=\"note\">The tables written beside this report (results/).</p>\n{csvs}\n"
+        + (f"<h2>Tables</h2>\n<p class=\"note\">The tables written {_esc(tables_where)}.</p>\n{csvs}\n"
            if csvs else "")
         + "</body>\n</html>\n")

@@ -41,9 +41,20 @@ class Text(NamedTuple):
 
 
 class Table(NamedTuple):
-    """A table of strings: its header and its rows."""
+    """A table of strings (or :class:`Link` cells): its header and its rows."""
     header: list
     rows: list
+
+
+class Link(NamedTuple):
+    """A table cell that links to another page: its text and its URL (relative to the page)."""
+    text: str
+    href: str
+
+
+def cell_text(cell) -> str:
+    """A table cell as report.md writes it: a :class:`Link` as ``[text](href)``."""
+    return f"[{cell.text}]({cell.href})" if isinstance(cell, Link) else str(cell)
 
 
 #: the summary card's header, as a table (report.md) and in report.html
@@ -64,7 +75,7 @@ def markdown(blocks) -> str:
             return "\n".join(([b.lead] if b.lead else []) + list(b.lines))
         if isinstance(b, Table):
             return "\n".join([f"| {' | '.join(b.header)} |", "|" + "---|" * len(b.header),
-                              *(f"| {' | '.join(row)} |" for row in b.rows)])
+                              *(f"| {' | '.join(map(cell_text, row))} |" for row in b.rows)])
         if isinstance(b, Card):
             return md(card_table(b))
         if isinstance(b, Heading):

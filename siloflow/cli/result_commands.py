@@ -188,32 +188,72 @@ def cg_scaling(folders: List[Path] = typer.Argument(..., help="cg result folders
         h = result["h_c"]
         out.print(f"h_c ~ R^{h['exponent']:.3f} +/- {h['exponent_stderr']:.3f} (paper B: 1)")
     out.print(f"written: {output}")
+
+
+def _beverloo_page_digests(page: Path, fit_file: Path) -> list[str]:
+    """The SHA-256s of the page ``siloflow beverloo`` last wrote at ``page``, as its fit file
+    (``<output>.json``, ``page_sha256``) records them. Refuses (``SetupError``) a ``page`` that
+    exists and is not one of them: a file siloflow did not write, or edited since."""
+    import os
+
+    from ..atomic_files import read_json
+    from ..errors import SetupError
+    from ..run_folder import sha256
+    try:
+        recorded = read_json(fit_file, "a Beverloo fit").get("page_sha256")
+    except ReadError:
+        recorded = None
+    recorded = [h for h in recorded if isinstance(h, str)] if isinstance(recorded, list) else []
+    if os.path.lexists(page) and (page.is_symlink() or not page.is_file() or sha256(page) not in recorded):
+        raise SetupError(f"{page} was not written by siloflow beverloo, or was edited since: siloflow does not "
+                         "overwrite it, and nothing was written; move it out of the folder, or choose another -o")
+    return recorded
+
+
 @app.command()
 def beverloo(folders: List[Path] = typer.Argument(..., help="finished run folders (different orifices or grains), "
                                                   "or one sweep table (sweep.csv: its complete runs)"),
-             output: Path = typer.Option(Path("beverloo.csv"), "-o", "--output", help="table of the runs and the fit")) -> None:
+             output: Path = typer.Option(Path("beverloo.csv"), "-o", "--output", help="table of the runs and the fit; "
+                                         "beside it the fit (.json) and its page (.html)")) -> None:
     """Fit Beverloo's law W = C rho_b sqrt(g) (D0 - k d)^(5/2) across runs: C and k with standard errors.
     A run that clogged or never flowed steadily is left out, and named; a fit of fewer than 3 runs,
-    or missing them by more than 20 % (rms), is refused."""
+    or missing them by more than 20 % (rms), is refused. The page beside the table (.html): the fit, its
+    runs with links to their own pages, the figure with its 95 % band; replaced only while it holds what
+    siloflow wrote there."""
+    import hashlib
+
+    from postprocess.report.sweep_page import beverloo_report
+
     from ..answers import beverloo as fit_runs
     from ..atomic_files import write_json, write_text
+    from ..errors import SetupError
+    page_file, fit_file = output.with_suffix(".html"), output.with_suffix(".json")
     try:
+        if output in (page_file, fit_file):
+            raise SetupError(f"-o {output}: the table is written beside its .json fit and .html page, so it cannot "
+                             "end in .json or .html; give a .csv")
         table, fit = fit_runs(folders)
+        owned = _beverloo_page_digests(page_file, fit_file)       # before anything is written
     except SiloflowError as exc:
         _fail(exc)
     except ValueError as exc:
         _fail(SiloflowError(str(exc)))
     left = {row.run: row.left_out for row in table.itertuples() if row.left_out}
+    g = float(table[table.left_out == ""].g.iloc[0])
+    page = beverloo_report(table, fit, g, page_file.absolute().parent, output.name)
+    digest = hashlib.sha256(page.encode("utf-8")).hexdigest()
+    record = {"C": fit.C, "C_stderr": fit.C_stderr, "k": fit.k, "k_stderr": fit.k_stderr, "runs": fit.n_runs,
+              "rms_relative_residual": fit.rms_relative_residual, "left_out": left}
     write_text(output, table.to_csv(index=False))
-    write_json(output.with_suffix(".json"), {"C": fit.C, "C_stderr": fit.C_stderr, "k": fit.k,
-                                             "k_stderr": fit.k_stderr, "runs": fit.n_runs,
-                                             "rms_relative_residual": fit.rms_relative_residual,
-                                             "left_out": left})
+    # the fit file knows the old page and the new one while the page is written: one cut short stays siloflow's
+    write_json(fit_file, {**record, "page_sha256": sorted(set(owned) | {digest})})
+    write_text(page_file, page)
+    write_json(fit_file, {**record, "page_sha256": [digest]})
     for run, why in left.items():
         out.print(printable(f"left out of the fit: {run}: {why}"), markup=False, highlight=False)
     out.print(f"Beverloo over {fit.n_runs} runs: C = {fit.C:.3f} +/- {fit.C_stderr:.3f}, "
               f"k = {fit.k:.2f} +/- {fit.k_stderr:.2f} (rms residual {fit.rms_relative_residual:.1%})")
-    out.print(f"table: {output}; fit: {output.with_suffix('.json')}")
+    out.print(f"table: {output}; fit: {fit_file}; page: {page_file}")
 
 
 @app.command()

@@ -28,7 +28,7 @@ def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
           cores: Optional[int] = typer.Option(None, "--cores", min=1, help="the engine ranks of the runs at once add "
                                               "up to at most this (default: this machine's cores)"),
           output: Path = typer.Option(..., "-o", "--output", help="sweep folder: cases/, runs/, logs/, sweep.csv, "
-                                      "sweep.json"),
+                                      "sweep.json, report.html"),
           cache: Optional[Path] = typer.Option(None, "--cache", help="fill cache (default OUT/cache)"),
           slurm: bool = typer.Option(False, "--slurm", help="write Slurm job arrays and submit.sh instead of running"),
           max_array_size: int = typer.Option(1000, "--max-array-size", min=1, help="--slurm: most tasks of one job "
@@ -38,15 +38,18 @@ def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
                                      "it is deleted; a run folder already there is refused). Not needed to resume: "
                                      "run the same command again")) -> None:
     """Run a case over every combination of --set values and seeds: one fill per distinct settled bed, then
-    the other runs from it, in parallel within --cores; the table of results is OUT/sweep.csv. To resume a
-    stopped sweep, run the same command again (same case, --set and --seeds; --force is not needed): complete
-    and failed runs are kept, interrupted ones resumed, the others run; a folder of another sweep is refused.
-    A file siloflow wrote (the Slurm scripts, sweep.csv) is replaced only while unchanged: if you edited one,
-    nothing is written."""
+    the other runs from it, in parallel within --cores; the table of results is OUT/sweep.csv, its page
+    OUT/report.html (the runs with links to their own pages, Beverloo's fit, flow rate and wall loads against
+    each swept value). To resume a stopped sweep, run the same command again (same case, --set and --seeds;
+    --force is not needed): complete and failed runs are kept, interrupted ones resumed, the others run; a
+    folder of another sweep is refused. A file siloflow wrote (the Slurm scripts, sweep.csv, report.html) is
+    replaced only while unchanged: if you edited one, nothing is written."""
     import os
     import shlex
 
     from ..slurm import write_slurm
+    from postprocess.report.sweep_page import write_sweep_report
+
     from ..sweep import prepare_sweep, run_sweep, table_summary
     again = shlex.join(["siloflow", "sweep", str(case_file), *[a for spec in set_specs for a in ("--set", spec)],
                         *(["--seeds", str(seeds)] if seeds != 1 else []), *(["--cores", str(cores)] if cores else []),
@@ -105,6 +108,13 @@ def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
         out.print(printable(f"clogged: {row.name} (its discharge stopped with grains left: no steady flow rate; "
                             f"siloflow beverloo leaves it out)"), markup=False, highlight=False)
     out.print(f"table: {output / 'sweep.csv'} (siloflow beverloo {output / 'sweep.csv'} fits it)")
+    try:        # the runs and their table are the sweep's results: a page not written does not fail it
+        page = write_sweep_report(output)
+    except (SiloflowError, OSError, ValueError) as exc:
+        err.print(printable(f"warning: the sweep's page {output / 'report.html'} was not written: {exc}"), markup=False,
+                  highlight=False)
+    else:
+        out.print(f"page: {output / page.name}")
 
 
 @app.command()
