@@ -96,18 +96,34 @@ class Frame:
         return self.data[name].to_numpy()
 
     def positions(self) -> np.ndarray:
-        """(n, 3) Cartesian positions, from x/xu or scaled xs/xsu columns."""
+        """(n, 3) Cartesian positions, from x/xu or scaled xs/xsu columns. Wrapped coordinates (x, xs)
+        are put inside the box along its periodic directions (``pp`` bounds): an engine wraps an atom
+        that crossed a periodic boundary only when it next rebuilds its neighbour lists, so a dump
+        between two rebuilds can hold it a little outside. Unwrapped ones (xu, xsu) are as written."""
         for names in (("x", "y", "z"), ("xu", "yu", "zu")):
             if all(c in self.data for c in names):
-                return self.data[list(names)].to_numpy(dtype=float)
+                xyz = self.data[list(names)].to_numpy(dtype=float)
+                return self._wrapped(xyz) if names[0] == "x" else xyz
         for names in (("xs", "ys", "zs"), ("xsu", "ysu", "zsu")):
             if all(c in self.data for c in names):
                 if self.meta.get("triclinic"):
                     raise ReadError(f"{self.source}: scaled coordinates of a triclinic box are not supported")
                 lo, hi = self.box[:, 0], self.box[:, 1]
-                return lo + self.data[list(names)].to_numpy(dtype=float) * (hi - lo)
+                xyz = lo + self.data[list(names)].to_numpy(dtype=float) * (hi - lo)
+                return self._wrapped(xyz) if names[0] == "xs" else xyz
         raise ReadError(f"{self.source}: frame at step {self.timestep} has no position columns "
                         f"(columns: {', '.join(self.data.columns)})")
+
+    def _wrapped(self, xyz: np.ndarray) -> np.ndarray:
+        """``xyz`` with each periodic direction of an orthogonal box wrapped into [lo, hi)."""
+        if self.meta.get("triclinic") or len(self.boundary) != 3:
+            return xyz
+        for k, flags in enumerate(self.boundary):
+            if flags == "pp":
+                lo, length = self.box[k, 0], self.box[k, 1] - self.box[k, 0]
+                if length > 0:
+                    xyz[:, k] = lo + np.mod(xyz[:, k] - lo, length)
+        return xyz
 
     def velocities(self) -> np.ndarray:
         return self.data[["vx", "vy", "vz"]].to_numpy(dtype=float) if "vx" in self.data else self._missing("vx vy vz")

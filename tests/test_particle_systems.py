@@ -247,9 +247,11 @@ def test_clump_run_coarse_grains_bodies_not_spheres(clump_run, tmp_path):
         assert ds.sizes["species"] == 2                                   # grains and dust
         h = fa["settled_surface_height_m"]
         mid = ds.sel(z=0.5 * h, method="nearest").isel(r=slice(0, 4)).mean("r")
-        # the flowing bed's solid fraction, from the bodies' mass: near the settled bed's
-        # union-volume value (three spheres each with the grain's mass would give about 3x)
-        assert 0.75 * fa["bulk_solid_fraction"] < float(mid.solid_fraction) < 1.1 * fa["bulk_solid_fraction"]
+        # the flowing bed's solid fraction, from the bodies' mass: near the settled bed's union-volume
+        # value, below it by the discharge's dilation (averaged over every frame, the emptying ones too:
+        # measured 0.75-0.8 of it with sensor-mesh side walls, 0.72 with primitive ones); three spheres each
+        # with the grain's mass would give about 3x, a third of it each about 0.33x
+        assert 0.6 * fa["bulk_solid_fraction"] < float(mid.solid_fraction) < 1.1 * fa["bulk_solid_fraction"]
         assert float(mid.contact_pressure) > 20 * float(mid.kinetic_pressure) > 0
         axis = ds.contact_pressure.isel(r=0)
         assert float(axis.sel(z=0.3 * h, method="nearest")) > float(axis.sel(z=0.7 * h, method="nearest"))
