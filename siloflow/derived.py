@@ -372,8 +372,8 @@ def _engine_options(case) -> dict[str, int]:
     """The case's settings only some engine reads (``EngineChoice.options``)."""
     tries = getattr(case.particles, "monte_carlo_tries", None)
     out = {} if tries is None else {"monte_carlo_tries": tries}
-    if case.engine.side_walls == "primitive":     # LIGGGHTS' primitive side walls (engine.liggghts.side_walls)
-        out["primitive_side_walls"] = 1
+    if case.engine.side_walls == "primitive" and case.engine.name == "liggghts":
+        out["primitive_side_walls"] = 1           # LIGGGHTS' primitive side walls (engine.liggghts.side_walls)
     return out
 
 
