@@ -35,6 +35,24 @@ def needs_liggghts(test):
         reason="LIGGGHTS not installed (make install-engine); CI installs it")(test))
 
 
+def engine_run(tmp_path_factory, case, name: str, engine: str | None = None, post: bool = True):
+    """A real run of ``case`` (a case file or a dict of case fields; ``engine``: the name of the engine
+    to run it on instead of the case's), its case file written as ``<name>.yaml`` in a fresh temporary
+    folder and run beside it (``siloflow.run``; ``post``: compute its results now); skipped where the
+    engine is LIGGGHTS and LIGGGHTS or mpirun is missing. Returns the ``siloflow.Run`` (``folder``,
+    ``record``, ``summary``)."""
+    import siloflow
+    data = copy.deepcopy(case) if isinstance(case, dict) else yaml.safe_load(Path(case).read_text())
+    if engine is not None:
+        data["engine"] = {**data.get("engine", {}), "name": engine}
+    if data.get("engine", {}).get("name", "liggghts") == "liggghts" and (
+            shutil.which("liggghts") is None or shutil.which("mpirun") is None):
+        pytest.skip("LIGGGHTS not installed (make install-engine); CI installs it")
+    path = tmp_path_factory.mktemp(name) / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return siloflow.run(path, path.with_suffix(""), post=post)
+
+
 def render(case, folder, **kwargs):
     """``siloflow.deck.render`` with the case's own engine (``siloflow.engine.get_engine``): the
     deck module imports no engine, its callers pass one (``Engine.prepare`` passes itself)."""

@@ -5,13 +5,12 @@ in x, y and z, mass counted, a steady flow, four sensed walls)."""
 from __future__ import annotations
 
 import math
-import shutil
 
 import numpy as np
 import pandas as pd
 import pytest
 import yaml
-from conftest import ROOT
+from conftest import ROOT, engine_run
 
 from postprocess.first_results import RunOutputs, static_window
 from siloflow.case_file import case_from_dict
@@ -175,17 +174,11 @@ ENGINE_RUNS = [("rectangle", "liggghts"), ("rectangle", "lammps"), ("pyramid", "
 
 @pytest.fixture(scope="module", params=ENGINE_RUNS, ids=[f"{v}-{e}" for v, e in ENGINE_RUNS])
 def box_run(request, tmp_path_factory):
-    import siloflow
     variant, engine = request.param
-    if engine == "liggghts" and (shutil.which("liggghts") is None or shutil.which("mpirun") is None):
-        pytest.skip("LIGGGHTS not installed (make install-engine); CI installs it")
     data = data_of(**VARIANTS[variant])
-    data["engine"] = {**data["engine"], "name": engine}
     if variant != "rectangle":
         data["discharge"] = {"duration": 0.3}
-    case = tmp_path_factory.mktemp(f"box_{variant}") / f"{engine}.yaml"
-    case.write_text(yaml.safe_dump(data))
-    run = siloflow.run(case, case.with_suffix(""))
+    run = engine_run(tmp_path_factory, data, f"box_{variant}_{engine}", engine)
     return variant, engine, run.folder, run.summary
 
 

@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 
 import numpy as np
 import pandas as pd
 import pytest
 import yaml
-from conftest import ROOT
+from conftest import ROOT, engine_run
 
 from postprocess.dumps import read_frames
 from postprocess.first_results import eccentric_discharge
@@ -179,16 +178,10 @@ def test_near_and_far_pressures_carry_the_mirror_pairs_packing_spread():
 def discharge_of(tmp_path_factory, engine: str, name: str, geometry: dict | None = None):
     """One run of the eccentric case (its geometry changed by ``geometry``) on ``engine``:
     (engine, folder, summary)."""
-    import siloflow
-    if engine == "liggghts" and (shutil.which("liggghts") is None or shutil.which("mpirun") is None):
-        pytest.skip("LIGGGHTS not installed (make install-engine); CI installs it")
     data = yaml.safe_load(ECCENTRIC.read_text())
     if geometry:
         data["geometry"] = geometry
-    data["engine"] = {**data["engine"], "name": engine}
-    case = tmp_path_factory.mktemp("eccentric") / f"{name}.yaml"
-    case.write_text(yaml.safe_dump(data))
-    run = siloflow.run(case, case.with_suffix(""))
+    run = engine_run(tmp_path_factory, data, f"eccentric_{name}", engine)
     return name, run.folder, run.summary
 
 

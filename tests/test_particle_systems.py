@@ -16,7 +16,7 @@ from siloflow.engine.liggghts.encoding import encode
 from siloflow.engine.tables import FLOW_COLUMNS, read_ave_time
 from siloflow.run_folder import RunFolder
 
-from conftest import ROOT, hooke_materials
+from conftest import ROOT, engine_run, hooke_materials
 
 pytestmark = [pytest.mark.engine,
               pytest.mark.skipif(shutil.which("liggghts") is None, reason="LIGGGHTS not installed "
@@ -27,13 +27,8 @@ POLY = ROOT / "tests" / "data" / "poly_silo.yaml"
 def run_case(path, tmp_path_factory, name: str, post: bool = False):
     """(case, folder, run record) of a real run of the case file at ``path``; ``post``: also
     compute its results."""
-    case = load_case(path)
-    folder = tmp_path_factory.mktemp(name) / "run"
-    record = LiggghtsEngine().run(case, folder)
-    if post:
-        from postprocess.report import post_process as analyse
-        analyse(folder)
-    return case, folder, record
+    run = engine_run(tmp_path_factory, path, name, post=post)
+    return load_case(path), run.folder, run.record
 
 
 @pytest.fixture(scope="module")

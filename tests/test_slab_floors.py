@@ -5,13 +5,12 @@ steady flow; the periodic slab's grains fill its depth evenly)."""
 from __future__ import annotations
 
 import math
-import shutil
 
 import numpy as np
 import pandas as pd
 import pytest
 import yaml
-from conftest import ROOT
+from conftest import ROOT, engine_run
 
 from postprocess.first_results import RunOutputs, static_window
 from siloflow.case_file import case_from_dict
@@ -156,15 +155,8 @@ def test_periodic_slab_refuses_a_depth_of_fewer_than_three_grains_and_clumps():
 @pytest.fixture(scope="module", params=[(FLAT, "liggghts"), (FLAT, "lammps"), (PERIODIC, "liggghts"),
                                         (PERIODIC, "lammps")], ids=lambda p: f"{p[0].stem}-{p[1]}")
 def slab_run(request, tmp_path_factory):
-    import siloflow
     path, engine = request.param
-    if engine == "liggghts" and (shutil.which("liggghts") is None or shutil.which("mpirun") is None):
-        pytest.skip("LIGGGHTS not installed (make install-engine); CI installs it")
-    data = data_of(path)
-    data["engine"] = {**data["engine"], "name": engine}
-    case = tmp_path_factory.mktemp(path.stem) / f"{engine}.yaml"
-    case.write_text(yaml.safe_dump(data))
-    run = siloflow.run(case, case.with_suffix(""))
+    run = engine_run(tmp_path_factory, data_of(path), f"{path.stem}_{engine}", engine)
     return engine, run.folder, run.summary
 
 

@@ -8,7 +8,7 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import ROOT, set_path
+from conftest import ROOT, engine_run, set_path
 
 from postprocess.dumps import read_frames
 from siloflow.case_file import case_from_dict, load_case
@@ -116,13 +116,8 @@ def test_slab_input_is_refused_naming_the_field(path, value, field):
 # ---------------------------------------------------------------- a real run
 @pytest.fixture(scope="module")
 def slab_run(tmp_path_factory):
-    from postprocess.report import post_process as analyse
-    from siloflow.engine import LiggghtsEngine
-
-    case = load_case(SLAB)
-    folder = tmp_path_factory.mktemp("slab") / "run"
-    record = LiggghtsEngine().run(case, folder)
-    return case, folder, record, analyse(folder)
+    run = engine_run(tmp_path_factory, SLAB, "slab")
+    return load_case(SLAB), run.folder, run.record, run.summary
 
 
 @pytest.mark.engine
