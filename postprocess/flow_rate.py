@@ -175,7 +175,7 @@ BEVERLOO_PARAMETERS = 2
 MAX_RMS_RELATIVE_RESIDUAL = 0.20
 
 
-def _finite(value) -> float:
+def as_number(value) -> float:
     """``value`` as a float if it is a number (not a bool), else NaN."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return float("nan")
@@ -200,16 +200,16 @@ def flow_verdict(summary: dict) -> dict:
     clogged = True if clog is not None or stopped else (False if "clogged" in summary else None)
     why = ""
     if clog is not None:
-        why = (f"its discharge clogged: {_finite(clog.get('discharged_mass_kg')) * 1000:.3g} g out, nothing after "
-               f"t = {_finite(clog.get('t_last_outflow_s')):.3g} s from opening")
+        why = (f"its discharge clogged: {as_number(clog.get('discharged_mass_kg')) * 1000:.3g} g out, nothing after "
+               f"t = {as_number(clog.get('t_last_outflow_s')):.3g} s from opening")
     elif stopped:
         why = "its discharge clogged: the engine stopped it when nothing flowed"
     elif "steady_window_detected" in summary and steady is None:
         why = "no steady discharge was detected in it (its rate never held near its median)"
-    elif not _finite(rate.get("rate")) > 0:
+    elif not as_number(rate.get("rate")) > 0:
         why = "its results hold no steady flow rate"
-    return {"clogged": clogged, "steady_t_start_s": _finite((steady or {}).get("t_start")),
-            "steady_t_end_s": _finite((steady or {}).get("t_end")), "unsteady": why}
+    return {"clogged": clogged, "steady_t_start_s": as_number((steady or {}).get("t_start")),
+            "steady_t_end_s": as_number((steady or {}).get("t_end")), "unsteady": why}
 
 
 @dataclass
@@ -353,6 +353,6 @@ def beverloo_table(folders) -> pd.DataFrame:
         x = beverloo_inputs(run.plan, summary, folder)
         rows.append({"run": str(folder), **{key: x[key] for key in ("D0", "d", "d_is", "L", "L_ends", "D0_is",
                                                                   "rho_b")},
-                     "W": _finite(rate.get("rate")), "W_stderr": _finite(rate.get("stderr")), "g": x["g"],
+                     "W": as_number(rate.get("rate")), "W_stderr": as_number(rate.get("stderr")), "g": x["g"],
                      "rho_b_source": x["rho_b_source"], "clogged": verdict["clogged"], "left_out": verdict["unsteady"]})
     return pd.DataFrame(rows)

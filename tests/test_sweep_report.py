@@ -22,11 +22,12 @@ from typer.testing import CliRunner
 
 from postprocess.numbers import with_error
 from postprocess.report.figures import plt
-from postprocess.report.sweep_page import swept_figures, write_sweep_report
+from postprocess.report.sweep_page import swept_figures
 from siloflow import sweep
 from siloflow.atomic_files import write_json
 from siloflow.case_file import load_case
 from siloflow.cli import app
+from siloflow.cli.study_commands import write_sweep_report
 from siloflow.derived import derive
 from siloflow.errors import SetupError
 from siloflow.run_folder import RECORD_NAME, RESULTS, RunFolder, write_status

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+from ..flow_rate import as_number
 from ..numbers import mass_rate, pressure
 
 #: the card's rows in order: key (the HTML row's id is ``card-<key>``) -> label
@@ -39,19 +40,11 @@ class Card(NamedTuple):
     rows: list
 
 
-def _num(x) -> float:
-    """``x`` as a float (NaN for anything that is no number)."""
-    try:
-        return float(x) if not isinstance(x, bool) else math.nan
-    except (TypeError, ValueError):
-        return math.nan
-
-
 def en_counts(design_loads: dict) -> dict | None:
     """EN 1991-4's verdicts counted over the bands under the fill that EN gives a p_hf (``design_loads``:
     the summary's): {bands, static: {word: [ratios]}, dynamic: {word: [ratios]}}; None without verdicts."""
     rows = [b for b in (design_loads or {}).get("bands", []) if b.get("static_verdict")
-            and math.isfinite(_num(b.get("en_p_hf")))]
+            and math.isfinite(as_number(b.get("en_p_hf")))]
     if not rows:
         return None
 
@@ -94,33 +87,33 @@ def _flow_row(summary: dict) -> CardRow:
         detail = (f"Beverloo with C = {bev['C']:g}, k = {bev['k']:g} and the bed's "
                   f"{'measured' if bev.get('rho_b_source') == 'measured' else 'planned'} bulk density "
                   f"{bev['rho_b']:.4g} kg/m3: {mass_rate(bev['rate'], math.nan).split(' (')[0]}")
-        if not clog and _num(fr.get("rate")) > 0 and bev["rate"] > 0:
+        if not clog and as_number(fr.get("rate")) > 0 and bev["rate"] > 0:
             detail += f"; DEM / Beverloo = {fr['rate'] / bev['rate']:.2f}"
     else:
         detail = f"no Beverloo prediction: {bev.get('error', 'not computed (an older summary)')}"
     if clog:
         return CardRow("flow", CARD_ROWS["flow"], "clogged: no steady flow rate",
-                       f"{_num(clog.get('discharged_mass_kg')) * 1000:.3g} g out, nothing after t = "
-                       f"{_num(clog.get('t_last_outflow_s')):.3g} s from opening; {detail}")
+                       f"{as_number(clog.get('discharged_mass_kg')) * 1000:.3g} g out, nothing after t = "
+                       f"{as_number(clog.get('t_last_outflow_s')):.3g} s from opening; {detail}")
     value = mass_rate(fr.get("rate"), fr.get("stderr"))
     error = " (standard error by batch means)" if fr.get("batches") else ""
     return CardRow("flow", CARD_ROWS["flow"], value + error, detail)
 
 
 def _pressure_rows(summary: dict) -> list[CardRow]:
-    bands = [b for b in summary.get("bands") or [] if math.isfinite(_num(b.get("static_pressure")))]
+    bands = [b for b in summary.get("bands") or [] if math.isfinite(as_number(b.get("static_pressure")))]
     if not bands:
         return []
     where = f"of {len(bands)} bands"
     s = max(bands, key=lambda b: b["static_pressure"])
     rows = [CardRow("static", CARD_ROWS["static"], pressure(s["static_pressure"], s.get("static_pressure_stderr")),
                     f"at z = {s['z_mid']:.3g} m (band {s['band']} {where}), the settled bed")]
-    dynamic = [b for b in bands if math.isfinite(_num(b.get("max_dynamic_pressure")))]
+    dynamic = [b for b in bands if math.isfinite(as_number(b.get("max_dynamic_pressure")))]
     if dynamic:
         d = max(dynamic, key=lambda b: b["max_dynamic_pressure"])
         rows.append(CardRow("dynamic", CARD_ROWS["dynamic"], pressure(d["max_dynamic_pressure"], math.nan).split(" (")[0],
                             f"at z = {d['z_mid']:.3g} m (band {d['band']}), the largest sample of the discharge; "
-                            f"{_num(d.get('discharge_factor')):.2f} x its static pressure; the steady discharge's "
+                            f"{as_number(d.get('discharge_factor')):.2f} x its static pressure; the steady discharge's "
                             f"mean there {pressure(d.get('dynamic_mean_pressure'), math.nan).split(' (')[0]}"))
     return rows
 
@@ -145,7 +138,7 @@ def health_checks(summary: dict) -> list[tuple[bool, str]]:
     checks = []
     fb = summary.get("force_balance")
     if fb:
-        ratio = _num(fb.get("ratio"))
+        ratio = as_number(fb.get("ratio"))
         checks.append((abs(ratio - 1) <= FORCE_BALANCE_TOLERANCE,
                        f"walls and bottom carry {ratio:.4f} x the settled bed's weight"))
     guard = summary.get("guard") or {}
@@ -153,15 +146,15 @@ def health_checks(summary: dict) -> list[tuple[bool, str]]:
         g = guard["stopped"]
         checks.append((False, f"the guard stopped the run ({g.get('signal')} at step {g.get('step')})"))
     elif guard.get("peaks"):
-        peaks, r = guard["peaks"], _num(guard.get("smallest_radius_m"))
-        overlap = _num(peaks.get("max_overlap"))
-        checks.append((True, f"guard never tripped (fastest grain {_num(peaks.get('max_speed')):.3g} m/s, deepest "
+        peaks, r = guard["peaks"], as_number(guard.get("smallest_radius_m"))
+        overlap = as_number(peaks.get("max_overlap"))
+        checks.append((True, f"guard never tripped (fastest grain {as_number(peaks.get('max_speed')):.3g} m/s, deepest "
                              f"overlap {overlap * 1000:.3g} mm" + (f" = {overlap / r:.3g} of the smallest radius)"
                                                            if r > 0 else ")")))
     if "clogged" in summary:
         checks.append((not summary["clogged"], "the discharge clogged" if summary["clogged"] else "no clog"))
     planned = summary.get("planned_bed") or {}
-    mass, plan_mass = _num(summary.get("initial_mass_kg")), _num(planned.get("mass_kg"))
+    mass, plan_mass = as_number(summary.get("initial_mass_kg")), as_number(planned.get("mass_kg"))
     if plan_mass > 0 and math.isfinite(mass):
         off = mass / plan_mass - 1
         lost = summary.get("fill_losses") or 0
@@ -184,9 +177,9 @@ def _profile_row(summary: dict) -> CardRow | None:
     p = summary.get("numerical_profile")
     if not p:
         return None
-    settings = f"time step {_num(p.get('timestep_fraction')):g} of the contact time, stiffness x {_num(p.get('stiffness_scale')):g}"
+    settings = f"time step {as_number(p.get('timestep_fraction')):g} of the contact time, stiffness x {as_number(p.get('stiffness_scale')):g}"
     if p.get("name") == "fast":
-        bounds = ", ".join(f"{q.replace('_', ' ')} {_num(b):.1%}" for q, b in (p.get("error_bounds") or {}).items())
+        bounds = ", ".join(f"{q.replace('_', ' ')} {as_number(b):.1%}" for q, b in (p.get("error_bounds") or {}).items())
         detail = (f"{settings}; 95 % error bounds against the papers' settings: {bounds}, proven on "
                   f"{p.get('benchmark') or 'the benchmark case'}; this case's own error is not measured"
                   if bounds else f"{settings}; its error bounds are not measured yet")

@@ -20,14 +20,10 @@ from urllib.parse import quote
 import numpy as np
 import pandas as pd
 
-from siloflow.answers import beverloo as fit_runs
-from siloflow.errors import ReadError, SetupError, SiloflowError
+from siloflow.errors import ReadError, SiloflowError
 from siloflow.run_folder import RESULTS, RunFolder
-from siloflow.run_row import number
-from siloflow.sweep import PAGE_NAME, TABLE_HEAD, TABLE_TAIL
-from siloflow.sweep_folder import RECORD_NAME, check_owned, read_record, write_owned
 
-from ..flow_rate import BeverlooFit, flow_verdict
+from ..flow_rate import BeverlooFit, as_number, flow_verdict
 from ..flow_rate import beverloo as beverloo_law
 from ..numbers import MASS_RATE_UNITS, PRESSURE_UNITS, unit_for, with_error
 from .figures import plt
@@ -56,11 +52,11 @@ def run_numbers(summary: dict) -> dict:
     fr = summary.get("flow_rate") if isinstance(summary.get("flow_rate"), dict) else {}
     verdict = flow_verdict(summary)
     bands = [b for b in summary.get("bands") or [] if isinstance(b, dict)]
-    static = [(number(b.get("static_pressure")), number(b.get("static_pressure_stderr"))) for b in bands]
+    static = [(as_number(b.get("static_pressure")), as_number(b.get("static_pressure_stderr"))) for b in bands]
     static = [s for s in static if math.isfinite(s[0])]
     top = max(static, key=lambda s: s[0]) if static else (math.nan, math.nan)
-    dynamic = [p for p in (number(b.get("max_dynamic_pressure")) for b in bands) if math.isfinite(p)]
-    return {"rate": number(fr.get("rate")), "rate_stderr": number(fr.get("stderr")), "unsteady": verdict["unsteady"],
+    dynamic = [p for p in (as_number(b.get("max_dynamic_pressure")) for b in bands) if math.isfinite(p)]
+    return {"rate": as_number(fr.get("rate")), "rate_stderr": as_number(fr.get("stderr")), "unsteady": verdict["unsteady"],
             "clogged": verdict["clogged"], "static": top[0], "static_stderr": top[1],
             "dynamic": max(dynamic) if dynamic else math.nan}
 
@@ -311,8 +307,11 @@ def beverloo_report(table: pd.DataFrame, fit: BeverlooFit, g: float, page_folder
 # ---------------------------------------------------------------- against the swept values
 
 def set_paths(sweep_table: pd.DataFrame) -> list[str]:
-    """The ``--set`` paths of a sweep table: its columns between ``name`` and ``seed``."""
-    return [c for c in sweep_table.columns if c not in TABLE_HEAD and c not in TABLE_TAIL]
+    """The ``--set`` paths of a sweep table (``sweep.csv``): its columns between ``name`` and ``seed``."""
+    columns = list(sweep_table.columns)
+    if "name" not in columns or "seed" not in columns:
+        return []
+    return columns[columns.index("name") + 1:columns.index("seed")]
 
 
 def swept_fields(sweep_table: pd.DataFrame) -> list[str]:
@@ -441,12 +440,12 @@ def variants_table(sweep_table: pd.DataFrame, runs: dict, numbers: dict, page_fo
     return Table(header, rows)
 
 
-def sweep_report(folder) -> str:
+def sweep_report(folder, fit_runs) -> str:
     """The page of the sweep in ``folder`` (its ``report.html``), from its ``sweep.csv`` and its
     runs' ``results/summary.json``: a lead (how many runs complete, failed, clogged), the variants'
     table (:func:`variants_table`), Beverloo's fit over the complete runs that flowed steadily
-    (``siloflow.answers.beverloo``, as ``siloflow beverloo OUT/sweep.csv`` fits them; when it is
-    refused, why, and no figure), the figures (:func:`beverloo_figure`, :func:`swept_figures`) and
+    (``fit_runs(run folders) -> (table, fit)``: ``siloflow.answers.beverloo``, as ``siloflow beverloo
+    OUT/sweep.csv`` fits them; when it refuses, why, and no figure), the figures (:func:`beverloo_figure`, :func:`swept_figures`) and
     ``sweep.csv``. A complete run whose summary cannot be read is named, its numbers left out.
     Raises ``ReadError`` when ``sweep.csv`` cannot be read."""
     folder = Path(folder).absolute()
@@ -511,18 +510,3 @@ def sweep_report(folder) -> str:
     blocks += [Heading("Variants"), variants_table(table, runs, numbers, folder), Heading("Beverloo's fit"),
                *fit_part, *([Items(captions, lead="Against the swept values:")] if captions else [])]
     return _page(blocks, folder.name, title, {SWEEP_TABLE: table}, figures)
-
-
-def write_sweep_report(out) -> Path:
-    """Write the sweep's page ``out/report.html`` (:func:`sweep_report`) atomically, and only while the
-    file holds what siloflow wrote there, as ``sweep.csv`` (``siloflow.sweep_folder.write_owned``);
-    returns its path. Raises ``SetupError`` for a folder without a sweep record or a ``report.html``
-    siloflow did not write or that changed since (nothing is written), and ``ReadError`` when
-    ``sweep.csv`` cannot be read."""
-    out = Path(out).absolute()
-    record = read_record(out)
-    if record is None:
-        raise SetupError(f"{out} holds no sweep (no {RECORD_NAME}): its page is written by siloflow sweep")
-    check_owned(out, record, {PAGE_NAME: None})          # before the figures are drawn
-    write_owned(out, record, {PAGE_NAME: sweep_report(out)})
-    return out / PAGE_NAME

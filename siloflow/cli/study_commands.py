@@ -20,6 +20,27 @@ from .app import _fail, _note, app, err, out, printable
 from .run_commands import _interrupt
 
 
+def write_sweep_report(out) -> Path:
+    """Write the sweep's page ``out/report.html`` (``postprocess.report.sweep_page.sweep_report``, its
+    Beverloo fit by ``siloflow.answers.beverloo``) atomically, and only while the file holds what
+    siloflow wrote there, as ``sweep.csv`` (``siloflow.sweep_folder.write_owned``); returns its path.
+    Raises ``SetupError`` for a folder without a sweep record or a ``report.html`` siloflow did not
+    write or that changed since (nothing is written), and ``ReadError`` when ``sweep.csv`` cannot be read."""
+    from postprocess.report.sweep_page import sweep_report
+
+    from ..answers import beverloo
+    from ..errors import SetupError
+    from ..sweep import PAGE_NAME
+    from ..sweep_folder import RECORD_NAME, check_owned, read_record, write_owned
+    out = Path(out).absolute()
+    record = read_record(out)
+    if record is None:
+        raise SetupError(f"{out} holds no sweep (no {RECORD_NAME}): its page is written by siloflow sweep")
+    check_owned(out, record, {PAGE_NAME: None})          # before the figures are drawn
+    write_owned(out, record, {PAGE_NAME: sweep_report(out, beverloo)})
+    return out / PAGE_NAME
+
+
 @app.command()
 def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
           set_specs: List[str] = typer.Option([], "--set", help="PATH=V1,V2,...: a case field and its values "
@@ -48,8 +69,6 @@ def sweep(case_file: Path = typer.Argument(..., help="YAML case file"),
     import shlex
 
     from ..slurm import write_slurm
-    from postprocess.report.sweep_page import write_sweep_report
-
     from ..sweep import prepare_sweep, run_sweep, table_summary
     again = shlex.join(["siloflow", "sweep", str(case_file), *[a for spec in set_specs for a in ("--set", spec)],
                         *(["--seeds", str(seeds)] if seeds != 1 else []), *(["--cores", str(cores)] if cores else []),
