@@ -11,7 +11,7 @@ resumed, missing ones run. :func:`sweep` is the whole of ``siloflow sweep`` from
 
 The sweep folder ``OUT`` (:mod:`siloflow.sweep_folder`) holds ``sweep.json``,
 ``cases/<name>.yaml``, ``runs/<name>/`` (each run folder), ``logs/`` (each run's output),
-``sweep.csv`` and the sweep's page ``report.html`` (``postprocess.report.sweep_page.write_sweep_report``,
+``sweep.csv`` and the sweep's page ``report.html`` (``siloflow.cli.study_commands.write_sweep_report``,
 which ``siloflow sweep`` writes after the table); :mod:`siloflow.slurm` writes the sweep as Slurm job arrays instead.
 """
 from __future__ import annotations
@@ -195,7 +195,7 @@ def run_sweep(variants: list[Variant], out: Path, cores: int, cache: Path, runne
         before anything runs: for a folder of another sweep, a run needing more ranks than
         ``cores``, run folders that are running or not siloflow's, a ``sweep.csv`` or a
         ``report.html`` siloflow did not write (or that changed since: the page is written after
-        the table, ``postprocess.report.sweep_page.write_sweep_report``); or a log that cannot be written, a worker that
+        the table, ``siloflow.cli.study_commands.write_sweep_report``); or a log that cannot be written, a worker that
         cannot be started.
     """
     import shlex
