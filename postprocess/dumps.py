@@ -96,26 +96,25 @@ class Frame:
         return self.data[name].to_numpy()
 
     def positions(self) -> np.ndarray:
-        """(n, 3) Cartesian positions, from x/xu or scaled xs/xsu columns. Wrapped coordinates (x, xs)
-        are put inside the box along its periodic directions (``pp`` bounds): an engine wraps an atom
-        that crossed a periodic boundary only when it next rebuilds its neighbour lists, so a dump
-        between two rebuilds can hold it a little outside. Unwrapped ones (xu, xsu) are as written."""
+        """(n, 3) Cartesian positions, from x/xu or scaled xs/xsu columns, as written (an engine wraps an
+        atom that crossed a periodic boundary only at its next neighbour-list rebuild, so a dump between
+        two rebuilds can hold it a little outside the box: :meth:`wrapped_positions` puts it back)."""
         for names in (("x", "y", "z"), ("xu", "yu", "zu")):
             if all(c in self.data for c in names):
-                xyz = self.data[list(names)].to_numpy(dtype=float)
-                return self._wrapped(xyz) if names[0] == "x" else xyz
+                return self.data[list(names)].to_numpy(dtype=float)
         for names in (("xs", "ys", "zs"), ("xsu", "ysu", "zsu")):
             if all(c in self.data for c in names):
                 if self.meta.get("triclinic"):
                     raise ReadError(f"{self.source}: scaled coordinates of a triclinic box are not supported")
                 lo, hi = self.box[:, 0], self.box[:, 1]
-                xyz = lo + self.data[list(names)].to_numpy(dtype=float) * (hi - lo)
-                return self._wrapped(xyz) if names[0] == "xs" else xyz
+                return lo + self.data[list(names)].to_numpy(dtype=float) * (hi - lo)
         raise ReadError(f"{self.source}: frame at step {self.timestep} has no position columns "
                         f"(columns: {', '.join(self.data.columns)})")
 
-    def _wrapped(self, xyz: np.ndarray) -> np.ndarray:
-        """``xyz`` with each periodic direction of an orthogonal box wrapped into [lo, hi)."""
+    def wrapped_positions(self) -> np.ndarray:
+        """:meth:`positions` with each periodic direction (``pp`` bounds) of an orthogonal box wrapped
+        into [lo, hi) (a copy; a triclinic box's as written)."""
+        xyz = np.array(self.positions(), dtype=float)
         if self.meta.get("triclinic") or len(self.boundary) != 3:
             return xyz
         for k, flags in enumerate(self.boundary):

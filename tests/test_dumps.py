@@ -387,17 +387,17 @@ def test_post_refuses_nan_positions_with_the_line_instead_of_a_traceback(tmp_pat
 
 def test_wrapped_positions_are_put_back_in_a_periodic_box(tmp_path):
     """An engine wraps an atom that crossed a periodic boundary only at its next neighbour-list
-    rebuild: a dump in between holds it outside the box. ``positions()`` wraps x/xs along ``pp``
-    directions (here y, of -0.005..0.005 m) and leaves the fixed ones (x, z) and unwrapped xu as written."""
+    rebuild: a dump in between holds it outside the box. ``positions()`` gives what the dump holds
+    (as MDAnalysis reads it); ``wrapped_positions()`` wraps along ``pp`` directions (here y, of
+    -0.005..0.005 m) and leaves the fixed ones (x, z) as written."""
     text = ("ITEM: TIMESTEP\n10\nITEM: NUMBER OF ATOMS\n3\nITEM: BOX BOUNDS ff pp ff\n-0.03 0.03\n-0.005 0.005\n0 0.08\n"
-            "ITEM: ATOMS id type x y z xu yu zu\n"
-            "1 1 0.031 0.0051 0.01 0.031 0.0051 0.01\n"
-            "2 1 0.0 -0.0052 0.02 0.0 -0.0052 0.02\n"
-            "3 1 0.0 0.001 -0.001 0.0 0.001 -0.001\n")
+            "ITEM: ATOMS id type x y z\n"
+            "1 1 0.031 0.0051 0.01\n"
+            "2 1 0.0 -0.0052 0.02\n"
+            "3 1 0.0 0.001 -0.001\n")
     (tmp_path / "d.txt").write_text(text)
     frame = read_dump(tmp_path / "d.txt")[0]
-    xyz = frame.positions()
+    np.testing.assert_allclose(frame.positions()[:, 1], [0.0051, -0.0052, 0.001])
+    xyz = frame.wrapped_positions()
     np.testing.assert_allclose(xyz[:, 1], [-0.0049, 0.0048, 0.001], atol=1e-15)
     np.testing.assert_allclose(xyz[:, [0, 2]], [[0.031, 0.01], [0.0, 0.02], [0.0, -0.001]])   # fixed: as written
-    unwrapped = frame.data[["xu", "yu", "zu"]].to_numpy()
-    assert unwrapped[0, 1] == 0.0051
