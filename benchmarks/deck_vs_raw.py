@@ -102,6 +102,14 @@ WORK = ROOT / "benchmarks" / "work" / "raw"
 SMOKE_WORK = ROOT / "benchmarks" / "work" / "raw_smoke"
 CACHE = WORK / "cache"
 HOOK = ROOT / "benchmarks" / "deck_vs_raw_hook"
+#: the thermo commands a raw deck writes in place of siloflow's (both engines)
+THERMO_COMMANDS = ("thermo_style", "thermo", "thermo_modify")
+
+
+def raw_thermo_line(command: str, thermo: int) -> str:
+    """A raw deck's ``thermo_style``, ``thermo`` (every ``thermo`` steps) or ``thermo_modify`` line."""
+    return {"thermo_style": "thermo_style    custom step atoms", "thermo": f"thermo          {int(thermo)}",
+            "thermo_modify": "thermo_modify   lost ignore norm no"}[command]
 CASES = {"demo": ROOT / "decks" / "demo.yaml", "quick": ROOT / "decks" / "quick.yaml",
          "raw_large": ROOT / "benchmarks" / "cases" / "raw_large.yaml"}
 ENGINES = ("liggghts", "lammps")
@@ -322,12 +330,8 @@ def liggghts_raw_deck(resume_text: str, steps: dict, thermo: int = RAW_THERMO) -
             line = re.sub(r" mesh/surface/stress ", " mesh/surface ", line, count=1)
         elif w[0] == "fix" and "wall/gran" in w:
             line = line.replace(" store_force yes", "")
-        elif w[0] == "thermo_style":
-            line = "thermo_style    custom step atoms"
-        elif w[0] == "thermo":
-            line = f"thermo          {int(thermo)}"
-        elif w[0] == "thermo_modify":
-            line = "thermo_modify   lost ignore norm no"
+        elif w[0] in THERMO_COMMANDS:
+            line = raw_thermo_line(w[0], thermo)
         if "file" in w and w.index("file") + 1 < len(w):
             meshes.append(w[w.index("file") + 1])
         head.append(line)
@@ -389,12 +393,8 @@ def lammps_raw_deck(deck_text: str, plan, steps: dict, first_step: int, classic:
             continue
         if w[0] == "fix" and "wall/gran/region" in w and w[-1] == "contacts":
             line = line[:line.rstrip().rfind(" contacts")].rstrip()
-        elif w[0] == "thermo_style":
-            line = "thermo_style    custom step atoms"
-        elif w[0] == "thermo":
-            line = f"thermo          {int(thermo)}"
-        elif w[0] == "thermo_modify":
-            line = "thermo_modify   lost ignore norm no"
+        elif w[0] in THERMO_COMMANDS:
+            line = raw_thermo_line(w[0], thermo)
         body.append(line)
     if plan.fill.mobilise is not None:
         body += sec.get("mobilised", [])          # the bed lies on the lowered floor
