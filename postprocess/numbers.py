@@ -58,3 +58,21 @@ def pressure(value_pa, stderr_pa) -> str:
     name, size = unit_for(value_pa, PRESSURE_UNITS)
     err = stderr_pa / size if _finite(stderr_pa) else stderr_pa
     return with_error(value_pa / size if _finite(value_pa) else value_pa, err, name)
+
+
+def in_unit(value, units) -> str:
+    """A value without an error, to 4 significant figures, in the largest of ``units`` that suits it
+    (what :func:`with_error` writes before '(error not resolved)')."""
+    name, size = unit_for(value, units)
+    return with_error(value / size if _finite(value) else value, float("nan"), name).removesuffix(
+        " (error not resolved)")
+
+
+def mass_rate_value(rate_kg_s) -> str:
+    """A mass flow rate (kg/s) without an error, in t/s, kg/s, g/s or mg/s by its size."""
+    return in_unit(rate_kg_s, MASS_RATE_UNITS)
+
+
+def pressure_value(value_pa) -> str:
+    """A pressure (Pa) without an error, in Pa, kPa or MPa by its size."""
+    return in_unit(value_pa, PRESSURE_UNITS)

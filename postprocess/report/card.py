@@ -13,7 +13,7 @@ import math
 from typing import NamedTuple
 
 from ..flow_rate import as_number
-from ..numbers import mass_rate, pressure
+from ..numbers import mass_rate, mass_rate_value, pressure, pressure_value
 
 #: the card's rows in order: key (the HTML row's id is ``card-<key>``) -> label
 CARD_ROWS = {"flow": "Flow rate", "static": "Largest static wall pressure", "dynamic": "Largest dynamic wall pressure",
@@ -86,7 +86,7 @@ def _flow_row(summary: dict) -> CardRow:
     if "rate" in bev:
         detail = (f"Beverloo with C = {bev['C']:g}, k = {bev['k']:g} and the bed's "
                   f"{'measured' if bev.get('rho_b_source') == 'measured' else 'planned'} bulk density "
-                  f"{bev['rho_b']:.4g} kg/m3: {mass_rate(bev['rate'], math.nan).split(' (')[0]}")
+                  f"{bev['rho_b']:.4g} kg/m3: {mass_rate_value(bev['rate'])}")
         if not clog and as_number(fr.get("rate")) > 0 and bev["rate"] > 0:
             detail += f"; DEM / Beverloo = {fr['rate'] / bev['rate']:.2f}"
     else:
@@ -111,10 +111,10 @@ def _pressure_rows(summary: dict) -> list[CardRow]:
     dynamic = [b for b in bands if math.isfinite(as_number(b.get("max_dynamic_pressure")))]
     if dynamic:
         d = max(dynamic, key=lambda b: b["max_dynamic_pressure"])
-        rows.append(CardRow("dynamic", CARD_ROWS["dynamic"], pressure(d["max_dynamic_pressure"], math.nan).split(" (")[0],
+        rows.append(CardRow("dynamic", CARD_ROWS["dynamic"], pressure_value(d["max_dynamic_pressure"]),
                             f"at z = {d['z_mid']:.3g} m (band {d['band']}), the largest sample of the discharge; "
                             f"{as_number(d.get('discharge_factor')):.2f} x its static pressure; the steady discharge's "
-                            f"mean there {pressure(d.get('dynamic_mean_pressure'), math.nan).split(' (')[0]}"))
+                            f"mean there {pressure_value(d.get('dynamic_mean_pressure'))}"))
     return rows
 
 

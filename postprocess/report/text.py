@@ -14,7 +14,7 @@ from typing import NamedTuple
 from siloflow.plan import unbounded_note
 from siloflow.run_folder import SUMMARY_NAME
 
-from ..numbers import mass_rate, pressure
+from ..numbers import mass_rate, mass_rate_value, pressure
 from .card import Card, en_count_text, en_counts, summary_card
 
 # ---------------------------------------------------------------- the blocks of a report
@@ -169,7 +169,7 @@ def flow_rate_line(fr: dict, clogged: dict | None = None) -> str:
             f"{_fmt(fr['t_end'], '.3g')} s, {fr.get('n_samples')} samples, r2 {_fmt(fr['r2'], '.4f')}")
     if fr.get("batches"):
         line += (f"; standard error by batch means of {fr['batches']} batches, the error that matches the spread "
-                 f"of seeds (the straight line's own, {mass_rate(fr.get('fit_stderr'), float('nan')).split(' (')[0]},"
+                 f"of seeds (the straight line's own, {mass_rate_value(fr.get('fit_stderr'))},"
                  " takes the samples as independent)")
     elif "batches" in fr:
         line += "; its error is not resolved: the window holds too few samples for batch means"
@@ -187,7 +187,7 @@ def steady_window_line(steady: dict, fr: dict) -> str:
     diff = steady["median_rate"] - fr["rate"]
     se = fr.get("stderr")
     if se is not None and math.isfinite(se) and se > 0 and abs(diff) > 2 * se:
-        line += (f"; its median sample rate {mass_rate(steady['median_rate'], float('nan')).split(' (')[0]} differs "
+        line += (f"; its median sample rate {mass_rate_value(steady['median_rate'])} differs "
                  f"from Wf by {diff / se:+.1f} standard errors: the rate drifts over Wf's window (the silo empties "
                  "or the flow is still starting), so Wf is an average over that window")
     return line
