@@ -6,8 +6,9 @@ What is measured. For each case (decks/demo.yaml, decks/quick.yaml, benchmarks/c
 
 1. siloflow's deck, every output (what a user gets): ``siloflow.run`` of the case into
    ``benchmarks/work/raw/<case>_<engine>[_primitive]/`` through the fill cache ``benchmarks/work/raw/cache``.
-   On LIGGGHTS twice: the side walls as sensor meshes (``engine.side_walls: meshes``, today's default,
-   deck ``siloflow_meshes``) and as primitives (``primitive``, the candidate default, ``siloflow_primitive``).
+   On LIGGGHTS twice: the side walls as primitives (``engine.side_walls: primitive``, the default since
+   8 Dec 2026, deck ``siloflow_primitive``) and as sensor meshes (``meshes``, the old default,
+   ``siloflow_meshes``; ``--decks`` leaves it out).
    Primitive side walls are in the fill's key (``LiggghtsEngine.fill_key_parts``), so the two LIGGGHTS
    decks settle their own beds: only the stages after the settled bed are timed and compared. On LAMMPS
    one deck (``siloflow``). A bed already in the cache (an earlier call, ``--smoke``) is reused: the run
@@ -123,6 +124,8 @@ CLASSIC_CASES = ("quick",)
 #: siloflow's decks on each engine: deck -> the case's engine.side_walls (LAMMPS: none)
 SILOFLOW_DECKS = {"liggghts": {"siloflow_meshes": "meshes", "siloflow_primitive": "primitive"},
                   "lammps": {"siloflow": None}}
+#: every deck name the bench knows
+ALL_DECKS = tuple(dict.fromkeys([d for e in SILOFLOW_DECKS.values() for d in e] + ["raw", "raw_classic"]))
 #: the siloflow deck each raw deck starts from (its run folder's settled bed and step counts)
 RAW_SOURCE = {"liggghts": "siloflow_primitive", "lammps": "siloflow"}
 #: the stages after the settled bed, in order
@@ -855,6 +858,8 @@ def main() -> None:
     ap.add_argument("--check", action="store_true", help="no engine: write and check the raw decks from siloflow's "
                     "renderer (and from --check-folder run folders), the smoke fill keys and the log parsers")
     ap.add_argument("--check-folder", type=Path, action="append", default=[], help="a finished run folder for --check")
+    ap.add_argument("--decks", nargs="+", choices=ALL_DECKS, default=list(ALL_DECKS),
+                    help="only these decks (default every one; a raw deck still runs the siloflow deck it starts from)")
     ap.add_argument("--no-lammps-split", action="store_true", help="siloflow's LAMMPS chunks as siloflow runs them "
                     "(post no): no loop split, and nothing of LAMMPS' summary in the time between chunks")
     args = ap.parse_args()
@@ -893,7 +898,7 @@ def main() -> None:
     for case in args.cases:
         for engine in args.engines:
             for deck in decks_of(case, engine):
-                if (case, engine, deck) in done:
+                if (case, engine, deck) in done or deck not in args.decks:
                     continue
                 if deck in SILOFLOW_DECKS[engine]:
                     add(run_siloflow(case, engine, deck, work, args.cache, args.smoke, call, not args.no_lammps_split))

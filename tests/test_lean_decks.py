@@ -11,8 +11,9 @@ from siloflow.derived import derive
 from siloflow.engine.liggghts.deck import render_deck_text
 
 
-def deck(quick_dict, results, **outputs):
+def deck(quick_dict, results, side_walls="primitive", **outputs):
     data = copy.deepcopy(quick_dict)
+    data.setdefault("engine", {})["side_walls"] = side_walls
     data["outputs"] = {**{k: v for k, v in data["outputs"].items() if k not in ("dump_interval", "vtk")},
                        "results": results, **outputs}
     case = case_from_dict(data)
@@ -65,12 +66,18 @@ def test_flow_rate_alone_is_the_leanest_deck(quick_dict):
     assert lean_meshes < sum(1 for w in full_plan.walls if w.is_wall) / 5
 
 
+#: the primitive side walls' forces are summed per band sector by one region reduction each
+PRIMITIVE_ADDS = {"force_balance": {"compute reduce/region"}, "wall_pressure": {"compute reduce/region"}}
+
+
+@pytest.mark.parametrize("side_walls", ["primitive", "meshes"])
 @pytest.mark.parametrize("result", sorted(ADDS))
-def test_each_result_adds_the_lines_it_needs(quick_dict, result):
-    _, lean = deck(quick_dict, ["flow_rate"])
-    plan, text = deck(quick_dict, ["flow_rate", result])
+def test_each_result_adds_the_lines_it_needs(quick_dict, result, side_walls):
+    _, lean = deck(quick_dict, ["flow_rate"], side_walls)
+    plan, text = deck(quick_dict, ["flow_rate", result], side_walls)
     added = commands(text) - commands(lean)
-    assert added == ADDS[result], f"{result} adds {sorted(added)}"
+    wanted = ADDS[result] | (PRIMITIVE_ADDS.get(result, set()) if side_walls == "primitive" else set())
+    assert added == wanted, f"{result} adds {sorted(added)}"
     pairs = [ln for ln in text.splitlines() if "pair/gran/local" in ln and not ln.startswith("#")]
     if result in CONTACT_RESULTS:      # the dumped contacts' keywords, and the guard's delta last
         assert pairs == ["compute         contacts all pair/gran/local pos id force force_normal delta"]

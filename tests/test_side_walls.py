@@ -30,7 +30,7 @@ def plan_of(name: str, side_walls: str = "primitive"):
     return derive(case_from_dict(data))
 
 
-def test_the_side_walls_are_sensor_meshes_unless_the_case_asks_for_primitives():
+def test_the_side_walls_are_primitives_unless_the_case_asks_for_sensor_meshes():
     assert primitive_sides(plan_of("quick", "meshes")) == []
     assert "band00_s00.stl" in render_deck_text(plan_of("quick", "meshes"))
     assert "band00_s00.stl" not in render_deck_text(plan_of("quick"))

@@ -67,9 +67,9 @@ class EngineSettings(Strict):
                                                   "(filled in from siloflow's benchmarked profile when not given)")
     guard: Guard = Guard()
     side_walls: Literal["meshes", "primitive"] = Field(
-        "meshes", description="LIGGGHTS: the side walls of a generated silo as sensor meshes (each band sector a "
-        "mesh), or as primitive walls whose band forces are binned in the engine (issue 56: 2.8x the demo's "
-        "loop rate; its equivalence with the meshes over seeds is being measured, docs/engines.md)")
+        "primitive", description="LIGGGHTS: the side walls of a generated silo as primitive walls whose band "
+        "forces are binned in the engine (the default: 3.0x the demo's engine rate, equal to the sensor meshes "
+        "over 10 seeds, docs/engines.md), or as sensor meshes (each band sector a mesh)")
 
     @model_validator(mode="before")
     @classmethod
