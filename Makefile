@@ -51,7 +51,7 @@ paper-a-quick: install
 	$(VENV)/bin/siloflow paper-a --scale quick
 
 paper-b-quick: install
-	$(PY) -m siloflow.reproduce_paper_b --scale quick
+	$(VENV)/bin/siloflow paper-b --scale quick
 
 # paper B's claims report (issue 38; siloflow/reproduce_paper_b.py): the polydisperse silo at three apertures sharing
 # one fill (siloflow sweep, fill cache), siloflow cg and cg-scaling on each, every claim of the paper beside
@@ -61,10 +61,10 @@ paper-b-quick: install
 # (PAPER_B_FLAGS=--slurm writes the sweep's cluster jobs instead). paper-b-report: the report again from the
 # committed results alone, no engine.
 paper-b: install
-	$(PY) -m siloflow.reproduce_paper_b --scale $(SCALE) $(if $(filter yes,$(CONFIRM)),--yes) $(PAPER_B_FLAGS)
+	$(VENV)/bin/siloflow paper-b --scale $(SCALE) $(if $(filter yes,$(CONFIRM)),--yes) $(PAPER_B_FLAGS)
 
 paper-b-report: $(VENV)/.installed
-	$(PY) -m siloflow.reproduce_paper_b --from-results reports/paper_b/results
+	$(VENV)/bin/siloflow paper-b --from-results reports/paper_b/results
 
 # every test, the engine tests included
 test: install

@@ -2,9 +2,13 @@
 that share one fill, coarse-grained, and the claims report ``reports/paper_b/`` (report.md,
 report.html, figures, and the small result tables it is made from).
 
-    python -m siloflow.reproduce_paper_b --scale quick            # run what is missing, post-process, report
-    python -m siloflow.reproduce_paper_b --scale paper [--yes]    # the paper's size: prints the cost, stops unless --yes
-    python -m siloflow.reproduce_paper_b --from-results reports/paper_b/results   # the report from committed results
+    siloflow paper-b --scale quick            # run what is missing, post-process, report
+    siloflow paper-b --scale paper [--yes]    # the paper's size: prints the cost, stops unless --yes
+    siloflow paper-b --from-results reports/paper_b/results   # the report from committed results
+
+(``python -m siloflow.reproduce_paper_b`` takes the same options.) Everything runs in this process from
+siloflow's shipped decks (``siloflow example``), so an installed wheel runs it from any folder; the
+default folders (``runs/paper_b_<scale>``, ``reports/paper_b``) are relative to the current one.
 
 What it runs: the scale's deck (``decks/paper_b_quick.yaml`` or ``decks/paper_b.yaml``) with the
 outputs paper B needs (no wall-pressure sensors, which cost time and which paper B does not read:
@@ -20,19 +24,30 @@ import argparse
 import json
 import os
 import shutil
-import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
+from postprocess.cg_run import scaling_across_runs, setup_from_run
+from postprocess.paper_b import RUNS, analyse, extract, read_tables
+from postprocess.report.cg import run_cg as coarse_grain
+from postprocess.report.files import write_tables
+from postprocess.report.paper_b import write_paper_b_report
 
-from .atomic_files import read_json, write_text
+from .atomic_files import read_json, write_json, write_text
+from .case_file import case_from_dict
+from .derived import derive
+from .disk_estimate import estimate_bytes
 from .errors import ReadError
+from .resources import example_text
+from .run_folder import RunFolder, record_products
+from .slurm import write_slurm
+from .sweep import prepare_sweep, run_sweep as run_variants
 
-ROOT = Path(__file__).resolve().parents[1]
-#: where the report goes, and the result tables it is made from
-REPORT_DIR = ROOT / "reports" / "paper_b"
+#: where the report goes, and the result tables it is made from (relative to the current folder)
+REPORT_DIR = Path("reports") / "paper_b"
 RESULTS_DIR_NAME = "results"
 #: what paper B reads of a run: no wall pressure (sensor meshes cost 1.5x the time), the dumps of
 #: the free surface (Wr), the bulk solid fraction and the coarse-graining (particles and contacts)
@@ -81,9 +96,14 @@ def rb_of(deck_data: dict) -> float:
     return float(max(deck_data["particles"]["radii"]))
 
 
+def deck_data(scale: Scale) -> dict:
+    """The scale's deck as shipped with siloflow (``siloflow example paper_b_quick``), as fields."""
+    return yaml.safe_load(example_text(Path(scale.deck).stem))
+
+
 def study_case(scale: Scale) -> dict:
     """The scale's deck with the outputs paper B reads and the scale's dump interval."""
-    data = yaml.safe_load((ROOT / scale.deck).read_text())
+    data = deck_data(scale)
     data["outputs"] = {**data.get("outputs", {}), "results": list(PAPER_B_RESULTS)}
     if scale.dump_interval:
         data["outputs"]["dump_interval"] = scale.dump_interval
@@ -109,22 +129,21 @@ def write_study_case(scale: Scale, work: Path) -> Path:
     return path
 
 
-def siloflow_cmd(*args) -> list[str]:
-    return [sys.executable, "-m", "siloflow.cli", *map(str, args)]
-
-
-def run_sweep(scale: Scale, work: Path, slurm: bool = False) -> Path:
-    """``siloflow sweep`` over the apertures (resumes a stopped one; ``slurm``: writes the cluster
-    jobs instead); the sweep folder."""
+def run_sweep(scale: Scale, work: Path, slurm: bool = False, progress=None) -> Path:
+    """``siloflow sweep`` over the apertures, in this process (resumes a stopped one; ``slurm``: writes
+    the cluster jobs instead; ``progress`` as ``siloflow.sweep.run_sweep``'s); the sweep folder."""
     case = write_study_case(scale, work)
     out = work / "sweep"
     data = yaml.safe_load(case.read_text())
-    cmd = siloflow_cmd("sweep", case, "--set", orifice_set(scale, data), "--cores",
-                       (scale.engine or {}).get("ranks", data.get("engine", {}).get("ranks", 2)), "-o", out)
+    spec = orifice_set(scale, data)
+    cores = int((scale.engine or {}).get("ranks", data.get("engine", {}).get("ranks", 2)))
+    print(f"$ siloflow sweep {case} --set {spec} --cores {cores} -o {out}" + (" --slurm" if slurm else ""), flush=True)
+    variants, groups = prepare_sweep(case, [spec], 1, out, need_binary=not slurm)
+    cache = out / "cache"
     if slurm:
-        cmd.append("--slurm")
-    print("$", " ".join(map(str, cmd[2:])), flush=True)
-    subprocess.run(cmd, check=True, cwd=ROOT)
+        print(f"submit with {write_slurm(variants, groups, out, cache)}", flush=True)
+    else:
+        run_variants(variants, out, cores, cache, progress=progress, groups=groups)
     return out
 
 
@@ -132,12 +151,12 @@ def run_sweep(scale: Scale, work: Path, slurm: bool = False) -> Path:
 
 def measured_rate(results: Path = REPORT_DIR / RESULTS_DIR_NAME) -> tuple[float | None, str]:
     """The engine's particle-steps per second measured by the quick study's runs (its committed
-    study.json), and where it came from; (None, why) when there is none."""
+    study.json, under the current folder by default), and where it came from; (None, why) when there is none."""
     try:
         study = read_json(results / "study.json", "paper B's study", allow_nan=True)
         rate = float(study["throughput"]["particle_steps_per_s"])
         return rate, (f"measured by the quick study's {len(study['runs'])} runs on {study['throughput']['ranks']} "
-                      f"rank(s) ({results.relative_to(ROOT) if results.is_relative_to(ROOT) else results}/study.json)")
+                      f"rank(s) ({_from_here(results)}/study.json)")
     except (OSError, ValueError, KeyError, TypeError, ReadError):
         return None, "no measured rate (run `make paper-b SCALE=quick` first, or give --rate)"
 
@@ -146,10 +165,6 @@ def paper_cost(scale: Scale, rate: float | None) -> dict:
     """Particles x planned steps of the study (one fill, then each aperture's static, opening and
     discharge stages; the settle stages at their cap: an upper bound), the engine time and
     core-hours at ``rate`` particle-steps/s, and the disk its dumps take (upper bound)."""
-    from .case_file import case_from_dict
-    from .derived import derive
-    from .disk_estimate import estimate_bytes
-
     data = study_case(scale)
     data["geometry"] = {**data["geometry"], "orifice_radius": scale.apertures_rb[-1] * rb_of(data)}
     case = case_from_dict(data, scale.deck)
@@ -163,7 +178,7 @@ def paper_cost(scale: Scale, rate: float | None) -> dict:
     disk = estimate_bytes(case, plan)["total"] * len(scale.apertures_rb)
     out = {"particles": n, "fill_steps": fill, "steps_per_aperture": after, "apertures": len(scale.apertures_rb),
            "particle_steps": particle_steps, "ranks": ranks, "disk_bytes": disk,
-           "disk_free_bytes": shutil.disk_usage(ROOT).free, "cores": os.cpu_count() or 1}
+           "disk_free_bytes": shutil.disk_usage(Path.cwd()).free, "cores": os.cpu_count() or 1}
     if rate:
         out["engine_hours"] = particle_steps / rate / 3600
         out["core_hours"] = out["engine_hours"] * ranks
@@ -197,20 +212,26 @@ def run_folders(sweep: Path) -> list[Path]:
     return sorted((sweep / "runs").iterdir())
 
 
+#: ``siloflow cg``'s settings for each run: w = 2 mean radii, a 50 x 150 rz grid, the lattice sums
+CG_SETTINGS = {"kernel_name": "gaussian", "width": 2.0, "unit": "radius", "nr": 50, "nz": 150, "species": "radius",
+               "grid_kind": "rz", "method": "lattice"}
+
+
 def run_cg(folders: list[Path], work: Path) -> dict | None:
-    """``siloflow cg`` on each run (w = 2 mean radii, the Makefile's paper-b-quick grid, the lattice
-    sums), skipped
-    where done, then ``siloflow cg-scaling`` across them; its JSON."""
+    """``siloflow cg`` on each run (``CG_SETTINGS``; skipped where done), then ``siloflow cg-scaling``
+    across them, in this process; the scaling fit (also ``work/cg_scaling.json``)."""
     for f in folders:
-        if not (f / "results" / "cg" / "cg_summary.json").is_file():
-            cmd = siloflow_cmd("cg", f, "--width", 2, "--unit", "radius", "--nr", 50, "--nz", 150,
-                               "--method", "lattice")
-            print("$", " ".join(map(str, cmd[2:])), flush=True)
-            subprocess.run(cmd, check=True, cwd=ROOT)
+        target = f / "results" / "cg"
+        if not (target / "cg_summary.json").is_file():
+            print(f"$ siloflow cg {f} --width 2 --unit radius --nr 50 --nz 150 --method lattice", flush=True)
+            since = time.time()
+            try:
+                coarse_grain(setup_from_run(f), target, **CG_SETTINGS)
+            finally:
+                record_products(f, target, since)
     out = work / "cg_scaling.json"
-    cmd = siloflow_cmd("cg-scaling", *[f / "results" / "cg" for f in folders], "-o", out)
-    print("$", " ".join(map(str, cmd[2:])), flush=True)
-    subprocess.run(cmd, check=True, cwd=ROOT)
+    print(f"$ siloflow cg-scaling {' '.join(str(f / 'results' / 'cg') for f in folders)} -o {out}", flush=True)
+    write_json(out, scaling_across_runs([f / "results" / "cg" for f in folders]))
     return read_json(out, "the cg-scaling fit", allow_nan=True)
 
 
@@ -224,8 +245,6 @@ def _record(folder: Path) -> dict:
 def study_record(scale: Scale, folders: list[Path], tables: dict, cg_scaling: dict | None) -> dict:
     """What the report says about the study besides the tables: the scale, why these apertures,
     each run's engine time and whether its bed came from the fill cache, the engine's measured rate."""
-    from postprocess.paper_b import RUNS
-
     runs = tables[RUNS]
     rows, ps, secs = [], 0.0, 0.0
     for f, r in zip(folders, runs.itertuples()):
@@ -242,9 +261,9 @@ def study_record(scale: Scale, folders: list[Path], tables: dict, cg_scaling: di
             ps += float(r.particles) * steps
             secs += float(rec["wall_time"])
     if cg_scaling:      # the committed record names the runs from the checkout, not this machine's path
-        cg_scaling = {**cg_scaling, "runs": [{**r, "folder": _from_root(r["folder"])}
+        cg_scaling = {**cg_scaling, "runs": [{**r, "folder": _from_here(r["folder"])}
                                              for r in cg_scaling.get("runs", [])]}
-    data = yaml.safe_load((ROOT / scale.deck).read_text())
+    data = deck_data(scale)
     ranks = (scale.engine or {}).get("ranks", data.get("engine", {}).get("ranks", 2))
     return {"scale": scale.name, "deck": scale.deck, "why": scale.why, "apertures_rb": list(scale.apertures_rb),
             "runs": rows, "cg_scaling": cg_scaling,
@@ -253,16 +272,15 @@ def study_record(scale: Scale, folders: list[Path], tables: dict, cg_scaling: di
                                    "on a machine shared with other jobs"}}
 
 
-def _from_root(path) -> str:
-    """``path`` relative to the checkout when it is inside it (as committed), else as it is."""
-    p = Path(path).absolute()
-    return p.relative_to(ROOT).as_posix() if p.is_relative_to(ROOT) else str(path)
+def _from_here(path) -> str:
+    """``path`` relative to the current folder (the checkout, as committed) when it is inside it,
+    else as it is."""
+    p, here = Path(path).absolute(), Path.cwd()
+    return p.relative_to(here).as_posix() if p.is_relative_to(here) else str(path)
 
 
 def pd_read_steps(folder: Path) -> int | None:
     """The last step of a run's flow table."""
-    from .run_folder import RunFolder
-
     try:
         return int(RunFolder(folder).flow().step.max())
     except (OSError, ValueError, KeyError, AttributeError):
@@ -271,17 +289,12 @@ def pd_read_steps(folder: Path) -> int | None:
 
 def write_results(folder: Path, tables: dict, study: dict) -> None:
     """The result tables and the study's record, as the report is made from them."""
-    from postprocess.report.files import write_tables
-
     write_tables(tables, folder)
     write_text(folder / "study.json", json.dumps(study, indent=1, sort_keys=True) + "\n")
 
 
 def report_from_results(results: Path, out: Path = REPORT_DIR) -> list[Path]:
     """The report from result tables and study.json alone (no run folder, no engine)."""
-    from postprocess.paper_b import analyse, read_tables
-    from postprocess.report.paper_b import write_paper_b_report
-
     tables = read_tables(results)
     study = read_json(results / "study.json", "paper B's study", allow_nan=True)
     written = write_paper_b_report(out, analyse(tables, study), study)
@@ -290,7 +303,7 @@ def report_from_results(results: Path, out: Path = REPORT_DIR) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="siloflow paper-b", description=__doc__.split("\n\n")[0])
     ap.add_argument("--scale", choices=sorted(SCALES), default="quick")
     ap.add_argument("--work", type=Path, help="the study's folder (default runs/paper_b_<scale>)")
     ap.add_argument("--out", type=Path, help="the report's folder (default reports/paper_b; other scales: "
@@ -306,7 +319,7 @@ def main(argv=None) -> int:
         report_from_results(args.from_results, args.out or REPORT_DIR)
         return 0
     scale = SCALES[args.scale]
-    work = args.work or ROOT / "runs" / f"paper_b_{scale.name}"
+    work = args.work or Path("runs") / f"paper_b_{scale.name}"
     if scale.name == "paper":
         rate, source = (args.rate, "given by --rate") if args.rate else measured_rate()
         for line in cost_lines(scale, paper_cost(scale, rate), rate, source):
@@ -320,8 +333,6 @@ def main(argv=None) -> int:
         return 0
     folders = run_folders(sweep)
     cg_scaling = run_cg(folders, work)
-    from postprocess.paper_b import extract
-
     print(f"extracting {len(folders)} runs in {scale.batches} batches each ...", flush=True)
     tables = extract(folders, scale.batches, scale.width_flow_rb, scale.width_stress_rb)
     out = args.out or (REPORT_DIR if scale.name == "quick" else work / "report")

@@ -194,14 +194,17 @@ def test_paper_scale_refuses_without_yes(tmp_path, capsys, monkeypatch):
     assert "particle-steps" in out and "core-hours" in out and "--yes" in out and "disk" in out
 
 
-def test_the_study_record_names_runs_from_the_checkout(tmp_path):
-    """The committed study.json names the coarse-graining runs relative to the checkout (a path
-    outside it stays as it is), not by this machine's absolute path."""
+def test_the_study_record_names_runs_from_the_checkout(tmp_path, monkeypatch):
+    """The committed study.json names the coarse-graining runs relative to the checkout it runs in
+    (the current folder; a path outside it stays as it is), not by this machine's absolute path."""
     import pandas as pd
 
     from postprocess.paper_b import RUNS
-    from siloflow.reproduce_paper_b import ROOT, SCALES, study_record
-    inside = ROOT / "runs" / "paper_b_quick" / "sweep" / "runs" / "x-000" / "results" / "cg"
+    from siloflow.reproduce_paper_b import SCALES, study_record
+    checkout = tmp_path / "checkout"
+    checkout.mkdir()
+    monkeypatch.chdir(checkout)
+    inside = checkout / "runs" / "paper_b_quick" / "sweep" / "runs" / "x-000" / "results" / "cg"
     cg = {"runs": [{"folder": str(inside), "R": 0.07}, {"folder": str(tmp_path / "cg"), "R": 0.08}]}
     record = study_record(SCALES["quick"], [], {RUNS: pd.DataFrame(columns=["R_over_rb", "R", "particles"])}, cg)
     assert [r["folder"] for r in record["cg_scaling"]["runs"]] == [

@@ -1,4 +1,4 @@
-"""``siloflow sweep | bench | stability``: resumable studies of many runs."""
+"""``siloflow sweep | bench | stability | paper-a | paper-b``: resumable studies of many runs."""
 from __future__ import annotations
 
 import signal
@@ -354,6 +354,20 @@ def paper_a(scale: str = typer.Option("quick", "--scale", help="quick (minutes, 
     except SiloflowError as exc:
         _fail(exc)
     out.print(f"paper A's report: {output / 'report.html'} ({len(written)} files)")
+
+
+@app.command("paper-b", context_settings={"allow_extra_args": True, "ignore_unknown_options": True,
+                                          "help_option_names": []})
+def paper_b(ctx: typer.Context) -> None:
+    """Paper B's claims: the polydisperse silo at three apertures sharing one fill, coarse-grained, and
+    reports/paper_b (report.md/.html, every claim beside our number and a computed verdict). Options:
+    siloflow paper-b --help (--scale quick|paper, --yes, --slurm, --from-results DIR, ...)."""
+    from ..reproduce_paper_b import main
+    try:
+        code = main(ctx.args)
+    except SiloflowError as exc:
+        _fail(exc)
+    raise typer.Exit(code)
 
 
 @contextmanager
