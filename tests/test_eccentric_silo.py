@@ -24,7 +24,7 @@ from siloflow.errors import CaseError
 from siloflow.fill_cache import fill_key_inputs
 
 ECCENTRIC = ROOT / "tests" / "data" / "eccentric_silo.yaml"
-R, R_OUT, E = 0.0125, 0.0055, 0.005
+R, R_OUT, E = 0.0125, 0.0065, 0.004
 
 
 def case_data(**geometry) -> dict:

@@ -64,7 +64,7 @@ def test_slab_deck_faces_have_their_own_friction_and_clumps_stay_flat():
     assert enc.face_type == enc.wall_type + 1 == 3 and enc.n_types == 3
     text = render_deck_text(d)
     assert "create_box      3 domain" in text
-    assert "face_s00.stl type 3" in text and "band00_s00.stl type 2" in text
+    assert "face_s00.stl type 3" in text and "primitive type 2 xplane -0.03" in text     # side walls: type 2
     mu = case.materials.particle_particle.friction, case.materials.particle_wall.friction
     assert f"coefficientFriction peratomtypepair 3 {mu[0]:g} {mu[1]:g} 0 " in text      # faces: 0
     assert "read_dump" in text and "insert/rate/region" not in text      # spheres: placed by siloflow
