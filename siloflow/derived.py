@@ -10,7 +10,7 @@ import math
 
 from . import contact_physics as cp
 from ._version import __version__
-from .case import BoxGeometry, Case, HopperGeometry, MeshGeometry, PlanarGeometry
+from .case import Case
 from .errors import CaseError, SetupError
 from .plan import (
     FACES,
@@ -35,6 +35,7 @@ from .plan import (
     TimeStep,
     Wall,
 )
+from .silos.registry import kind_of
 from .species import INSERTION_SPEED, species_of
 
 #: planned steps above which a run needs an explicit override (``--allow-long``): LIGGGHTS takes
@@ -65,7 +66,7 @@ def measured(case: Case, container=None) -> Case:
     (``siloflow.geometry.read_container``; ``container`` when already read), and the case's checks
     that need the silo's size run. A problem is a ``CaseError`` naming the field."""
     g = case.geometry
-    if not isinstance(g, MeshGeometry):
+    if not kind_of(g).reads_files:
         return case
     from .case.model import shape_problems
     from .geometry import MeshError, Outline, read_container
@@ -92,30 +93,7 @@ def measured(case: Case, container=None) -> Case:
 
 def bed_volume(case: Case, height: float) -> float:
     """Volume of the silo below ``height`` (m above the outlet), m3."""
-    g = case.geometry
-    if isinstance(g, MeshGeometry):
-        return g.container.volume_below(height)
-    if isinstance(g, BoxGeometry):          # the hopper's frustum (a pyramid's or a wedge's), then the box
-        hh, (hx, hy) = g.hopper_height, g.outlet_half_sizes
-        h_w = min(height, hh)
-        a0, a1 = 2 * hx, (g.width - 2 * hx) / hh if hh > 0 else 0.0           # width along x: a0 + a1 z
-        b0, b1 = 2 * hy, (g.depth - 2 * hy) / hh if hh > 0 else 0.0
-        hopper = a0 * b0 * h_w + (a0 * b1 + a1 * b0) * h_w ** 2 / 2 + a1 * b1 * h_w ** 3 / 3
-        return hopper + g.width * g.depth * max(0.0, height - hh)
-    if isinstance(g, PlanarGeometry):       # trapezoid of the wedge hopper, then the full width
-        h_w = min(height, g.hopper_height)      # 0 on a flat floor (no wedge); an offset slot shears it
-        w_top = g.outlet_width + (2.0 * h_w * math.tan(math.radians(g.half_angle_deg)) if h_w > 0 else 0.0)
-        area = 0.5 * (g.outlet_width + w_top) * h_w + g.width * max(0.0, height - g.hopper_height)
-        return area * g.thickness
-    R = g.radius
-    if isinstance(g, HopperGeometry):
-        hh = g.hopper_height
-        t = math.tan(math.radians(g.half_angle_deg))
-        h_cone = min(height, hh)
-        r_top = g.outlet_radius + h_cone * t
-        cone = math.pi * h_cone / 3 * (g.outlet_radius ** 2 + g.outlet_radius * r_top + r_top ** 2)
-        return cone + math.pi * R ** 2 * max(0.0, height - hh)
-    return math.pi * R ** 2 * height
+    return kind_of(case.geometry).bed_volume(case.geometry, height)
 
 
 def bed_height(case: Case, volume: float) -> float:
@@ -192,7 +170,7 @@ def contact_pairs(case: Case, species: list[Species], v_impact: float) -> list[P
         out.append(_pair(case, a.name, WALL, a.mass, a.radius, _contact_of(case, a.material, None),
                          (_modulus_of(case, a.material), _modulus_of(case, None)), v_impact))
     g = case.geometry
-    if isinstance(g, PlanarGeometry):
+    if kind_of(g).slab:
         walls = {p.a: p for p in out if p.b == WALL}
         out += [walls[sp.name].model_copy(update={"name": f"{sp.name}-{FACES}", "b": FACES,
                                                   "friction": g.face_friction}) for sp in species]
@@ -284,18 +262,7 @@ def bed_pressure(case: Case, bulk_density: float, depth: float) -> float:
     Jaky's K = 1 - sin(atan(friction)); hydrostatic rho_b g depth without wall friction."""
     g = case.geometry
     m = case.materials
-    if isinstance(g, BoxGeometry):
-        area = g.width * g.depth
-        grip = 2 * (g.width + g.depth) * m.particle_wall.friction
-    elif isinstance(g, MeshGeometry):        # the vertical walls' section half way up
-        area, perimeter = g.section
-        grip = perimeter * m.particle_wall.friction
-    elif isinstance(g, PlanarGeometry):
-        area = g.width * g.thickness
-        grip = 2 * g.thickness * m.particle_wall.friction + 2 * g.width * g.face_friction
-    else:
-        area = math.pi * g.radius ** 2
-        grip = 2 * math.pi * g.radius * m.particle_wall.friction
+    area, grip = kind_of(g).janssen_section(g, m.particle_wall.friction)
     hydrostatic = bulk_density * case.gravity * depth
     k = 1.0 - math.sin(math.atan(m.particle_particle.friction))
     if grip * k <= 0:
@@ -392,11 +359,10 @@ def derive(case: Case) -> RunPlan:
     settings = profile_settings(case)
     # the profile's time step and stiffness, applied once here (a changed case is validated anew: the
     # walls read are handed on)
-    container = case.geometry.container if isinstance(case.geometry, MeshGeometry) else None
+    container = case.geometry.container if kind_of(case.geometry).reads_files else None
     case = measured(effective_case(case, settings), container)
     g = case.geometry
-    planar = isinstance(g, PlanarGeometry)
-    box = isinstance(g, BoxGeometry)
+    kind = kind_of(g)
     p = case.particles
     r = p.max_radius                       # geometry margins use the largest grain (clumps: bounding sphere)
     d = 2 * r
@@ -443,26 +409,7 @@ def derive(case: Case) -> RunPlan:
                           f"{f.packing_fraction}) leaves no room to insert particles below the top "
                           f"({top:.4g} m): fill fewer particles or make the silo taller (geometry.height)")])
     pour = f.pour_radius if f.pour_radius is not None else g.half_width      # central or distributed fill
-    if box:
-        # centres only, a grain's radius (and 5 %) from the walls
-        half_x, half_y = min(pour, g.half_width - 1.05 * r), min(pour, 0.5 * g.depth - 1.05 * r)
-        insertion_region = {"shape": "block", "xlo": -half_x, "xhi": half_x,
-                            "ylo": -half_y, "yhi": half_y, "z_min": z_min + r, "z_max": z_max - r}
-        region_volume = 4 * half_x * half_y * (z_max - z_min)
-    elif planar:
-        # centres only (all_in no: a clump's bounding sphere is wider than the slab); wheat is
-        # inserted lying flat in the slab, so its half thickness is its sphere radius
-        half_t = 0.5 * g.thickness - (0.5 * p.width if p.kind == "clumps" else r)
-        if g.periodic_depth:                  # the whole periodic length (centres wrap)
-            half_t = 0.5 * g.thickness
-        half_x = min(pour, g.half_width - 1.05 * r)
-        insertion_region = {"shape": "block", "xlo": -half_x, "xhi": half_x,
-                            "ylo": -half_t, "yhi": half_t, "z_min": z_min + r, "z_max": z_max - r}
-        region_volume = 2 * half_x * g.thickness * (z_max - z_min)
-    else:
-        region_radius = min(pour, g.radius - 0.6 * r)
-        insertion_region = {"shape": "cylinder", "radius": region_radius, "z_min": z_min, "z_max": z_max}
-        region_volume = math.pi * region_radius ** 2 * (z_max - z_min)
+    insertion_region, region_volume = kind.insertion_region(g, p, pour, r, z_min, z_max)
     batch = max(1, min(count, int(f.batch_volume_fraction * region_volume / (vol + dust_vol))))
 
     # time step: the shortest contact of any pair of types; dust's cost is reported
@@ -538,20 +485,8 @@ def derive(case: Case) -> RunPlan:
     if static_steps < 2 * sample_freq:      # the time check of the case can miss by a rounded step
         raise CaseError([("fill.settle.static_window", f"{static_steps} steps hold fewer than two samples of "
                           f"{sample_freq} steps (outputs.sample_interval): no static wall-load sample")])
-    round_silo = not (planar or box)
-    mesh = isinstance(g, MeshGeometry)
     silo = Silo(kind=g.kind, half_width=g.half_width, height=g.height, hopper_height=g.hopper_height,
-                outlet_radius=g.outlet_radius, radius=g.radius if round_silo else None,
-                width=None if round_silo else g.width, thickness=g.thickness if planar else None,
-                face_friction=g.face_friction if planar else None,
-                mesh_segments=g.mesh_segments if round_silo and not mesh else None,
-                outlet_offset=g.outlet_offset, periodic_depth=planar and g.periodic_depth,
-                **({"depth": g.depth, "outlet": g.outlet, "outlet_half_y": g.outlet_half_sizes[1],
-                    "outlet_offset_y": g.outlet_offset_y} if box else {}),
-                **({"outlet_offset_y": g.outlet_offset_y,
-                    "outer_radius": g.container.outer_radius, "section_area": g.section[0],
-                    "section_perimeter": g.section[1], "outlet": "circle" if g.outlet.radius is not None else "polygon"}
-                   if mesh else {}))
+                outlet_radius=g.outlet_radius, outlet_offset=g.outlet_offset, **kind.silo_fields(g))
     materials = {"particle": Material(youngs_modulus=_modulus_of(case, "particle")[0],
                                       poisson_ratio=_modulus_of(case, "particle")[1]),
                  "wall": Material(youngs_modulus=_modulus_of(case, None)[0], poisson_ratio=_modulus_of(case, None)[1])}
@@ -585,8 +520,8 @@ def derive(case: Case) -> RunPlan:
         discharge=Discharge(chunk_steps=d_chunk, max_chunks=d_chunks, until_empty=dis.until_empty, steady=steady,
                             empty_mass=dis.empty_fraction * (count * final_mass + (dust_count * dust.mass if dust
                                                                                    is not None else 0.0))),
-        outlet=Outlet(z=outlet_z, radius=(g.container.outline.size if mesh else g.outlet_radius) + 2 * d),
-        sensors=Sensors(bands=0, sectors=2 if planar else 4 if box else case.sensors.sectors),
+        outlet=Outlet(z=outlet_z, radius=kind.outlet_reach(g) + 2 * d),
+        sensors=Sensors(bands=0, sectors=kind.sensor_sectors(g, case.sensors.sectors)),
         outputs=Outputs(thermo_every=thermo_every, sample_steps=sample_freq, samples_per_average=sample_repeat,
                         dump_every=dump_every, vtk=bool(dump_every and needs["vtk"]),
                         contacts=bool(dump_every and needs["contacts"]), results=out.results,
@@ -627,7 +562,7 @@ def wall_meshes(case: Case, plan: RunPlan, sensors: bool) -> list:
     )
     s = case.sensors
     bounds = band_boundaries(case.geometry.height, s.bands, s.heights)
-    container = case.geometry.container if plan.geometry.kind == "mesh" else None
+    container = case.geometry.container if kind_of(case.geometry).reads_files else None
     try:
         meshes = silo_meshes(plan.geometry, bounds, plan.sensors.sectors, plan.outlet.z, plan.outlet.radius, sensors,
                              container)
@@ -652,42 +587,8 @@ def wall_meshes(case: Case, plan: RunPlan, sensors: bool) -> list:
 def shaping_fields(case: Case, role: str, kind: str = "angle") -> list[str]:
     """The case fields that shape a wall of ``role``, the likeliest culprit first (for ``kind``
     'edge', a too short edge: the outlet's size, which sets the hopper's shortest sides)."""
-    g = case.geometry
     sensors = "sensors.heights" if case.sensors.heights is not None else "sensors.bands"
-    if isinstance(g, MeshGeometry):      # the user's triangles, cut at the bands and sectors
-        return {"band": [sensors, "sensors.sectors", "geometry.files"], "wall": [sensors, "geometry.files"],
-                "outlet": ["geometry.outlet"]}.get(role, ["geometry.files", "geometry.scale"])
-    offset = ["geometry.outlet_offset"] if getattr(g, "outlet_offset", 0.0) else []
-    if isinstance(g, BoxGeometry):       # its own fields: the outlet's by its shape, width and depth
-        offset += ["geometry.outlet_offset_y"] if g.outlet_offset_y else []
-        outlet = {"rectangle": ["geometry.outlet_width", "geometry.outlet_length"], "slot": ["geometry.outlet_width"],
-                  "circle": ["geometry.outlet_radius"]}[g.outlet]
-        sides = ["geometry.width", "geometry.depth"]
-        if kind == "edge" and role in ("hopper", "bottom", "plate", "outlet"):
-            return outlet + offset + sides
-        return {"band": [sensors, "geometry.height"] + sides, "wall": [sensors, "geometry.height"] + sides,
-                "hopper": offset + ["geometry.half_angle_deg"] + outlet + sides,
-                "bottom": offset + outlet + sides}.get(role, outlet + offset)
-    if kind == "edge" and role in ("hopper", "cone", "bottom", "plate", "outlet"):
-        if isinstance(g, PlanarGeometry):
-            return ["geometry.outlet_width", "geometry.width", "geometry.half_angle_deg", "geometry.thickness"] + offset
-        orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
-        return [orifice, "geometry.mesh_segments", "geometry.radius"] + offset
-    if isinstance(g, PlanarGeometry):
-        return {"band": [sensors, "geometry.height", "geometry.thickness"],
-                "wall": [sensors, "geometry.height", "geometry.thickness"],
-                "hopper": offset + ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width",
-                                    "geometry.thickness"],
-                "bottom": offset + ["geometry.outlet_width", "geometry.width", "geometry.thickness"],
-                "face": offset + ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width",
-                                  "geometry.height"],
-                }.get(role, ["geometry.outlet_width", "geometry.thickness"] + offset)
-    orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
-    return {"band": [sensors, "geometry.height", "geometry.mesh_segments", "sensors.sectors"],
-            "wall": [sensors, "geometry.height", "geometry.mesh_segments"],
-            "cone": offset + ["geometry.half_angle_deg", orifice, "geometry.radius", "geometry.mesh_segments"],
-            "bottom": offset + [orifice, "geometry.radius", "geometry.mesh_segments"],
-            }.get(role, [orifice, "geometry.mesh_segments"])
+    return kind_of(case.geometry).shaping_fields(case.geometry, role, kind, sensors)
 
 
 def own_overlap(species: Species) -> float:
@@ -712,16 +613,11 @@ def guard_limits(case: Case, species: list, v_open: float, z_lowest: float) -> G
     fall = math.sqrt(INSERTION_SPEED ** 2 + 2.0 * case.gravity * (top - z_lowest))
     r_min = min(sp.radius for sp in species if sp.stream == "grains")     # dust: watched by speed and escapes
     margin = gs.escape_margin * 2.0 * case.particles.max_radius
-    planar, box = isinstance(g, PlanarGeometry), isinstance(g, BoxGeometry)
     return Guard(enabled=gs.enabled, max_speed=gs.speed_factor * (fall + v_open),
                  max_overlap=gs.max_overlap * r_min + max(map(own_overlap, species)),
                  max_overlap_fraction=gs.max_overlap, grain_radius=r_min,
                  energy_growth=gs.energy_growth,
-                 escape_radius=None if planar or box else (g.container.outer_radius if isinstance(g, MeshGeometry)
-                                                           else g.half_width) + margin,
-                 escape_half_x=g.half_width + margin if planar or box else None,
-                 escape_half_y=(0.5 * g.thickness if planar else 0.5 * g.depth) + margin if planar or box else None,
-                 escape_z=top + margin)
+                 escape_z=top + margin, **kind_of(g).escape_limits(g, margin))
 
 
 #: depth of a pour's insertion layer at the top of the silo, grain diameters
