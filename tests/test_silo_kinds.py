@@ -6,7 +6,6 @@ from __future__ import annotations
 import inspect
 import math
 import typing
-from importlib import import_module
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +15,7 @@ from siloflow.case import Geometry
 from siloflow.case_file import case_from_dict, load_case
 from siloflow.derived import bed_volume, derive, measured
 from siloflow.plan import Silo
-from siloflow.silos.base import FlatSided, SiloKind
+from siloflow.silos.base import FlatSided, SiloKind, resolve
 from siloflow.silos.registry import SILO_KINDS, kind_of, silo_kind
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,11 +28,6 @@ def _abstract() -> list[str]:
     """The interface's methods a kind must give: those the base class leaves unimplemented."""
     return [name for name, f in vars(SiloKind).items() if inspect.isfunction(f)
             and "raise NotImplementedError" in inspect.getsource(f)]
-
-
-def _resolve(ref: str):
-    module, name = ref.split(":")
-    return getattr(import_module(module), name)
 
 
 def test_the_registry_is_the_case_schemas_and_the_plans_kinds():
@@ -51,9 +45,10 @@ def test_every_kind_provides_the_whole_interface(name):
     assert isinstance(kind, SiloKind) and kind.name == name and kind.title
     for method in _abstract():
         assert getattr(type(kind), method) is not getattr(SiloKind, method), f"{name} lacks {method}"
-    model = _resolve(kind.case_model)
+    model = resolve(kind.case_model)
     assert typing.get_args(model.model_fields["kind"].annotation) == (name,)
     assert callable(kind.builder())
+    assert callable(resolve(kind.lammps_walls)) if kind.lammps_walls else kind.user_triangles  # LAMMPS refuses it
     assert kind.en1991 in (None, "flat", "hopper")
     assert isinstance(kind.design_refusal("cylinder or hopper"), str)
     assert {"bed_volume", "insertion_region", "silo_fields", "escape_limits", "bed_discs"} <= set(_abstract())

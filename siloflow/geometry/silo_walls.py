@@ -201,7 +201,7 @@ def cylinder_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outl
                                      lambda: graded_disc(inner, radius, z, n_ring))
 
     r_out = g.outlet_radius
-    if g.kind == "hopper":
+    if base > 0:                        # a hopper's cone, else a flat floor
         slant = math.hypot(R - r_out, base)
         n_ax = max(1, math.ceil(slant / h_facet))
         meshes.append(_wall("cone", "cone", lambda: _structured_or_graded(

@@ -26,6 +26,9 @@ class SiloKind:
     #: ``"module:function"`` building its walls' meshes (``siloflow.geometry``), imported when a plan
     #: is made (as the engine registry imports an engine), so that post-processing never reaches it
     walls_builder: str = ""
+    #: ``"module:function"`` of its LAMMPS region walls ((plan, floor_dz) -> ``LammpsWall`` list,
+    #: ``siloflow.engine.lammps.deck``); empty when LAMMPS cannot build them
+    lammps_walls: str = ""
     #: its walls are the user's triangles (held to LIGGGHTS' limits, not siloflow's)
     user_triangles: bool = False
     #: the case names files the planner reads (``geometry.files``): located beside the case file,
@@ -113,8 +116,7 @@ class SiloKind:
 
     def builder(self):
         """The function :attr:`walls_builder` names."""
-        module, function = self.walls_builder.split(":")
-        return getattr(import_module(module), function)
+        return resolve(self.walls_builder)
 
     def primitive_sides(self, s) -> list[dict]:
         """The side walls as LIGGGHTS primitives (``siloflow.engine.liggghts.side_walls``): ``fid``,
@@ -178,6 +180,12 @@ class SiloKind:
         (m), and the radius (None for flat walls). ``sectors`` asked (None: the plan's)."""
         raise ReadError(f"re-binning a {self.name} silo's walls is not supported (its sensor pieces are its own "
                         "meshes)")
+
+
+def resolve(ref: str):
+    """What a ``"module:name"`` reference names, its module imported now."""
+    module, name = ref.split(":")
+    return getattr(import_module(module), name)
 
 
 class FlatSided(SiloKind):

@@ -13,6 +13,7 @@ class Box(FlatSided):
     name = "box"
     title = "box"
     case_model = "siloflow.case.geometry:BoxGeometry"
+    lammps_walls = "siloflow.engine.lammps.deck:box_region_walls"
     walls_builder = "siloflow.geometry.silo_walls:box_meshes"
     side_walls = 4
 

@@ -16,6 +16,7 @@ class Cylinder(SiloKind):
     name = "cylinder"
     title = "cylinder"
     case_model = "siloflow.case.geometry:CylinderGeometry"
+    lammps_walls = "siloflow.engine.lammps.deck:cylinder_walls"
     walls_builder = "siloflow.geometry.silo_walls:cylinder_meshes"
     mobile_floor = True
     wall_force_balance = True

@@ -13,6 +13,7 @@ class Hopper(Cylinder):
     name = "hopper"
     title = "hopper"
     case_model = "siloflow.case.geometry:HopperGeometry"
+    lammps_walls = "siloflow.engine.lammps.deck:hopper_walls"
     mobile_floor = False
     wall_force_balance = False
     en1991 = "hopper"

@@ -19,6 +19,7 @@ class Planar(FlatSided):
     name = "planar"
     title = "slab"
     case_model = "siloflow.case.geometry:PlanarGeometry"
+    lammps_walls = "siloflow.engine.lammps.deck:slab_walls"
     walls_builder = "siloflow.geometry.silo_walls:slab_meshes"
     slab = True
     side_walls = 2
