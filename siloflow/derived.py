@@ -7,6 +7,8 @@ unit-tested and written to ``plan.json`` beside the deck. All values SI.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Optional
 
 from . import contact_physics as cp
 from ._version import __version__
@@ -344,9 +346,277 @@ def _engine_options(case) -> dict[str, int]:
     return out
 
 
+@dataclass(frozen=True)
+class GrainBudget:
+    """What the fill's amount and batches need of the species: ``species`` (every one), ``grains``
+    and ``dust`` (None without), ``dust_ratio`` (dust spheres per grain), ``number_fractions`` of
+    the grains, their ``mass_fractions``, ``poured_volume`` (m3, mean volume of a grain as poured:
+    the largest sphere when the bed shrinks after settling), ``dust_volume`` (m3 of dust per grain),
+    ``grain_mass`` (kg, mean mass once the bed has its size distribution), ``shrink``."""
+
+    species: list[Species]
+    grains: list[Species]
+    dust: Optional[Species]
+    dust_ratio: float
+    number_fractions: list[float]
+    mass_fractions: list[float]
+    poured_volume: float
+    dust_volume: float
+    grain_mass: float
+    shrink: bool
+
+    @property
+    def volume_per_grain(self) -> float:
+        """Solid volume inserted per grain, dust included, m3."""
+        return self.poured_volume + self.dust_volume
+
+
+def plan_species(case: Case) -> GrainBudget:
+    """The species of the case and the volumes and masses the fill is planned with."""
+    p = case.particles
+    rho = case.materials.particle.density
+    species = species_of(case)
+    grains = [sp for sp in species if sp.stream == "grains"]
+    dust = next((sp for sp in species if sp.stream == "dust"), None)
+    dust_ratio = p.dust.number_ratio if dust is not None else 0.0
+    vol = sum(sp.number_fraction * sp.volume for sp in grains)      # mean volume per grain
+    mass_fractions = [sp.number_fraction * sp.volume for sp in grains]
+    shrink = getattr(p, "protocol", "insert") == "shrink_after_settling"
+    return GrainBudget(species=species, grains=grains, dust=dust, dust_ratio=dust_ratio,
+                       number_fractions=[sp.number_fraction for sp in grains],
+                       mass_fractions=[w / sum(mass_fractions) for w in mass_fractions],
+                       poured_volume=cp.sphere_volume(p.max_radius) if shrink else vol,  # poured as the largest
+                       dust_volume=dust_ratio * dust.volume if dust is not None else 0.0,
+                       grain_mass=rho * vol, shrink=shrink)
+
+
+def plan_amount(case: Case, budget: GrainBudget) -> tuple[int, int, float]:
+    """The grains and dust spheres the fill inserts, and the expected bed's height (m):
+    ``fill.count``, else as many as ``fill.height`` holds at ``fill.packing_fraction``."""
+    f = case.fill
+    if f.count is not None:
+        count = f.count
+    else:
+        count = int(f.packing_fraction * bed_volume(case, f.height) / budget.volume_per_grain)
+        if count < 1:
+            raise CaseError([("fill.height", f"too low to hold a single particle at fill.packing_fraction "
+                                             f"{f.packing_fraction:g}")])
+    dust_count = round(budget.dust_ratio * count)
+    if budget.dust is not None and dust_count < 1:
+        raise CaseError([("particles.dust.number_ratio", f"{budget.dust_ratio} dust per grain is less than one "
+                          f"dust sphere for {count} grains (fill.count)")])
+    return count, dust_count, bed_height(case, count * budget.volume_per_grain / f.packing_fraction)
+
+
+def plan_insertion(case: Case, h_bed: float) -> tuple[float, float, dict, float]:
+    """The insertion heights z_min, z_max (m) above the expected bed ``h_bed`` (m) and below the
+    top, the region between them (``InsertionRegion`` fields) and its volume (m3); ``CaseError``
+    when the bed leaves it no room."""
+    f, g, p = case.fill, case.geometry, case.particles
+    r = p.max_radius                       # geometry margins use the largest grain (clumps: bounding sphere)
+    d = 2 * r
+    top = g.hopper_height + g.height
+    z_max = f.insertion_z_max if f.insertion_z_max is not None else top - 0.5 * d
+    z_min = f.insertion_z_min if f.insertion_z_min is not None else max(
+        h_bed + 2 * d, z_max - max(0.3 * g.height, 4 * d), g.hopper_height + d)
+    if f.protocol == "pour" and f.insertion_z_min is None:      # a thin layer at a fixed height
+        z_min = max(z_min, z_max - POUR_LAYER * d)
+    if z_max - z_min < 2 * d:
+        amount = "fill.height" if f.height is not None else "fill.count"
+        raise CaseError([("fill", f"the expected bed ({h_bed:.4g} m: {amount} at fill.packing_fraction "
+                          f"{f.packing_fraction}) leaves no room to insert particles below the top "
+                          f"({top:.4g} m): fill fewer particles or make the silo taller (geometry.height)")])
+    pour = f.pour_radius if f.pour_radius is not None else g.half_width      # central or distributed fill
+    return (z_min, z_max) + kind_of(g).insertion_region(g, p, pour, r, z_min, z_max)
+
+
+def plan_timestep(case: Case, budget: GrainBudget, v_impact: float) -> tuple[TimeStep, list[PairParameters], dict]:
+    """The time step (the shortest contact of any pair of species at impact speed ``v_impact``,
+    m/s, times ``engine.timestep_fraction``; dust's cost reported), every pair's contact parameters,
+    and the smallest grain's with itself and the walls (``particle_particle``, ``particle_wall``)."""
+    species, grains, dust = budget.species, budget.grains, budget.dust
+    contacts = contact_pairs(case, species, v_impact)
+    smallest = min(grains, key=lambda sp: sp.radius).name          # its contacts are the shortest
+    by_names = {(c.a, c.b): c for c in contacts}
+    pairs = {"particle_particle": by_names[(smallest, smallest)].model_copy(update={"name": "particle_particle"}),
+             "particle_wall": by_names[(smallest, WALL)].model_copy(update={"name": "particle_wall"})}
+    t_crit, source = critical_time(case, species, contacts)
+    rayleigh = None
+    if case.materials.model == "hertz":
+        pm = case.materials.particle
+        rayleigh = cp.rayleigh_time(case.particles.min_radius, pm.density, pm.youngs_modulus, pm.poisson_ratio)
+    dt_without_dust = None
+    if dust is not None:
+        no_dust = [c for c in contacts if dust.name not in (c.a, c.b)]
+        dt_without_dust = case.engine.timestep_fraction * critical_time(case, grains, no_dust)[0]
+    timestep = TimeStep(dt=case.engine.timestep_fraction * t_crit, fraction=case.engine.timestep_fraction,
+                        critical_time=t_crit, critical_time_source=source, rayleigh_time=rayleigh,
+                        without_dust=dt_without_dust)
+    return timestep, contacts, pairs
+
+
+
+def plan_fill(case: Case, budget: GrainBudget, count: int, dust_count: int, h_bed: float,
+              insertion: tuple[float, float, dict, float], dt: float, v_impact: float) -> Fill:
+    """The fill's batches: as many grains as ``fill.batch_volume_fraction`` of the insertion region
+    holds (:func:`plan_insertion`'s ``insertion``; a pour: one small batch per clearing time over
+    ``fill.pour_time``), each leaving the region before the next comes; the steps of the whole fill
+    (``dt`` s, grains inserted at ``v_impact`` m/s)."""
+    f, p = case.fill, case.particles
+    z_min, z_max, region, region_volume = insertion
+    batch = max(1, min(count, int(f.batch_volume_fraction * region_volume / budget.volume_per_grain)))
+    h_region = z_max - z_min
+    t_clear = (-INSERTION_SPEED + math.sqrt(INSERTION_SPEED ** 2 + 2 * case.gravity * h_region)) / case.gravity
+    insert_every = _steps(1.1 * t_clear, dt)
+    if f.protocol == "pour":        # small batches, one per clearing time, over the pour time
+        wanted = math.ceil(count / max(1, math.floor(f.pour_time / (insert_every * dt))))
+        if wanted > batch:
+            raise CaseError([("fill.pour_time", f"{f.pour_time} s is too short to pour {count} grains through a "
+                              f"layer {POUR_LAYER} grains deep: at most {batch} per {insert_every * dt:.3g} s fit, "
+                              f"so the pour takes at least {math.ceil(count / batch) * insert_every * dt:.3g} s")])
+        batch = max(1, wanted)
+    n_batches = math.ceil(count / batch)
+    t_fall = (-INSERTION_SPEED + math.sqrt(INSERTION_SPEED ** 2 + 2 * case.gravity * z_max)) / case.gravity
+    fill_steps = n_batches * insert_every + _steps(1.5 * t_fall, dt)
+    return Fill(count=count, dust_count=dust_count, batch=batch,
+                dust_batch=math.ceil(batch * budget.dust_ratio) if budget.dust is not None else 0,
+                insert_every=insert_every, insertion_speed=INSERTION_SPEED,
+                region=InsertionRegion(**region), steps=fill_steps, frictionless=f.frictionless,
+                radii=list(p.radii), number_fractions=list(budget.number_fractions),
+                mass_fractions=budget.mass_fractions,
+                shrink_classes=shrink_classes(p.radii, budget.number_fractions) if budget.shrink else [],
+                packing_fraction=f.packing_fraction, bed_height_estimate=h_bed, impact_velocity=v_impact)
+
+
+def plan_settle(case: Case, dt: float) -> Settle:
+    """The settling's checks: one every ``fill.settle.check_interval`` (``dt`` s steps), up to its
+    ``max_time``."""
+    s = case.fill.settle
+    return Settle(ke_pe_ratio=s.ke_pe_ratio, chunk_steps=_steps(s.check_interval, dt),
+                  max_chunks=max(1, math.ceil(s.max_time / s.check_interval)))
+
+
+def plan_opening(case: Case, dt: float) -> tuple[Outlet, Opening]:
+    """The counting disc two grain diameters below the orifice, over the outlet, and the plate's
+    opening: down three times as far, faster than the grains fall after it (``CaseError`` if not)."""
+    d = 2 * case.particles.max_radius
+    outlet_z = -2.0 * d
+    v_open = case.discharge.opening.speed
+    plate_travel = 3.0 * abs(outlet_z)
+    check_opening(case.gravity, v_open, outlet_z)
+    return (Outlet(z=outlet_z, radius=kind_of(case.geometry).outlet_reach(case.geometry) + 2 * d),
+            Opening(speed=v_open, travel=plate_travel, steps=_steps(plate_travel / v_open, dt)))
+
+
+def plan_discharge(case: Case, dt: float, total_mass: float) -> Discharge:
+    """The discharge's chunks (``dt`` s steps): 0.1 s ones until empty (``empty_fraction`` of
+    ``total_mass``, kg, left), batches until steady, or one of ``discharge.duration``."""
+    dis = case.discharge
+    steady = None
+    if dis.until_empty:
+        chunk_time = min(0.1, dis.max_time)
+        d_chunk, d_chunks = _steps(chunk_time, dt), max(1, math.ceil(dis.max_time / chunk_time))
+    elif dis.until_steady:
+        d_chunk = _steps(dis.batch_time, dt)
+        d_chunks = max(1, math.ceil(dis.max_time / dis.batch_time))
+        steady = SteadyStop(precision=dis.precision, chunk_time=d_chunk * dt,
+                            skip_chunks=math.ceil(dis.startup_time / (d_chunk * dt) - 1e-9),
+                            min_batches=dis.min_batches)
+    else:
+        d_chunk, d_chunks = _steps(dis.duration, dt), 1
+    return Discharge(chunk_steps=d_chunk, max_chunks=d_chunks, until_empty=dis.until_empty, steady=steady,
+                     empty_mass=dis.empty_fraction * total_mass)
+
+
+def plan_outputs(case: Case, dt: float, thermo_every: int) -> Outputs:
+    """What the deck writes and how often (``dt`` s steps): wall-force averages of 5 samples per
+    ``outputs.sample_interval``, thermo every ``thermo_every`` steps (the settling's checks read it),
+    dumps as the results need them (:func:`result_needs`)."""
+    out = case.outputs
+    needs = result_needs(case)
+    sample_freq = _steps(out.sample_interval, dt)
+    sample_every = max(1, sample_freq // 5)  # 5 samples per average: wall-force sampling is not free
+    sample_repeat = sample_freq // sample_every
+    sample_freq = sample_every * sample_repeat
+    dump_every = None
+    if needs["dumps"]:              # outputs.dump_interval, else as often as the frame analyses need
+        dump_every = _steps(out.dump_interval or auto_dump_interval(case), dt)
+    return Outputs(thermo_every=thermo_every, sample_steps=sample_freq, samples_per_average=sample_repeat,
+                   dump_every=dump_every, vtk=bool(dump_every and needs["vtk"]),
+                   contacts=bool(dump_every and needs["contacts"]), results=out.results,
+                   wall_pressure=needs["wall_pressure"], wall_forces=needs["wall_forces"])
+
+
+def plan_static(case: Case, dt: float, outputs: Outputs) -> int:
+    """The static window's steps (``dt`` s each): at least two of the outputs' samples, else
+    ``CaseError``."""
+    static_steps = _steps(case.fill.settle.static_window, dt)
+    if static_steps < 2 * outputs.sample_steps:      # the time check of the case can miss by a rounded step
+        raise CaseError([("fill.settle.static_window", f"{static_steps} steps hold fewer than two samples of "
+                          f"{outputs.sample_steps} steps (outputs.sample_interval): no static wall-load sample")])
+    return static_steps
+
+
+def plan_silo(case: Case) -> Silo:
+    """The plan's silo: the fields every kind has, and its kind's own (``SiloKind.silo_fields``)."""
+    g = case.geometry
+    return Silo(kind=g.kind, half_width=g.half_width, height=g.height, hopper_height=g.hopper_height,
+                outlet_radius=g.outlet_radius, outlet_offset=g.outlet_offset, **kind_of(g).silo_fields(g))
+
+
+def plan_materials(case: Case, dust: bool) -> dict[str, Material]:
+    """The elastic constants of the particles, the walls and (``dust``) the dust."""
+    names = {"particle": "particle", "wall": None}
+    if dust:
+        names["dust"] = "dust"
+    return {name: Material(youngs_modulus=_modulus_of(case, m)[0], poisson_ratio=_modulus_of(case, m)[1])
+            for name, m in names.items()}
+
+
+def plan_walls(case: Case, plan: RunPlan) -> RunPlan:
+    """The plan with its walls (their meshes generated and the inserts' read: :func:`wall_meshes`),
+    the floor's lowering (``fill.mobilise``) or the fill protocol, the sensor bands counted and the
+    physics warnings; ``CaseError`` for a dump interval longer than the whole run."""
+    f, out, dt = case.fill, case.outputs, plan.dt
+    meshes = wall_meshes(case, plan, sensors=plan.outputs.wall_pressure)
+    walls = [Wall(**m.info()) for m in meshes]
+    if f.mobilise is not None or f.protocol != "rain":
+        plan = plan.model_copy(update={"fill": plan.fill.model_copy(update={
+            "protocol": f.protocol, "mobilise": mobilise_plan(case, meshes, dt)})})
+    total = plan.total_planned_steps
+    dump_every = plan.outputs.dump_every
+    if out.dump_interval is not None and dump_every is not None and dump_every > total:
+        raise CaseError([("outputs.dump_interval", f"{out.dump_interval:g} s is longer than the whole run (at most "
+                          f"{total * dt:.4g} s with every stage at its cap): no frame would be written after the "
+                          "first; give a shorter interval, or none (the frame analyses then choose one)")])
+    plan = plan.model_copy(update={
+        "walls": walls, "warnings": physics_warnings(case, plan),
+        "sensors": Sensors(bands=len([w for w in walls if w.role == "band"]) // plan.sensors.sectors,
+                           sectors=plan.sensors.sectors)})
+    plan._meshes = meshes
+    return plan
+
+
+def plan_profile(settings: dict) -> Profile:
+    """The engine profile's settings as the plan records them (``siloflow.profiles.profile_settings``)."""
+    return Profile(name=settings["profile"], timestep_fraction=settings["timestep_fraction"],
+                   stiffness_scale=settings["stiffness_scale"], overlap_ratio=settings.get("overlap_ratio"),
+                   speedup=settings.get("speedup"),
+                   error_bounds=settings.get("error_bounds", {}), tolerances=settings.get("tolerances", {}),
+                   benchmark=settings.get("benchmark", ""), question=settings.get("question"),
+                   unbounded=settings.get("unbounded", []), measured=settings.get("measured", {}))
+
+
+def plan_sensors(case: Case) -> Sensors:
+    """The sensor sectors per band (the kind's: ``SiloKind.sensor_sectors``); the bands are counted
+    once the walls are cut (:func:`plan_walls`)."""
+    return Sensors(bands=0, sectors=kind_of(case.geometry).sensor_sectors(case.geometry, case.sensors.sectors))
+
+
 def derive(case: Case) -> RunPlan:
     """The run plan of a case: every value any engine needs, computed once, with the walls' meshes
-    (generated, and the inserts' read from their files and checked).
+    (generated, and the inserts' read from their files and checked); one planner per section
+    (``plan_*``), in the order their checks run.
 
     Raises
     ------
@@ -361,191 +631,33 @@ def derive(case: Case) -> RunPlan:
     # walls read are handed on)
     container = case.geometry.container if kind_of(case.geometry).reads_files else None
     case = measured(effective_case(case, settings), container)
-    g = case.geometry
-    kind = kind_of(g)
-    p = case.particles
-    r = p.max_radius                       # geometry margins use the largest grain (clumps: bounding sphere)
-    d = 2 * r
-    rho = case.materials.particle.density
-    species = species_of(case)
-    grains = [sp for sp in species if sp.stream == "grains"]
-    dust = next((sp for sp in species if sp.stream == "dust"), None)
-    dust_ratio = p.dust.number_ratio if dust is not None else 0.0
-    numbers = [sp.number_fraction for sp in grains]
-    vol = sum(sp.number_fraction * sp.volume for sp in grains)      # mean volume per grain
-    mass = rho * vol
-    mass_fractions = [sp.number_fraction * sp.volume for sp in grains]
-    mass_fractions = [w / sum(mass_fractions) for w in mass_fractions]
-    final_mass = mass                      # mean grain mass once the bed has its size distribution
-    shrink = getattr(p, "protocol", "insert") == "shrink_after_settling"
-    if shrink:        # the bed is poured as grains of the largest radius
-        vol = cp.sphere_volume(r)
-        mass = rho * vol
-    dust_vol = dust_ratio * dust.volume if dust is not None else 0.0    # dust volume per grain
-    f = case.fill
-    top = g.hopper_height + g.height
-    if f.count is not None:
-        count = f.count
-    else:
-        count = int(f.packing_fraction * bed_volume(case, f.height) / (vol + dust_vol))
-        if count < 1:
-            raise CaseError([("fill.height", f"too low to hold a single particle at fill.packing_fraction "
-                                             f"{f.packing_fraction:g}")])
-    dust_count = round(dust_ratio * count)
-    if dust is not None and dust_count < 1:
-        raise CaseError([("particles.dust.number_ratio", f"{dust_ratio} dust per grain is less than one "
-                          f"dust sphere for {count} grains (fill.count)")])
-    h_bed = bed_height(case, count * (vol + dust_vol) / f.packing_fraction)
-
-    # insertion region: above the expected bed, below the top
-    z_max = f.insertion_z_max if f.insertion_z_max is not None else top - 0.5 * d
-    z_min = f.insertion_z_min if f.insertion_z_min is not None else max(
-        h_bed + 2 * d, z_max - max(0.3 * g.height, 4 * d), g.hopper_height + d)
-    if f.protocol == "pour" and f.insertion_z_min is None:      # a thin layer at a fixed height
-        z_min = max(z_min, z_max - POUR_LAYER * d)
-    if z_max - z_min < 2 * d:
-        amount = "fill.height" if f.height is not None else "fill.count"
-        raise CaseError([("fill", f"the expected bed ({h_bed:.4g} m: {amount} at fill.packing_fraction "
-                          f"{f.packing_fraction}) leaves no room to insert particles below the top "
-                          f"({top:.4g} m): fill fewer particles or make the silo taller (geometry.height)")])
-    pour = f.pour_radius if f.pour_radius is not None else g.half_width      # central or distributed fill
-    insertion_region, region_volume = kind.insertion_region(g, p, pour, r, z_min, z_max)
-    batch = max(1, min(count, int(f.batch_volume_fraction * region_volume / (vol + dust_vol))))
-
-    # time step: the shortest contact of any pair of types; dust's cost is reported
-    v_impact = cp.free_fall_speed(z_max, case.gravity, INSERTION_SPEED)
-    contacts = contact_pairs(case, species, v_impact)
-    smallest = min(grains, key=lambda sp: sp.radius).name          # its contacts are the shortest
-    by_names = {(c.a, c.b): c for c in contacts}
-    pairs = {"particle_particle": by_names[(smallest, smallest)].model_copy(update={"name": "particle_particle"}),
-             "particle_wall": by_names[(smallest, WALL)].model_copy(update={"name": "particle_wall"})}
-    t_crit, source = critical_time(case, species, contacts)
-    rayleigh = None
-    if case.materials.model == "hertz":
-        pm = case.materials.particle
-        rayleigh = cp.rayleigh_time(p.min_radius, rho, pm.youngs_modulus, pm.poisson_ratio)
-    dt = case.engine.timestep_fraction * t_crit
-    dt_without_dust = None
-    if dust is not None:
-        no_dust = [c for c in contacts if dust.name not in (c.a, c.b)]
-        dt_without_dust = case.engine.timestep_fraction * critical_time(case, grains, no_dust)[0]
-
-    # fill: batches leave the region before the next one comes
-    h_region = z_max - z_min
-    t_clear = (-INSERTION_SPEED + math.sqrt(INSERTION_SPEED ** 2 + 2 * case.gravity * h_region)) / case.gravity
-    insert_every = _steps(1.1 * t_clear, dt)
-    if f.protocol == "pour":        # small batches, one per clearing time, over the pour time
-        wanted = math.ceil(count / max(1, math.floor(f.pour_time / (insert_every * dt))))
-        if wanted > batch:
-            raise CaseError([("fill.pour_time", f"{f.pour_time} s is too short to pour {count} grains through a "
-                              f"layer {POUR_LAYER} grains deep: at most {batch} per {insert_every * dt:.3g} s fit, "
-                              f"so the pour takes at least {math.ceil(count / batch) * insert_every * dt:.3g} s")])
-        batch = max(1, wanted)
-    n_batches = math.ceil(count / batch)
-    t_fall = (-INSERTION_SPEED + math.sqrt(INSERTION_SPEED ** 2 + 2 * case.gravity * z_max)) / case.gravity
-    fill_steps = n_batches * insert_every + _steps(1.5 * t_fall, dt)
-
-    s = f.settle
-    settle_chunk = _steps(s.check_interval, dt)
-    settle_chunks = max(1, math.ceil(s.max_time / s.check_interval))
-
-    # opening: the plate moves down, below the counting disc, faster than the grains fall after it
-    outlet_z = -2.0 * d
-    v_open = case.discharge.opening.speed
-    plate_travel = 3.0 * abs(outlet_z)
-    check_opening(case.gravity, v_open, outlet_z)
-    open_steps = _steps(plate_travel / v_open, dt)
-
-    dis = case.discharge
-    steady = None
-    if dis.until_empty:
-        chunk_time = min(0.1, dis.max_time)
-        d_chunk, d_chunks = _steps(chunk_time, dt), max(1, math.ceil(dis.max_time / chunk_time))
-    elif dis.until_steady:
-        d_chunk = _steps(dis.batch_time, dt)
-        d_chunks = max(1, math.ceil(dis.max_time / dis.batch_time))
-        steady = SteadyStop(precision=dis.precision, chunk_time=d_chunk * dt,
-                            skip_chunks=math.ceil(dis.startup_time / (d_chunk * dt) - 1e-9),
-                            min_batches=dis.min_batches)
-    else:
-        d_chunk, d_chunks = _steps(dis.duration, dt), 1
-
-    out = case.outputs
-    needs = result_needs(case)
-    sample_freq = _steps(out.sample_interval, dt)
-    sample_every = max(1, sample_freq // 5)  # 5 samples per average: wall-force sampling is not free
-    sample_repeat = sample_freq // sample_every
-    sample_freq = sample_every * sample_repeat
-    thermo_every = settle_chunk  # settle checks read thermo values, so they must coincide
-    dump_every = None
-    if needs["dumps"]:              # outputs.dump_interval, else as often as the frame analyses need
-        dump_every = _steps(out.dump_interval or auto_dump_interval(case), dt)
-
-    static_steps = _steps(s.static_window, dt)
-    if static_steps < 2 * sample_freq:      # the time check of the case can miss by a rounded step
-        raise CaseError([("fill.settle.static_window", f"{static_steps} steps hold fewer than two samples of "
-                          f"{sample_freq} steps (outputs.sample_interval): no static wall-load sample")])
-    silo = Silo(kind=g.kind, half_width=g.half_width, height=g.height, hopper_height=g.hopper_height,
-                outlet_radius=g.outlet_radius, outlet_offset=g.outlet_offset, **kind.silo_fields(g))
-    materials = {"particle": Material(youngs_modulus=_modulus_of(case, "particle")[0],
-                                      poisson_ratio=_modulus_of(case, "particle")[1]),
-                 "wall": Material(youngs_modulus=_modulus_of(case, None)[0], poisson_ratio=_modulus_of(case, None)[1])}
-    if dust is not None:
-        materials["dust"] = Material(youngs_modulus=_modulus_of(case, "dust")[0],
-                                     poisson_ratio=_modulus_of(case, "dust")[1])
+    budget = plan_species(case)
+    count, dust_count, h_bed = plan_amount(case, budget)
+    insertion = plan_insertion(case, h_bed)
+    v_impact = cp.free_fall_speed(insertion[1], case.gravity, INSERTION_SPEED)
+    timestep, contacts, pairs = plan_timestep(case, budget, v_impact)
+    dt = timestep.dt
+    fill = plan_fill(case, budget, count, dust_count, h_bed, insertion, dt, v_impact)
+    settle = plan_settle(case, dt)
+    outlet, opening = plan_opening(case, dt)
+    total_mass = count * budget.grain_mass + (dust_count * budget.dust.mass if budget.dust is not None else 0.0)
+    discharge = plan_discharge(case, dt, total_mass)
+    outputs = plan_outputs(case, dt, settle.chunk_steps)  # settle checks read thermo values: they coincide
+    static_steps = plan_static(case, dt, outputs)
     plan = RunPlan(
         siloflow_version=__version__, name=case.name,
         engine=EngineChoice(name=case.engine.name, ranks=case.engine.ranks, options=_engine_options(case)),
-        profile=Profile(name=settings["profile"], timestep_fraction=settings["timestep_fraction"],
-                        stiffness_scale=settings["stiffness_scale"], overlap_ratio=settings.get("overlap_ratio"),
-                        speedup=settings.get("speedup"),
-                        error_bounds=settings.get("error_bounds", {}), tolerances=settings.get("tolerances", {}),
-                        benchmark=settings.get("benchmark", ""), question=settings.get("question"),
-                        unbounded=settings.get("unbounded", []), measured=settings.get("measured", {})),
-        guard=guard_limits(case, species, v_open, outlet_z - plate_travel),
-        gravity=case.gravity, seed=case.seed, geometry=silo, species=species, materials=materials,
-        contact_model=case.materials.model, contacts=contacts, pairs=pairs,
-        timestep=TimeStep(dt=dt, fraction=case.engine.timestep_fraction, critical_time=t_crit,
-                          critical_time_source=source, rayleigh_time=rayleigh, without_dust=dt_without_dust),
-        fill=Fill(count=count, dust_count=dust_count, batch=batch,
-                  dust_batch=math.ceil(batch * dust_ratio) if dust is not None else 0,
-                  insert_every=insert_every, insertion_speed=INSERTION_SPEED,
-                  region=InsertionRegion(**insertion_region), steps=fill_steps, frictionless=f.frictionless,
-                  radii=list(p.radii), number_fractions=list(numbers), mass_fractions=mass_fractions,
-                  shrink_classes=shrink_classes(p.radii, numbers) if shrink else [],
-                  packing_fraction=f.packing_fraction, bed_height_estimate=h_bed, impact_velocity=v_impact),
-        settle=Settle(ke_pe_ratio=s.ke_pe_ratio, chunk_steps=settle_chunk, max_chunks=settle_chunks),
-        static_steps=static_steps,
-        opening=Opening(speed=v_open, travel=plate_travel, steps=open_steps),
-        discharge=Discharge(chunk_steps=d_chunk, max_chunks=d_chunks, until_empty=dis.until_empty, steady=steady,
-                            empty_mass=dis.empty_fraction * (count * final_mass + (dust_count * dust.mass if dust
-                                                                                   is not None else 0.0))),
-        outlet=Outlet(z=outlet_z, radius=kind.outlet_reach(g) + 2 * d),
-        sensors=Sensors(bands=0, sectors=kind.sensor_sectors(g, case.sensors.sectors)),
-        outputs=Outputs(thermo_every=thermo_every, sample_steps=sample_freq, samples_per_average=sample_repeat,
-                        dump_every=dump_every, vtk=bool(dump_every and needs["vtk"]),
-                        contacts=bool(dump_every and needs["contacts"]), results=out.results,
-                        wall_pressure=needs["wall_pressure"], wall_forces=needs["wall_forces"]),
-        total_mass=count * final_mass + (dust_count * dust.mass if dust is not None else 0.0),
-        particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass,
-        analysis=case.analysis, design=case.design, run_length_fields=run_length_fields(case, source, settings["profile"]),
+        profile=plan_profile(settings),
+        guard=guard_limits(case, budget.species, opening.speed, outlet.z - opening.travel),
+        gravity=case.gravity, seed=case.seed, geometry=plan_silo(case), species=budget.species,
+        materials=plan_materials(case, budget.dust is not None), contact_model=case.materials.model, contacts=contacts, pairs=pairs,
+        timestep=timestep, fill=fill, settle=settle, static_steps=static_steps, opening=opening,
+        discharge=discharge, outlet=outlet, sensors=plan_sensors(case), outputs=outputs, total_mass=total_mass,
+        particle_radius=case.particles.max_radius, particle_volume=budget.grain_mass / case.materials.particle.density,
+        particle_mass=budget.grain_mass, analysis=case.analysis, design=case.design,
+        run_length_fields=run_length_fields(case, timestep.critical_time_source, settings["profile"]),
     )
-    meshes = wall_meshes(case, plan, sensors=needs["wall_pressure"])
-    walls = [Wall(**m.info()) for m in meshes]
-    if f.mobilise is not None or f.protocol != "rain":
-        plan = plan.model_copy(update={"fill": plan.fill.model_copy(update={
-            "protocol": f.protocol, "mobilise": mobilise_plan(case, meshes, dt)})})
-    total = plan.total_planned_steps
-    if out.dump_interval is not None and dump_every is not None and dump_every > total:
-        raise CaseError([("outputs.dump_interval", f"{out.dump_interval:g} s is longer than the whole run (at most "
-                          f"{total * dt:.4g} s with every stage at its cap): no frame would be written after the "
-                          "first; give a shorter interval, or none (the frame analyses then choose one)")])
-    plan = plan.model_copy(update={
-        "walls": walls, "warnings": physics_warnings(case, plan),
-        "sensors": Sensors(bands=len([w for w in walls if w.role == "band"]) // plan.sensors.sectors,
-                           sectors=plan.sensors.sectors)})
-    plan._meshes = meshes
-    return plan
+    return plan_walls(case, plan)
 
 
 def wall_meshes(case: Case, plan: RunPlan, sensors: bool) -> list:

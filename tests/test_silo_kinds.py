@@ -95,8 +95,9 @@ def test_a_kinds_plan_and_post_processing_agree(plan_case):
         assert on.all() and 0 <= sector[0] < n
 
 
-def test_the_round_kinds_volumes_are_their_formulas(quick_dict):
-    """A cylinder's volume pi R^2 h; a slab's and a box's without a hopper their sections times h."""
+def test_kinds_volumes_and_sections_are_their_formulas(quick_dict):
+    """A cylinder's volume pi R^2 h; a box's and a slab's Janssen sections (area, m2, and grip: friction
+    times the perimeter it acts on, m)."""
     case = case_from_dict(quick_dict)
     g = case.geometry
     assert silo_kind("cylinder").bed_volume(g, 0.1) == pytest.approx(math.pi * g.radius ** 2 * 0.1)

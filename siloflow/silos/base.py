@@ -43,7 +43,6 @@ class SiloKind:
     #: the wall's normal force from band pressures (2 pi R per unit height) is compared with the
     #: force balance of a flat-floored cylinder
     wall_force_balance: bool = False
-
     #: EN 1991-4's circular silo it is (``siloflow.design_loads``): ``flat`` bottomed or ``hopper``;
     #: None for none the standard covers
     en1991: str | None = None
