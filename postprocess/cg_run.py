@@ -13,6 +13,7 @@ import numpy as np
 from siloflow.atomic_files import read_json
 from siloflow.errors import ReadError
 from siloflow.run_folder import CG_SUMMARY_NAME, RunFolder
+from siloflow.silos.registry import silo_kind
 
 from .cg_analyses import axial_profiles, janda_fit, kinetic_peak_height, outlet_profiles, species_kinetic_table
 from .cg_kernels import make_kernel
@@ -68,6 +69,7 @@ def setup_from_run(folder) -> CgSetup:
     walls = run.dump_files("wall_contacts") if layout.wall_contact_columns else None
     primitives = primitive_wall_files(run) if walls else []
     g = plan.geometry
+    kind = silo_kind(g.kind)
     top = summary.get("frame_analyses", {}).get("settled_surface_height_m") or g.top
     densities = {sp.density for sp in plan.species}
     rho_p = plan.grains[0].density
@@ -79,9 +81,9 @@ def setup_from_run(folder) -> CgSetup:
     return CgSetup(atoms, contacts, layout.contact_columns or None, g.half_width, plan.outlet.z,
                    float(top), 0.0, g.outlet_radius, rho_p,
                    int(rate["t_start"] / dt), int(rate["t_end"] / dt), walls, layout.wall_contact_columns or None,
-                   slab_thickness=g.thickness if g.kind == "planar" else None, note=note,
+                   slab_thickness=kind.grid_slab(g), note=note,
                    clump_mass=layout.clump_mass, outlet_offset=getattr(g, "outlet_offset", 0.0),
-                   half_depth=g.half_depth if g.kind == "box" else None, primitive_walls=primitives)
+                   half_depth=kind.grid_half_depth(g), primitive_walls=primitives)
 
 
 @dataclass

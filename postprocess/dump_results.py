@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from siloflow.errors import ReadError
+from siloflow.silos.registry import silo_kind
 
 from .coordination import Coordination
 from .dumps import Frame, read_frames
@@ -89,16 +90,8 @@ def bed_regions(g, surface: float, d: float) -> list[MeasureRegion]:
     z1 = surface - 3.0 * d
     if z1 - z0 < 2.0 * d:
         raise ReadError(f"the settled bed ({surface:.4g} m) is too shallow for a bulk measurement region")
-    if g.kind == "planar":
-        # a slab: discs through the thickness (cylinders along y) at mid-bed, as large as the bed allows
-        half = 0.5 * (z1 - z0)
-        mid, t = (0.0, 0.0, 0.5 * (z0 + z1)), 0.5 * g.thickness
-        return [MeasureRegion("bulk_core", "cylinder", mid, min(g.half_width - 2.0 * d, half), axis=1, t0=-t, t1=t),
-                MeasureRegion("cross_section", "cylinder", mid, min(g.half_width, half), axis=1, t0=-t, t1=t)]
-    # a cylinder, or a box: the vertical cylinder inscribed in its cross-section
-    radius = g.radius if g.kind != "box" else min(g.half_width, 0.5 * g.depth)
-    return [MeasureRegion("bulk_core", "cylinder", (0.0, 0.0, 0.0), radius - 2.0 * d, axis=2, t0=z0, t1=z1),
-            MeasureRegion("cross_section", "cylinder", (0.0, 0.0, 0.0), radius, axis=2, t0=z0, t1=z1)]
+    return [MeasureRegion(name, "cylinder", centre, radius, axis=axis, t0=t0, t1=t1)
+            for name, centre, radius, axis, t0, t1 in silo_kind(g.kind).bed_discs(g, z0, z1, d)]
 
 
 def janssen_diameter(g) -> float:
@@ -106,14 +99,7 @@ def janssen_diameter(g) -> float:
     cylinder; for a slab 4 A / P with P the perimeter that carries wall friction (the side
     walls, and the faces only when they have friction); for a box 4 A / P of its four walls; for a
     silo from STL 4 A / P of its vertical walls' section half way up."""
-    if g.kind == "mesh":
-        return g.hydraulic_diameter
-    if g.kind == "box":
-        return 4.0 * g.width * g.depth / (2.0 * (g.width + g.depth))
-    if g.kind != "planar":
-        return 2.0 * g.radius
-    perimeter = 2.0 * g.thickness + (2.0 * g.width if g.face_friction > 0 else 0.0)
-    return 4.0 * g.width * g.thickness / perimeter
+    return silo_kind(g.kind).janssen_diameter(g)
 
 
 def case_regions(analysis) -> list[MeasureRegion]:
@@ -164,12 +150,12 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
 
     g = plan.geometry
     R = g.half_width
-    planar, box = g.kind == "planar", g.kind == "box"
+    kind = silo_kind(g.kind)
 
     # free surface over all frames (a box: strips across its width, its whole depth); its table also
     # says which frames exist
     surface = FreeSurface(radius=R, z_min=g.hopper_height, timestep=dt,
-                          thickness=g.thickness if planar else g.depth if box else None).run(read_frames(atoms_files))
+                          thickness=kind.surface_thickness(g)).run(read_frames(atoms_files))
     results.add_analysis(surface)
     steps = surface.table.step
     if not (steps <= open_step).any():
@@ -212,10 +198,7 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
     def core(frame: Frame) -> np.ndarray:
         p = frame.positions()
         top = float(p[:, 2].max()) if frame.n else 0.0
-        across = np.abs(p[:, 0]) if planar else np.hypot(p[:, 0], p[:, 1])
-        if box:                    # the core: two diameters from each of the four walls
-            across = np.maximum(np.abs(p[:, 0]), np.abs(p[:, 1]) + R - 0.5 * g.depth)
-        return ((across < R - 2 * d) & (p[:, 2] > g.hopper_height + 2 * d)
+        return ((kind.across(g, p) < R - 2 * d) & (p[:, 2] > g.hopper_height + 2 * d)
                 & (p[:, 2] < top - 2 * d))
 
     def settled_coordination(coord) -> None:
@@ -246,7 +229,7 @@ def analyse_dumps(run, bands_table: pd.DataFrame, discharge: pd.DataFrame, flow_
         return summary
 
     # Wr (free-surface speed) against Wf (outlet count) in Wf's steady window
-    area = g.section_area if g.kind == "mesh" else surface.area     # the bed's whole cross-section
+    area = kind.bed_area(g, surface.area)     # the bed's whole cross-section
     st = surface.table
     in_window = (st.time >= flow_rate.t_start) & (st.time <= flow_rate.t_end) & (st.surface_height > g.hopper_height + 3 * d)
     wr = surface_flow_rate(st.time[in_window], st.surface_height[in_window], area, rho_section)

@@ -19,6 +19,7 @@ import pandas as pd
 from siloflow.design_loads import bulk_solid, design_loads
 from siloflow.errors import ReadError
 from siloflow.run_folder import RESULT_TABLES, RunFolder
+from siloflow.silos.registry import silo_kind
 
 from .batch_means import batch_means_stderr
 from .discharge import clog, discharge_table, steady_flow_rate
@@ -189,17 +190,7 @@ def eccentric_discharge(table: pd.DataFrame, sectors: int, offset: float, kind: 
     sum(m^2)) / 2, d a pair's difference, e its time-series error and m its mean pressure (the
     loaded bands weigh most).
     ``table``: :func:`sector_statistics`."""
-    if kind in ("planar", "box"):       # sectors 0, 1 the walls at x = -+ width/2; a box's 2, 3 at y = -+ depth/2
-        if kind == "box" and abs(offset_y) > abs(offset):
-            near, far = (3, [2]) if offset_y > 0 else (2, [3])
-        else:
-            near, far = (1, [0]) if offset > 0 else (0, [1])
-        pairs = []
-    else:
-        near = 0
-        far = [sectors // 2] if sectors % 2 == 0 else [sectors // 2, sectors // 2 + 1]
-        # mirror pairs: equal by symmetry on a cylinder; a silo from STL need not be symmetric
-        pairs = [(k, sectors - k) for k in range(1, (sectors + 1) // 2) if k != sectors - k] if kind != "mesh" else []
+    near, far, pairs = silo_kind(kind).eccentric_sectors(sectors, offset, offset_y)
     excess = []
     by_band = {band: grp.set_index("sector") for band, grp in table.groupby("band")}
     for by in by_band.values():
@@ -427,7 +418,7 @@ def en_band_verdicts(plan, loads, compared, table, summary: dict, surface: float
         f"{plan.fill.protocol}" + (", poured frictionless" if plan.fill.frictionless else ""))
     max_case = loads.values["max_horizontal"]
     fa = summary.get("frame_analyses", {})
-    flat_cylinder = g.kind == "cylinder" and g.hopper_height == 0
+    flat_cylinder = silo_kind(g.kind).wall_force_balance and g.hopper_height == 0
     state = bed_state(summary.get("force_balance") if flat_cylinder else None, wall_normal_force(plan, table),
                       fa.get("janssen_static"), surface, diameter, max_case.mu, max_case.K, protocol,
                       mu_w=plan.pairs["particle_wall"].friction)
@@ -440,7 +431,7 @@ def wall_normal_force(plan, table) -> float | None:
     """The settled bed's normal force on a cylinder's vertical wall (N): each band's static
     pressure over its area 2 pi R (z1 - z0); None for another silo or without bands."""
     g = plan.geometry
-    if g.kind != "cylinder" or table.empty:
+    if not silo_kind(g.kind).wall_force_balance or table.empty:
         return None
     spans = {w.band: (w.z0, w.z1) for w in plan.walls if w.role == "band"}
     pressure = table.set_index("band").static_pressure

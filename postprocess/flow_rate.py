@@ -18,6 +18,7 @@ from scipy.optimize import curve_fit
 
 from siloflow.run_folder import RunFolder
 from siloflow.errors import ReadError
+from siloflow.silos.registry import silo_kind
 
 from .analysis_base import FrameAnalysis
 from .discharge import FlowRate, straight_line_fit
@@ -315,11 +316,8 @@ def beverloo_inputs(plan, summary: dict, folder) -> dict:
     measured = measured if isinstance(measured, (int, float)) and not isinstance(measured, bool) else None
     rho_b = measured or plan.fill.packing_fraction * density
     g = plan.geometry
-    L = g.thickness if g.kind == "planar" else 2 * g.outlet_half_y if g.kind == "box" and g.outlet != "circle" \
-        else np.nan
-    return {"D0": 2 * g.outlet_radius, "d": d, "d_is": d_is, "L": L, "L_ends": g.kind == "box",
-            "D0_is": "hydraulic diameter 4A/P of a polygon outlet (the round law approximated)"
-            if g.kind == "mesh" and g.outlet == "polygon" else "outlet width or diameter",
+    L, L_ends, D0_is = silo_kind(g.kind).beverloo_outlet(g)
+    return {"D0": 2 * g.outlet_radius, "d": d, "d_is": d_is, "L": L, "L_ends": L_ends, "D0_is": D0_is,
             "rho_b": float(rho_b), "g": plan.gravity,
             "rho_b_source": "measured" if measured else "case packing fraction"}
 

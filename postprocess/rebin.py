@@ -20,6 +20,7 @@ import pandas as pd
 
 from siloflow.errors import ReadError
 from siloflow.run_folder import RunFolder
+from siloflow.silos.registry import silo_kind
 
 from .batch_means import batch_means_stderr
 from .cg_run import primitive_wall_files
@@ -62,41 +63,7 @@ def _side_geometry(plan, sectors: int | None):
     horizontal outward normal nx, ny)), the sectors' count, and each sector's (theta0, theta1) or
     width along the wall (m)."""
     g = plan.geometry
-    r_min = min(sp.radius for sp in plan.species)
-    base = g.hopper_height
-    if g.kind in ("cylinder", "hopper"):
-        n = sectors or plan.sensors.sectors
-        R = g.radius
-        sag = R * (1.0 - math.cos(math.pi / (g.mesh_segments or 1000)))
-        tol = sag + 0.25 * r_min
-        phase = -math.pi / n if g.outlet_offset else 0.0
-
-        def classify(xw, yw, zw):
-            rho = np.hypot(xw, yw)
-            on = (np.abs(rho - R) <= tol) & (zw >= base - tol)
-            theta = np.mod(np.arctan2(yw, xw) - phase, 2 * math.pi)
-            sector = np.minimum((theta / (2 * math.pi / n)).astype(int), n - 1)
-            return on, sector
-        spans = [(phase + 2 * math.pi * s / n, phase + 2 * math.pi * (s + 1) / n) for s in range(n)]
-        return classify, n, spans, R
-    if g.kind in ("planar", "box"):
-        if sectors is not None:
-            raise ReadError(f"a {'slab' if g.kind == 'planar' else 'box'} silo's sectors are its walls: "
-                            "give --bands without --sectors")
-        a = g.half_width
-        b = 0.5 * (g.thickness if g.kind == "planar" else g.depth)
-        tol = 0.25 * r_min
-        sides = [(-a, "x"), (a, "x")] + ([(-b, "y"), (b, "y")] if g.kind == "box" else [])
-
-        def classify(xw, yw, zw):
-            sector = np.full(len(xw), -1)
-            for s, (pos, axis) in enumerate(sides):
-                coord = xw if axis == "x" else yw
-                sector = np.where((sector < 0) & (np.abs(coord - pos) <= tol), s, sector)
-            return (sector >= 0) & (zw >= base - tol), np.maximum(sector, 0)
-        lengths = [2 * b if axis == "x" else 2 * a for _, axis in sides]
-        return classify, len(sides), lengths, None
-    raise ReadError(f"re-binning a {g.kind} silo's walls is not supported (its sensor pieces are its own meshes)")
+    return silo_kind(g.kind).wall_bins(g, sectors, plan.sensors.sectors, min(sp.radius for sp in plan.species))
 
 
 def rebin_run(folder, heights: Sequence[float], sectors: int | None = None) -> RebinnedBands:

@@ -14,6 +14,7 @@ import yaml
 from pydantic import ValidationError
 
 from .errors import CaseError
+from .silos.registry import SILO_KINDS, silo_kind
 
 
 #: case files larger than this are refused unread (the largest real case is a few kB)
@@ -94,8 +95,7 @@ def _field_path(loc) -> str:
     for item in loc:
         if isinstance(item, int):
             parts.append(f"[{item}]")
-        elif item in ("cylinder", "hopper", "planar", "box", "mesh", "spheres", "polydisperse_spheres",
-                      "clumps") and parts:
+        elif item in (*SILO_KINDS, "spheres", "polydisperse_spheres", "clumps") and parts:
             continue  # discriminator tag pydantic inserts into the path
         else:
             parts.append(("." if parts else "") + str(item))
@@ -145,7 +145,7 @@ def locate_inserts(case, base: Path):
     update = {}
     if case.inserts:
         update["inserts"] = [ins.model_copy(update={"file": located(ins.file)}) for ins in case.inserts]
-    if case.geometry.kind == "mesh":
+    if silo_kind(case.geometry.kind).reads_files:
         update["geometry"] = case.geometry.model_copy(update={"files": [located(f) for f in case.geometry.files]})
     return case.model_copy(update=update) if update else case
 

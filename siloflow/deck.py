@@ -21,6 +21,7 @@ from .case_file import case_to_yaml
 from .errors import SetupError, SiloflowError
 from .resources import template_text
 from .run_folder import CASE_NAME, MANIFEST_NAME, RunFolder, check_plain_tree, new_folder, sha256
+from .silos.registry import silo_kind
 
 #: words no deck line may hold, whatever its command (LIGGGHTS and LAMMPS both have ``shell``)
 FORBIDDEN_WORDS = re.compile(r"\b(shell|include|python|system|popen)\b", re.IGNORECASE)
@@ -117,7 +118,7 @@ def write_run_folder(case: Case, plan, engine, folder: Path) -> None:
     engine.write_deck(plan, folder)
     stored = case.model_copy(update={"inserts": [
         ins.model_copy(update={"file": f"meshes/{ins.mesh_name}.stl", "scale": 1.0}) for ins in case.inserts]})
-    if case.geometry.kind == "mesh":
+    if silo_kind(case.geometry.kind).reads_files:
         stored = stored.model_copy(update={"geometry": stored_container(case, folder)})
     write_text(folder / CASE_NAME, case_to_yaml(stored))
     RunFolder(folder).write_plan(plan)

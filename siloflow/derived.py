@@ -7,10 +7,12 @@ unit-tested and written to ``plan.json`` beside the deck. All values SI.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import Optional
 
 from . import contact_physics as cp
 from ._version import __version__
-from .case import BoxGeometry, Case, HopperGeometry, MeshGeometry, PlanarGeometry
+from .case import Case
 from .errors import CaseError, SetupError
 from .plan import (
     FACES,
@@ -35,6 +37,7 @@ from .plan import (
     TimeStep,
     Wall,
 )
+from .silos.registry import kind_of
 from .species import INSERTION_SPEED, species_of
 
 #: planned steps above which a run needs an explicit override (``--allow-long``): LIGGGHTS takes
@@ -65,7 +68,7 @@ def measured(case: Case, container=None) -> Case:
     (``siloflow.geometry.read_container``; ``container`` when already read), and the case's checks
     that need the silo's size run. A problem is a ``CaseError`` naming the field."""
     g = case.geometry
-    if not isinstance(g, MeshGeometry):
+    if not kind_of(g).reads_files:
         return case
     from .case.model import shape_problems
     from .geometry import MeshError, Outline, read_container
@@ -92,30 +95,7 @@ def measured(case: Case, container=None) -> Case:
 
 def bed_volume(case: Case, height: float) -> float:
     """Volume of the silo below ``height`` (m above the outlet), m3."""
-    g = case.geometry
-    if isinstance(g, MeshGeometry):
-        return g.container.volume_below(height)
-    if isinstance(g, BoxGeometry):          # the hopper's frustum (a pyramid's or a wedge's), then the box
-        hh, (hx, hy) = g.hopper_height, g.outlet_half_sizes
-        h_w = min(height, hh)
-        a0, a1 = 2 * hx, (g.width - 2 * hx) / hh if hh > 0 else 0.0           # width along x: a0 + a1 z
-        b0, b1 = 2 * hy, (g.depth - 2 * hy) / hh if hh > 0 else 0.0
-        hopper = a0 * b0 * h_w + (a0 * b1 + a1 * b0) * h_w ** 2 / 2 + a1 * b1 * h_w ** 3 / 3
-        return hopper + g.width * g.depth * max(0.0, height - hh)
-    if isinstance(g, PlanarGeometry):       # trapezoid of the wedge hopper, then the full width
-        h_w = min(height, g.hopper_height)      # 0 on a flat floor (no wedge); an offset slot shears it
-        w_top = g.outlet_width + (2.0 * h_w * math.tan(math.radians(g.half_angle_deg)) if h_w > 0 else 0.0)
-        area = 0.5 * (g.outlet_width + w_top) * h_w + g.width * max(0.0, height - g.hopper_height)
-        return area * g.thickness
-    R = g.radius
-    if isinstance(g, HopperGeometry):
-        hh = g.hopper_height
-        t = math.tan(math.radians(g.half_angle_deg))
-        h_cone = min(height, hh)
-        r_top = g.outlet_radius + h_cone * t
-        cone = math.pi * h_cone / 3 * (g.outlet_radius ** 2 + g.outlet_radius * r_top + r_top ** 2)
-        return cone + math.pi * R ** 2 * max(0.0, height - hh)
-    return math.pi * R ** 2 * height
+    return kind_of(case.geometry).bed_volume(case.geometry, height)
 
 
 def bed_height(case: Case, volume: float) -> float:
@@ -192,7 +172,7 @@ def contact_pairs(case: Case, species: list[Species], v_impact: float) -> list[P
         out.append(_pair(case, a.name, WALL, a.mass, a.radius, _contact_of(case, a.material, None),
                          (_modulus_of(case, a.material), _modulus_of(case, None)), v_impact))
     g = case.geometry
-    if isinstance(g, PlanarGeometry):
+    if kind_of(g).slab:
         walls = {p.a: p for p in out if p.b == WALL}
         out += [walls[sp.name].model_copy(update={"name": f"{sp.name}-{FACES}", "b": FACES,
                                                   "friction": g.face_friction}) for sp in species]
@@ -284,18 +264,7 @@ def bed_pressure(case: Case, bulk_density: float, depth: float) -> float:
     Jaky's K = 1 - sin(atan(friction)); hydrostatic rho_b g depth without wall friction."""
     g = case.geometry
     m = case.materials
-    if isinstance(g, BoxGeometry):
-        area = g.width * g.depth
-        grip = 2 * (g.width + g.depth) * m.particle_wall.friction
-    elif isinstance(g, MeshGeometry):        # the vertical walls' section half way up
-        area, perimeter = g.section
-        grip = perimeter * m.particle_wall.friction
-    elif isinstance(g, PlanarGeometry):
-        area = g.width * g.thickness
-        grip = 2 * g.thickness * m.particle_wall.friction + 2 * g.width * g.face_friction
-    else:
-        area = math.pi * g.radius ** 2
-        grip = 2 * math.pi * g.radius * m.particle_wall.friction
+    area, grip = kind_of(g).janssen_section(g, m.particle_wall.friction)
     hydrostatic = bulk_density * case.gravity * depth
     k = 1.0 - math.sin(math.atan(m.particle_particle.friction))
     if grip * k <= 0:
@@ -377,61 +346,76 @@ def _engine_options(case) -> dict[str, int]:
     return out
 
 
-def derive(case: Case) -> RunPlan:
-    """The run plan of a case: every value any engine needs, computed once, with the walls' meshes
-    (generated, and the inserts' read from their files and checked).
+@dataclass(frozen=True)
+class GrainBudget:
+    """What the fill's amount and batches need of the species: ``species`` (every one), ``grains``
+    and ``dust`` (None without), ``dust_ratio`` (dust spheres per grain), ``number_fractions`` of
+    the grains, their ``mass_fractions``, ``poured_volume`` (m3, mean volume of a grain as poured:
+    the largest sphere when the bed shrinks after settling), ``dust_volume`` (m3 of dust per grain),
+    ``grain_mass`` (kg, mean mass once the bed has its size distribution), ``shrink``."""
 
-    Raises
-    ------
-    CaseError
-        when the case is valid on its own but cannot be run as stated (bed too high
-        for the insertion region, opening too slow, ...), naming the field.
-    """
-    from .profiles import effective_case, profile_settings
-    case = measured(case)                  # a mesh silo's walls read once, here
-    settings = profile_settings(case)
-    # the profile's time step and stiffness, applied once here (a changed case is validated anew: the
-    # walls read are handed on)
-    container = case.geometry.container if isinstance(case.geometry, MeshGeometry) else None
-    case = measured(effective_case(case, settings), container)
-    g = case.geometry
-    planar = isinstance(g, PlanarGeometry)
-    box = isinstance(g, BoxGeometry)
+    species: list[Species]
+    grains: list[Species]
+    dust: Optional[Species]
+    dust_ratio: float
+    number_fractions: list[float]
+    mass_fractions: list[float]
+    poured_volume: float
+    dust_volume: float
+    grain_mass: float
+    shrink: bool
+
+    @property
+    def volume_per_grain(self) -> float:
+        """Solid volume inserted per grain, dust included, m3."""
+        return self.poured_volume + self.dust_volume
+
+
+def plan_species(case: Case) -> GrainBudget:
+    """The species of the case and the volumes and masses the fill is planned with."""
     p = case.particles
-    r = p.max_radius                       # geometry margins use the largest grain (clumps: bounding sphere)
-    d = 2 * r
     rho = case.materials.particle.density
     species = species_of(case)
     grains = [sp for sp in species if sp.stream == "grains"]
     dust = next((sp for sp in species if sp.stream == "dust"), None)
     dust_ratio = p.dust.number_ratio if dust is not None else 0.0
-    numbers = [sp.number_fraction for sp in grains]
     vol = sum(sp.number_fraction * sp.volume for sp in grains)      # mean volume per grain
-    mass = rho * vol
     mass_fractions = [sp.number_fraction * sp.volume for sp in grains]
-    mass_fractions = [w / sum(mass_fractions) for w in mass_fractions]
-    final_mass = mass                      # mean grain mass once the bed has its size distribution
     shrink = getattr(p, "protocol", "insert") == "shrink_after_settling"
-    if shrink:        # the bed is poured as grains of the largest radius
-        vol = cp.sphere_volume(r)
-        mass = rho * vol
-    dust_vol = dust_ratio * dust.volume if dust is not None else 0.0    # dust volume per grain
+    return GrainBudget(species=species, grains=grains, dust=dust, dust_ratio=dust_ratio,
+                       number_fractions=[sp.number_fraction for sp in grains],
+                       mass_fractions=[w / sum(mass_fractions) for w in mass_fractions],
+                       poured_volume=cp.sphere_volume(p.max_radius) if shrink else vol,  # poured as the largest
+                       dust_volume=dust_ratio * dust.volume if dust is not None else 0.0,
+                       grain_mass=rho * vol, shrink=shrink)
+
+
+def plan_amount(case: Case, budget: GrainBudget) -> tuple[int, int, float]:
+    """The grains and dust spheres the fill inserts, and the expected bed's height (m):
+    ``fill.count``, else as many as ``fill.height`` holds at ``fill.packing_fraction``."""
     f = case.fill
-    top = g.hopper_height + g.height
     if f.count is not None:
         count = f.count
     else:
-        count = int(f.packing_fraction * bed_volume(case, f.height) / (vol + dust_vol))
+        count = int(f.packing_fraction * bed_volume(case, f.height) / budget.volume_per_grain)
         if count < 1:
             raise CaseError([("fill.height", f"too low to hold a single particle at fill.packing_fraction "
                                              f"{f.packing_fraction:g}")])
-    dust_count = round(dust_ratio * count)
-    if dust is not None and dust_count < 1:
-        raise CaseError([("particles.dust.number_ratio", f"{dust_ratio} dust per grain is less than one "
+    dust_count = round(budget.dust_ratio * count)
+    if budget.dust is not None and dust_count < 1:
+        raise CaseError([("particles.dust.number_ratio", f"{budget.dust_ratio} dust per grain is less than one "
                           f"dust sphere for {count} grains (fill.count)")])
-    h_bed = bed_height(case, count * (vol + dust_vol) / f.packing_fraction)
+    return count, dust_count, bed_height(case, count * budget.volume_per_grain / f.packing_fraction)
 
-    # insertion region: above the expected bed, below the top
+
+def plan_insertion(case: Case, h_bed: float) -> tuple[float, float, dict, float]:
+    """The insertion heights z_min, z_max (m) above the expected bed ``h_bed`` (m) and below the
+    top, the region between them (``InsertionRegion`` fields) and its volume (m3); ``CaseError``
+    when the bed leaves it no room."""
+    f, g, p = case.fill, case.geometry, case.particles
+    r = p.max_radius                       # geometry margins use the largest grain (clumps: bounding sphere)
+    d = 2 * r
+    top = g.hopper_height + g.height
     z_max = f.insertion_z_max if f.insertion_z_max is not None else top - 0.5 * d
     z_min = f.insertion_z_min if f.insertion_z_min is not None else max(
         h_bed + 2 * d, z_max - max(0.3 * g.height, 4 * d), g.hopper_height + d)
@@ -443,30 +427,14 @@ def derive(case: Case) -> RunPlan:
                           f"{f.packing_fraction}) leaves no room to insert particles below the top "
                           f"({top:.4g} m): fill fewer particles or make the silo taller (geometry.height)")])
     pour = f.pour_radius if f.pour_radius is not None else g.half_width      # central or distributed fill
-    if box:
-        # centres only, a grain's radius (and 5 %) from the walls
-        half_x, half_y = min(pour, g.half_width - 1.05 * r), min(pour, 0.5 * g.depth - 1.05 * r)
-        insertion_region = {"shape": "block", "xlo": -half_x, "xhi": half_x,
-                            "ylo": -half_y, "yhi": half_y, "z_min": z_min + r, "z_max": z_max - r}
-        region_volume = 4 * half_x * half_y * (z_max - z_min)
-    elif planar:
-        # centres only (all_in no: a clump's bounding sphere is wider than the slab); wheat is
-        # inserted lying flat in the slab, so its half thickness is its sphere radius
-        half_t = 0.5 * g.thickness - (0.5 * p.width if p.kind == "clumps" else r)
-        if g.periodic_depth:                  # the whole periodic length (centres wrap)
-            half_t = 0.5 * g.thickness
-        half_x = min(pour, g.half_width - 1.05 * r)
-        insertion_region = {"shape": "block", "xlo": -half_x, "xhi": half_x,
-                            "ylo": -half_t, "yhi": half_t, "z_min": z_min + r, "z_max": z_max - r}
-        region_volume = 2 * half_x * g.thickness * (z_max - z_min)
-    else:
-        region_radius = min(pour, g.radius - 0.6 * r)
-        insertion_region = {"shape": "cylinder", "radius": region_radius, "z_min": z_min, "z_max": z_max}
-        region_volume = math.pi * region_radius ** 2 * (z_max - z_min)
-    batch = max(1, min(count, int(f.batch_volume_fraction * region_volume / (vol + dust_vol))))
+    return (z_min, z_max) + kind_of(g).insertion_region(g, p, pour, r, z_min, z_max)
 
-    # time step: the shortest contact of any pair of types; dust's cost is reported
-    v_impact = cp.free_fall_speed(z_max, case.gravity, INSERTION_SPEED)
+
+def plan_timestep(case: Case, budget: GrainBudget, v_impact: float) -> tuple[TimeStep, list[PairParameters], dict]:
+    """The time step (the shortest contact of any pair of species at impact speed ``v_impact``,
+    m/s, times ``engine.timestep_fraction``; dust's cost reported), every pair's contact parameters,
+    and the smallest grain's with itself and the walls (``particle_particle``, ``particle_wall``)."""
+    species, grains, dust = budget.species, budget.grains, budget.dust
     contacts = contact_pairs(case, species, v_impact)
     smallest = min(grains, key=lambda sp: sp.radius).name          # its contacts are the shortest
     by_names = {(c.a, c.b): c for c in contacts}
@@ -476,14 +444,27 @@ def derive(case: Case) -> RunPlan:
     rayleigh = None
     if case.materials.model == "hertz":
         pm = case.materials.particle
-        rayleigh = cp.rayleigh_time(p.min_radius, rho, pm.youngs_modulus, pm.poisson_ratio)
-    dt = case.engine.timestep_fraction * t_crit
+        rayleigh = cp.rayleigh_time(case.particles.min_radius, pm.density, pm.youngs_modulus, pm.poisson_ratio)
     dt_without_dust = None
     if dust is not None:
         no_dust = [c for c in contacts if dust.name not in (c.a, c.b)]
         dt_without_dust = case.engine.timestep_fraction * critical_time(case, grains, no_dust)[0]
+    timestep = TimeStep(dt=case.engine.timestep_fraction * t_crit, fraction=case.engine.timestep_fraction,
+                        critical_time=t_crit, critical_time_source=source, rayleigh_time=rayleigh,
+                        without_dust=dt_without_dust)
+    return timestep, contacts, pairs
 
-    # fill: batches leave the region before the next one comes
+
+
+def plan_fill(case: Case, budget: GrainBudget, count: int, dust_count: int, h_bed: float,
+              insertion: tuple[float, float, dict, float], dt: float, v_impact: float) -> Fill:
+    """The fill's batches: as many grains as ``fill.batch_volume_fraction`` of the insertion region
+    holds (:func:`plan_insertion`'s ``insertion``; a pour: one small batch per clearing time over
+    ``fill.pour_time``), each leaving the region before the next comes; the steps of the whole fill
+    (``dt`` s, grains inserted at ``v_impact`` m/s)."""
+    f, p = case.fill, case.particles
+    z_min, z_max, region, region_volume = insertion
+    batch = max(1, min(count, int(f.batch_volume_fraction * region_volume / budget.volume_per_grain)))
     h_region = z_max - z_min
     t_clear = (-INSERTION_SPEED + math.sqrt(INSERTION_SPEED ** 2 + 2 * case.gravity * h_region)) / case.gravity
     insert_every = _steps(1.1 * t_clear, dt)
@@ -497,18 +478,39 @@ def derive(case: Case) -> RunPlan:
     n_batches = math.ceil(count / batch)
     t_fall = (-INSERTION_SPEED + math.sqrt(INSERTION_SPEED ** 2 + 2 * case.gravity * z_max)) / case.gravity
     fill_steps = n_batches * insert_every + _steps(1.5 * t_fall, dt)
+    return Fill(count=count, dust_count=dust_count, batch=batch,
+                dust_batch=math.ceil(batch * budget.dust_ratio) if budget.dust is not None else 0,
+                insert_every=insert_every, insertion_speed=INSERTION_SPEED,
+                region=InsertionRegion(**region), steps=fill_steps, frictionless=f.frictionless,
+                radii=list(p.radii), number_fractions=list(budget.number_fractions),
+                mass_fractions=budget.mass_fractions,
+                shrink_classes=shrink_classes(p.radii, budget.number_fractions) if budget.shrink else [],
+                packing_fraction=f.packing_fraction, bed_height_estimate=h_bed, impact_velocity=v_impact)
 
-    s = f.settle
-    settle_chunk = _steps(s.check_interval, dt)
-    settle_chunks = max(1, math.ceil(s.max_time / s.check_interval))
 
-    # opening: the plate moves down, below the counting disc, faster than the grains fall after it
+def plan_settle(case: Case, dt: float) -> Settle:
+    """The settling's checks: one every ``fill.settle.check_interval`` (``dt`` s steps), up to its
+    ``max_time``."""
+    s = case.fill.settle
+    return Settle(ke_pe_ratio=s.ke_pe_ratio, chunk_steps=_steps(s.check_interval, dt),
+                  max_chunks=max(1, math.ceil(s.max_time / s.check_interval)))
+
+
+def plan_opening(case: Case, dt: float) -> tuple[Outlet, Opening]:
+    """The counting disc two grain diameters below the orifice, over the outlet, and the plate's
+    opening: down three times as far, faster than the grains fall after it (``CaseError`` if not)."""
+    d = 2 * case.particles.max_radius
     outlet_z = -2.0 * d
     v_open = case.discharge.opening.speed
     plate_travel = 3.0 * abs(outlet_z)
     check_opening(case.gravity, v_open, outlet_z)
-    open_steps = _steps(plate_travel / v_open, dt)
+    return (Outlet(z=outlet_z, radius=kind_of(case.geometry).outlet_reach(case.geometry) + 2 * d),
+            Opening(speed=v_open, travel=plate_travel, steps=_steps(plate_travel / v_open, dt)))
 
+
+def plan_discharge(case: Case, dt: float, total_mass: float) -> Discharge:
+    """The discharge's chunks (``dt`` s steps): 0.1 s ones until empty (``empty_fraction`` of
+    ``total_mass``, kg, left), batches until steady, or one of ``discharge.duration``."""
     dis = case.discharge
     steady = None
     if dis.until_empty:
@@ -522,85 +524,67 @@ def derive(case: Case) -> RunPlan:
                             min_batches=dis.min_batches)
     else:
         d_chunk, d_chunks = _steps(dis.duration, dt), 1
+    return Discharge(chunk_steps=d_chunk, max_chunks=d_chunks, until_empty=dis.until_empty, steady=steady,
+                     empty_mass=dis.empty_fraction * total_mass)
 
+
+def plan_outputs(case: Case, dt: float, thermo_every: int) -> Outputs:
+    """What the deck writes and how often (``dt`` s steps): wall-force averages of 5 samples per
+    ``outputs.sample_interval``, thermo every ``thermo_every`` steps (the settling's checks read it),
+    dumps as the results need them (:func:`result_needs`)."""
     out = case.outputs
     needs = result_needs(case)
     sample_freq = _steps(out.sample_interval, dt)
     sample_every = max(1, sample_freq // 5)  # 5 samples per average: wall-force sampling is not free
     sample_repeat = sample_freq // sample_every
     sample_freq = sample_every * sample_repeat
-    thermo_every = settle_chunk  # settle checks read thermo values, so they must coincide
     dump_every = None
     if needs["dumps"]:              # outputs.dump_interval, else as often as the frame analyses need
         dump_every = _steps(out.dump_interval or auto_dump_interval(case), dt)
+    return Outputs(thermo_every=thermo_every, sample_steps=sample_freq, samples_per_average=sample_repeat,
+                   dump_every=dump_every, vtk=bool(dump_every and needs["vtk"]),
+                   contacts=bool(dump_every and needs["contacts"]), results=out.results,
+                   wall_pressure=needs["wall_pressure"], wall_forces=needs["wall_forces"])
 
-    static_steps = _steps(s.static_window, dt)
-    if static_steps < 2 * sample_freq:      # the time check of the case can miss by a rounded step
+
+def plan_static(case: Case, dt: float, outputs: Outputs) -> int:
+    """The static window's steps (``dt`` s each): at least two of the outputs' samples, else
+    ``CaseError``."""
+    static_steps = _steps(case.fill.settle.static_window, dt)
+    if static_steps < 2 * outputs.sample_steps:      # the time check of the case can miss by a rounded step
         raise CaseError([("fill.settle.static_window", f"{static_steps} steps hold fewer than two samples of "
-                          f"{sample_freq} steps (outputs.sample_interval): no static wall-load sample")])
-    round_silo = not (planar or box)
-    mesh = isinstance(g, MeshGeometry)
-    silo = Silo(kind=g.kind, half_width=g.half_width, height=g.height, hopper_height=g.hopper_height,
-                outlet_radius=g.outlet_radius, radius=g.radius if round_silo else None,
-                width=None if round_silo else g.width, thickness=g.thickness if planar else None,
-                face_friction=g.face_friction if planar else None,
-                mesh_segments=g.mesh_segments if round_silo and not mesh else None,
-                outlet_offset=g.outlet_offset, periodic_depth=planar and g.periodic_depth,
-                **({"depth": g.depth, "outlet": g.outlet, "outlet_half_y": g.outlet_half_sizes[1],
-                    "outlet_offset_y": g.outlet_offset_y} if box else {}),
-                **({"outlet_offset_y": g.outlet_offset_y,
-                    "outer_radius": g.container.outer_radius, "section_area": g.section[0],
-                    "section_perimeter": g.section[1], "outlet": "circle" if g.outlet.radius is not None else "polygon"}
-                   if mesh else {}))
-    materials = {"particle": Material(youngs_modulus=_modulus_of(case, "particle")[0],
-                                      poisson_ratio=_modulus_of(case, "particle")[1]),
-                 "wall": Material(youngs_modulus=_modulus_of(case, None)[0], poisson_ratio=_modulus_of(case, None)[1])}
-    if dust is not None:
-        materials["dust"] = Material(youngs_modulus=_modulus_of(case, "dust")[0],
-                                     poisson_ratio=_modulus_of(case, "dust")[1])
-    plan = RunPlan(
-        siloflow_version=__version__, name=case.name,
-        engine=EngineChoice(name=case.engine.name, ranks=case.engine.ranks, options=_engine_options(case)),
-        profile=Profile(name=settings["profile"], timestep_fraction=settings["timestep_fraction"],
-                        stiffness_scale=settings["stiffness_scale"], overlap_ratio=settings.get("overlap_ratio"),
-                        speedup=settings.get("speedup"),
-                        error_bounds=settings.get("error_bounds", {}), tolerances=settings.get("tolerances", {}),
-                        benchmark=settings.get("benchmark", ""), question=settings.get("question"),
-                        unbounded=settings.get("unbounded", []), measured=settings.get("measured", {})),
-        guard=guard_limits(case, species, v_open, outlet_z - plate_travel),
-        gravity=case.gravity, seed=case.seed, geometry=silo, species=species, materials=materials,
-        contact_model=case.materials.model, contacts=contacts, pairs=pairs,
-        timestep=TimeStep(dt=dt, fraction=case.engine.timestep_fraction, critical_time=t_crit,
-                          critical_time_source=source, rayleigh_time=rayleigh, without_dust=dt_without_dust),
-        fill=Fill(count=count, dust_count=dust_count, batch=batch,
-                  dust_batch=math.ceil(batch * dust_ratio) if dust is not None else 0,
-                  insert_every=insert_every, insertion_speed=INSERTION_SPEED,
-                  region=InsertionRegion(**insertion_region), steps=fill_steps, frictionless=f.frictionless,
-                  radii=list(p.radii), number_fractions=list(numbers), mass_fractions=mass_fractions,
-                  shrink_classes=shrink_classes(p.radii, numbers) if shrink else [],
-                  packing_fraction=f.packing_fraction, bed_height_estimate=h_bed, impact_velocity=v_impact),
-        settle=Settle(ke_pe_ratio=s.ke_pe_ratio, chunk_steps=settle_chunk, max_chunks=settle_chunks),
-        static_steps=static_steps,
-        opening=Opening(speed=v_open, travel=plate_travel, steps=open_steps),
-        discharge=Discharge(chunk_steps=d_chunk, max_chunks=d_chunks, until_empty=dis.until_empty, steady=steady,
-                            empty_mass=dis.empty_fraction * (count * final_mass + (dust_count * dust.mass if dust
-                                                                                   is not None else 0.0))),
-        outlet=Outlet(z=outlet_z, radius=(g.container.outline.size if mesh else g.outlet_radius) + 2 * d),
-        sensors=Sensors(bands=0, sectors=2 if planar else 4 if box else case.sensors.sectors),
-        outputs=Outputs(thermo_every=thermo_every, sample_steps=sample_freq, samples_per_average=sample_repeat,
-                        dump_every=dump_every, vtk=bool(dump_every and needs["vtk"]),
-                        contacts=bool(dump_every and needs["contacts"]), results=out.results,
-                        wall_pressure=needs["wall_pressure"], wall_forces=needs["wall_forces"]),
-        total_mass=count * final_mass + (dust_count * dust.mass if dust is not None else 0.0),
-        particle_radius=r, particle_volume=final_mass / rho, particle_mass=final_mass,
-        analysis=case.analysis, design=case.design, run_length_fields=run_length_fields(case, source, settings["profile"]),
-    )
-    meshes = wall_meshes(case, plan, sensors=needs["wall_pressure"])
+                          f"{outputs.sample_steps} steps (outputs.sample_interval): no static wall-load sample")])
+    return static_steps
+
+
+def plan_silo(case: Case) -> Silo:
+    """The plan's silo: the fields every kind has, and its kind's own (``SiloKind.silo_fields``)."""
+    g = case.geometry
+    return Silo(kind=g.kind, half_width=g.half_width, height=g.height, hopper_height=g.hopper_height,
+                outlet_radius=g.outlet_radius, outlet_offset=g.outlet_offset, **kind_of(g).silo_fields(g))
+
+
+def plan_materials(case: Case, dust: bool) -> dict[str, Material]:
+    """The elastic constants of the particles, the walls and (``dust``) the dust."""
+    names = {"particle": "particle", "wall": None}
+    if dust:
+        names["dust"] = "dust"
+    return {name: Material(youngs_modulus=_modulus_of(case, m)[0], poisson_ratio=_modulus_of(case, m)[1])
+            for name, m in names.items()}
+
+
+def plan_walls(case: Case, plan: RunPlan) -> RunPlan:
+    """The plan with its walls (their meshes generated and the inserts' read: :func:`wall_meshes`),
+    the floor's lowering (``fill.mobilise``) or the fill protocol, the sensor bands counted and the
+    physics warnings; ``CaseError`` for a dump interval longer than the whole run."""
+    f, out, dt = case.fill, case.outputs, plan.dt
+    meshes = wall_meshes(case, plan, sensors=plan.outputs.wall_pressure)
     walls = [Wall(**m.info()) for m in meshes]
     if f.mobilise is not None or f.protocol != "rain":
         plan = plan.model_copy(update={"fill": plan.fill.model_copy(update={
             "protocol": f.protocol, "mobilise": mobilise_plan(case, meshes, dt)})})
     total = plan.total_planned_steps
+    dump_every = plan.outputs.dump_every
     if out.dump_interval is not None and dump_every is not None and dump_every > total:
         raise CaseError([("outputs.dump_interval", f"{out.dump_interval:g} s is longer than the whole run (at most "
                           f"{total * dt:.4g} s with every stage at its cap): no frame would be written after the "
@@ -611,6 +595,69 @@ def derive(case: Case) -> RunPlan:
                            sectors=plan.sensors.sectors)})
     plan._meshes = meshes
     return plan
+
+
+def plan_profile(settings: dict) -> Profile:
+    """The engine profile's settings as the plan records them (``siloflow.profiles.profile_settings``)."""
+    return Profile(name=settings["profile"], timestep_fraction=settings["timestep_fraction"],
+                   stiffness_scale=settings["stiffness_scale"], overlap_ratio=settings.get("overlap_ratio"),
+                   speedup=settings.get("speedup"),
+                   error_bounds=settings.get("error_bounds", {}), tolerances=settings.get("tolerances", {}),
+                   benchmark=settings.get("benchmark", ""), question=settings.get("question"),
+                   unbounded=settings.get("unbounded", []), measured=settings.get("measured", {}))
+
+
+def plan_sensors(case: Case) -> Sensors:
+    """The sensor sectors per band (the kind's: ``SiloKind.sensor_sectors``); the bands are counted
+    once the walls are cut (:func:`plan_walls`)."""
+    return Sensors(bands=0, sectors=kind_of(case.geometry).sensor_sectors(case.geometry, case.sensors.sectors))
+
+
+def derive(case: Case) -> RunPlan:
+    """The run plan of a case: every value any engine needs, computed once, with the walls' meshes
+    (generated, and the inserts' read from their files and checked); one planner per section
+    (``plan_*``), in the order their checks run.
+
+    Raises
+    ------
+    CaseError
+        when the case is valid on its own but cannot be run as stated (bed too high
+        for the insertion region, opening too slow, ...), naming the field.
+    """
+    from .profiles import effective_case, profile_settings
+    case = measured(case)                  # a mesh silo's walls read once, here
+    settings = profile_settings(case)
+    # the profile's time step and stiffness, applied once here (a changed case is validated anew: the
+    # walls read are handed on)
+    container = case.geometry.container if kind_of(case.geometry).reads_files else None
+    case = measured(effective_case(case, settings), container)
+    budget = plan_species(case)
+    count, dust_count, h_bed = plan_amount(case, budget)
+    insertion = plan_insertion(case, h_bed)
+    v_impact = cp.free_fall_speed(insertion[1], case.gravity, INSERTION_SPEED)
+    timestep, contacts, pairs = plan_timestep(case, budget, v_impact)
+    dt = timestep.dt
+    fill = plan_fill(case, budget, count, dust_count, h_bed, insertion, dt, v_impact)
+    settle = plan_settle(case, dt)
+    outlet, opening = plan_opening(case, dt)
+    total_mass = count * budget.grain_mass + (dust_count * budget.dust.mass if budget.dust is not None else 0.0)
+    discharge = plan_discharge(case, dt, total_mass)
+    outputs = plan_outputs(case, dt, settle.chunk_steps)  # settle checks read thermo values: they coincide
+    static_steps = plan_static(case, dt, outputs)
+    plan = RunPlan(
+        siloflow_version=__version__, name=case.name,
+        engine=EngineChoice(name=case.engine.name, ranks=case.engine.ranks, options=_engine_options(case)),
+        profile=plan_profile(settings),
+        guard=guard_limits(case, budget.species, opening.speed, outlet.z - opening.travel),
+        gravity=case.gravity, seed=case.seed, geometry=plan_silo(case), species=budget.species,
+        materials=plan_materials(case, budget.dust is not None), contact_model=case.materials.model, contacts=contacts, pairs=pairs,
+        timestep=timestep, fill=fill, settle=settle, static_steps=static_steps, opening=opening,
+        discharge=discharge, outlet=outlet, sensors=plan_sensors(case), outputs=outputs, total_mass=total_mass,
+        particle_radius=case.particles.max_radius, particle_volume=budget.grain_mass / case.materials.particle.density,
+        particle_mass=budget.grain_mass, analysis=case.analysis, design=case.design,
+        run_length_fields=run_length_fields(case, timestep.critical_time_source, settings["profile"]),
+    )
+    return plan_walls(case, plan)
 
 
 def wall_meshes(case: Case, plan: RunPlan, sensors: bool) -> list:
@@ -627,7 +674,7 @@ def wall_meshes(case: Case, plan: RunPlan, sensors: bool) -> list:
     )
     s = case.sensors
     bounds = band_boundaries(case.geometry.height, s.bands, s.heights)
-    container = case.geometry.container if plan.geometry.kind == "mesh" else None
+    container = case.geometry.container if kind_of(case.geometry).reads_files else None
     try:
         meshes = silo_meshes(plan.geometry, bounds, plan.sensors.sectors, plan.outlet.z, plan.outlet.radius, sensors,
                              container)
@@ -652,42 +699,8 @@ def wall_meshes(case: Case, plan: RunPlan, sensors: bool) -> list:
 def shaping_fields(case: Case, role: str, kind: str = "angle") -> list[str]:
     """The case fields that shape a wall of ``role``, the likeliest culprit first (for ``kind``
     'edge', a too short edge: the outlet's size, which sets the hopper's shortest sides)."""
-    g = case.geometry
     sensors = "sensors.heights" if case.sensors.heights is not None else "sensors.bands"
-    if isinstance(g, MeshGeometry):      # the user's triangles, cut at the bands and sectors
-        return {"band": [sensors, "sensors.sectors", "geometry.files"], "wall": [sensors, "geometry.files"],
-                "outlet": ["geometry.outlet"]}.get(role, ["geometry.files", "geometry.scale"])
-    offset = ["geometry.outlet_offset"] if getattr(g, "outlet_offset", 0.0) else []
-    if isinstance(g, BoxGeometry):       # its own fields: the outlet's by its shape, width and depth
-        offset += ["geometry.outlet_offset_y"] if g.outlet_offset_y else []
-        outlet = {"rectangle": ["geometry.outlet_width", "geometry.outlet_length"], "slot": ["geometry.outlet_width"],
-                  "circle": ["geometry.outlet_radius"]}[g.outlet]
-        sides = ["geometry.width", "geometry.depth"]
-        if kind == "edge" and role in ("hopper", "bottom", "plate", "outlet"):
-            return outlet + offset + sides
-        return {"band": [sensors, "geometry.height"] + sides, "wall": [sensors, "geometry.height"] + sides,
-                "hopper": offset + ["geometry.half_angle_deg"] + outlet + sides,
-                "bottom": offset + outlet + sides}.get(role, outlet + offset)
-    if kind == "edge" and role in ("hopper", "cone", "bottom", "plate", "outlet"):
-        if isinstance(g, PlanarGeometry):
-            return ["geometry.outlet_width", "geometry.width", "geometry.half_angle_deg", "geometry.thickness"] + offset
-        orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
-        return [orifice, "geometry.mesh_segments", "geometry.radius"] + offset
-    if isinstance(g, PlanarGeometry):
-        return {"band": [sensors, "geometry.height", "geometry.thickness"],
-                "wall": [sensors, "geometry.height", "geometry.thickness"],
-                "hopper": offset + ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width",
-                                    "geometry.thickness"],
-                "bottom": offset + ["geometry.outlet_width", "geometry.width", "geometry.thickness"],
-                "face": offset + ["geometry.half_angle_deg", "geometry.outlet_width", "geometry.width",
-                                  "geometry.height"],
-                }.get(role, ["geometry.outlet_width", "geometry.thickness"] + offset)
-    orifice = "geometry.outlet_radius" if isinstance(g, HopperGeometry) else "geometry.orifice_radius"
-    return {"band": [sensors, "geometry.height", "geometry.mesh_segments", "sensors.sectors"],
-            "wall": [sensors, "geometry.height", "geometry.mesh_segments"],
-            "cone": offset + ["geometry.half_angle_deg", orifice, "geometry.radius", "geometry.mesh_segments"],
-            "bottom": offset + [orifice, "geometry.radius", "geometry.mesh_segments"],
-            }.get(role, [orifice, "geometry.mesh_segments"])
+    return kind_of(case.geometry).shaping_fields(case.geometry, role, kind, sensors)
 
 
 def own_overlap(species: Species) -> float:
@@ -712,16 +725,11 @@ def guard_limits(case: Case, species: list, v_open: float, z_lowest: float) -> G
     fall = math.sqrt(INSERTION_SPEED ** 2 + 2.0 * case.gravity * (top - z_lowest))
     r_min = min(sp.radius for sp in species if sp.stream == "grains")     # dust: watched by speed and escapes
     margin = gs.escape_margin * 2.0 * case.particles.max_radius
-    planar, box = isinstance(g, PlanarGeometry), isinstance(g, BoxGeometry)
     return Guard(enabled=gs.enabled, max_speed=gs.speed_factor * (fall + v_open),
                  max_overlap=gs.max_overlap * r_min + max(map(own_overlap, species)),
                  max_overlap_fraction=gs.max_overlap, grain_radius=r_min,
                  energy_growth=gs.energy_growth,
-                 escape_radius=None if planar or box else (g.container.outer_radius if isinstance(g, MeshGeometry)
-                                                           else g.half_width) + margin,
-                 escape_half_x=g.half_width + margin if planar or box else None,
-                 escape_half_y=(0.5 * g.thickness if planar else 0.5 * g.depth) + margin if planar or box else None,
-                 escape_z=top + margin)
+                 escape_z=top + margin, **kind_of(g).escape_limits(g, margin))
 
 
 #: depth of a pour's insertion layer at the top of the silo, grain diameters

@@ -40,6 +40,8 @@ from typing import Optional
 
 import numpy as np
 
+from .silos.registry import SILO_KINDS
+
 #: wall surface categories of Annex E's wall friction columns (D1 low friction / polished,
 #: D2 moderate / smooth steel, D3 high friction / rough: concrete, rusted steel)
 WALL_TYPES = ("D1", "D2", "D3")
@@ -550,12 +552,11 @@ def design_loads(geometry, material, fill_height: float, wall_type: str = "D2", 
     """
     solid = bulk_solid(material) if isinstance(material, str) else material
     kind = getattr(geometry, "kind", None)
-    if kind == "planar":
-        raise ValueError("geometry.kind planar: EN 1991-4's rectangular silos need both plan dimensions, "
-                         "and a slab one grain thick is not a silo the standard covers; design loads are "
-                         "computed for kind cylinder or hopper")
-    if kind not in ("cylinder", "hopper"):
-        raise ValueError(f"geometry.kind {kind!r}: design loads need kind cylinder or hopper")
+    standard = SILO_KINDS[kind].en1991 if kind in SILO_KINDS else None
+    if standard is None:
+        covered = " or ".join(k for k, v in SILO_KINDS.items() if v.en1991)
+        raise ValueError(SILO_KINDS[kind].design_refusal(covered) if kind in SILO_KINDS else
+                         f"geometry.kind {kind!r}: design loads need kind {covered}")
     _wall_index(wall_type)
     if aac not in (1, 2, 3):
         raise ValueError(f"action assessment class {aac!r} is not 1, 2 or 3")
@@ -581,7 +582,7 @@ def design_loads(geometry, material, fill_height: float, wall_type: str = "D2", 
     a_over_u = d_c / 4.0
     h_c = fill_height - transition
     ratio = h_c / d_c
-    cls = classify(ratio, flat_bottom=kind == "cylinder")
+    cls = classify(ratio, flat_bottom=standard == "flat")
     values = characteristic_values(solid, wall_type, a_over_u)
     gamma = solid.gamma
     h_o = 0.0
@@ -638,7 +639,7 @@ def design_loads(geometry, material, fill_height: float, wall_type: str = "D2", 
     nan = np.full_like(z, np.nan)
     hopper = None
     p_v_hopper, p_nf, p_tf, p_ne, p_te = nan, nan, nan, nan, nan
-    if kind == "hopper":
+    if standard == "hopper":
         beta = math.degrees(math.atan((r - geometry.outlet_radius) / transition))
         x_outlet = geometry.outlet_radius / math.tan(math.radians(beta))
         h_h = transition + x_outlet

@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, PrivateAttr, ValidationError, model_
 
 from .case import DEFAULT_TIMESTEP_FRACTION, Analysis, DesignSettings
 from .errors import ReadError
+from .silos.registry import SILO_KINDS, silo_kind
 
 #: bumped whenever a field changes meaning; a plan of another version is refused
 PLAN_VERSION = 1
@@ -197,7 +198,7 @@ class Silo(Frozen):
     farthest point of its walls); ``half_width`` is the radius or half the width;
     the outlet's centre is at (``outlet_offset``, 0, 0)."""
 
-    kind: Literal["cylinder", "hopper", "planar", "box", "mesh"]
+    kind: Literal[tuple(SILO_KINDS)]       # siloflow.silos.registry
     half_width: float
     height: float                   # of the vertical part
     hopper_height: float            # 0 without a hopper
@@ -224,9 +225,7 @@ class Silo(Frozen):
     @property
     def half_depth(self) -> float:
         """Half the extent along y, m."""
-        if self.kind == "box":
-            return 0.5 * self.depth
-        return 0.5 * self.thickness if self.kind == "planar" else self.reach
+        return silo_kind(self.kind).half_depth(self)
 
     @property
     def hydraulic_diameter(self) -> Optional[float]:
@@ -417,7 +416,8 @@ class RunPlan(Frozen):
 
     @property
     def planar(self) -> bool:
-        return self.geometry.kind == "planar"
+        """A slab (``siloflow.silos.base.SiloKind.slab``)."""
+        return silo_kind(self.geometry.kind).slab
 
     @property
     def dt(self) -> float:

@@ -16,6 +16,7 @@ from importlib import resources
 from importlib.abc import Traversable
 
 from .errors import SetupError
+from .silos.registry import SILO_KINDS
 
 TEMPLATES = "siloflow.templates"
 DECKS = "siloflow.decks"
@@ -61,7 +62,9 @@ def example_companions(name: str) -> list[str]:
     import yaml
     data = yaml.safe_load(example_text(name))
     geometry = data.get("geometry", {}) if isinstance(data, dict) else {}
-    return list(geometry.get("files", [])) if geometry.get("kind") == "mesh" else []
+    kind = geometry.get("kind")
+    reads_files = isinstance(kind, str) and kind in SILO_KINDS and SILO_KINDS[kind].reads_files
+    return list(geometry.get("files", [])) if reads_files else []
 
 
 def example_file(name: str) -> bytes:

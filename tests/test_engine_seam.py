@@ -261,9 +261,10 @@ def _within(module: str, packages) -> bool:
 READERS = ("postprocess.dumps",)
 #: what analyses and the report may import of siloflow: errors (and the optional extras' names),
 #: atomic writes, the run folder (and the plan it holds), the engine names, and pure formulas
-#: (EN 1991-4, clump shapes)
+#: (EN 1991-4, clump shapes, the silo kinds: siloflow.silos reaches no step before the run folder)
 POST_MAY_IMPORT = ("siloflow.errors", "siloflow.extras", "siloflow.atomic_files", "siloflow.run_folder",
-                   "siloflow.plan", "siloflow.engines", "siloflow.design_loads", "siloflow.clumps")
+                   "siloflow.plan", "siloflow.engines", "siloflow.design_loads", "siloflow.clumps",
+                   "siloflow.silos.registry")
 #: the steps before the run folder, which post-processing never reaches
 BEFORE_THE_RUN_FOLDER = ("siloflow.derived", "siloflow.profiles", "siloflow.geometry", "siloflow.deck",
                          "siloflow.engine", "siloflow.runs", "siloflow.fill_cache", "siloflow.cli", "siloflow.sweep",

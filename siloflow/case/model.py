@@ -7,6 +7,7 @@ from typing import Optional
 from pydantic import Field, model_validator
 
 from ..packaged_profile import packaged_fast_profile
+from ..silos.registry import silo_kind
 from .analysis import Analysis, DesignSettings, WallInsert
 from .engine_settings import EngineSettings
 from .fields import MIN_GRAVITY, Int, Positive, SafeName, Strict
@@ -17,8 +18,6 @@ from .particles import Particles
 from .stages import Discharge, Fill, Settle
 
 STATIC_WINDOW_SAMPLES = 20
-#: the fewest grain diameters a periodic slab's depth holds (a grain must not touch its own image)
-PERIODIC_GRAINS = 3.0
 
 
 def default_static_window(sample_interval: float, check_interval: float) -> float:
@@ -133,32 +132,15 @@ class Case(Strict):
         if p.max_radius >= g.outlet_radius:
             problems.append(f"{field} ({p.max_radius:.6g} m) must be smaller than the outlet's half width "
                             f"({g.outlet_radius} m, {_outlet_fields(g)}): nothing could leave")
-        if g.kind == "planar":
-            # the grains' thickness across the slab: spheres their diameter, wheat lies flat in it
-            across = p.width if p.kind == "clumps" and p.shape == "wheat" else 2 * p.max_radius
-            if p.kind == "clumps" and p.shape != "wheat":
-                problems.append("geometry.kind planar: clumps in a slab need shape 'wheat' (inserted flat)")
-            if g.periodic_depth:
-                if p.kind == "clumps" or getattr(p, "dust", None) is not None:
-                    problems.append("geometry.periodic_depth: a periodic slab takes spheres without dust (clumps and "
-                                    "dust are held to a one-grain slab's mid-plane)")
-                if g.thickness < PERIODIC_GRAINS * 2 * p.max_radius:
-                    problems.append(f"geometry.thickness ({g.thickness} m) of a periodic slab must hold at least "
-                                    f"{PERIODIC_GRAINS:g} grain diameters ({PERIODIC_GRAINS * 2 * p.max_radius:.6g} m): "
-                                    "a grain must not touch its own periodic image")
-            elif g.thickness <= 1.01 * across:
-                problems.append(f"geometry.thickness ({g.thickness} m) must exceed the grains' thickness "
-                                f"({across:.6g} m) by 1 %")
-        if g.kind == "box" and (p.kind == "clumps" or getattr(p, "dust", None) is not None):
-            problems.append("geometry.kind box: a rectangular silo takes spheres (monodisperse or polydisperse) "
-                            "without dust for now; clumps and dust: kind cylinder, hopper or planar")
-        if f.mobilise is not None and g.kind != "cylinder":
+        kind = silo_kind(g.kind)
+        problems += kind.particle_problems(g, p)
+        if f.mobilise is not None and not kind.mobile_floor:
             problems.append(f"fill.mobilise lowers a flat floor: it needs geometry.kind cylinder, not {g.kind} "
                             "(a hopper or slab floor cannot move down without opening a gap at its walls)")
         zmin, zmax = f.insertion_z_min, f.insertion_z_max
         if zmin is not None and zmax is not None and zmax - zmin < 2 * d:
             problems.append("fill.insertion_z_max must exceed insertion_z_min by 2 particle diameters")
-        if g.kind != "mesh" or g.measured:      # a mesh silo's size is known once its files are read
+        if not kind.reads_files or g.measured:      # a mesh silo's size is known once its files are read
             problems += shape_problems(self)
         names = [i.name for i in self.inserts]
         if len(set(names)) != len(names):
@@ -171,15 +153,12 @@ class Case(Strict):
 
 def _wall_height_field(g) -> str:
     """The field that sets a geometry's vertical wall height, for messages."""
-    return "the vertical walls of geometry.files" if g.kind == "mesh" else "geometry.height"
+    return silo_kind(g.kind).wall_height_field(g)
 
 
 def _outlet_fields(g) -> str:
     """The fields that size a geometry's outlet, for messages."""
-    if g.kind == "box":
-        return "geometry.outlet_radius" if g.outlet == "circle" else "geometry.outlet_width"
-    return {"cylinder": "geometry.orifice_radius", "hopper": "geometry.outlet_radius",
-            "planar": "geometry.outlet_width / 2", "mesh": "geometry.outlet times geometry.scale"}[g.kind]
+    return silo_kind(g.kind).outlet_fields(g)
 
 
 def shape_problems(case: "Case") -> list[str]:
@@ -189,7 +168,7 @@ def shape_problems(case: "Case") -> list[str]:
     d = 2 * p.max_radius
     field = {"spheres": "particles.radius", "clumps": "particles.length"}.get(p.kind, "particles.radii")
     problems = []
-    if g.kind == "mesh" and (g.height > MAX_WALL_HEIGHT or g.hopper_height > MAX_HOPPER_HEIGHT):
+    if silo_kind(g.kind).reads_files and (g.height > MAX_WALL_HEIGHT or g.hopper_height > MAX_HOPPER_HEIGHT):
         problems.append(f"geometry.scale ({g.scale:g}) makes the walls of geometry.files {g.height:.4g} m tall above a "
                         f"floor or hopper {g.hopper_height:.4g} m tall: at most {MAX_WALL_HEIGHT:g} m and "
                         f"{MAX_HOPPER_HEIGHT:g} m, as a cylinder's (is the scale right? 0.001 for mm)")

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..plan import Silo
-from .container import container_meshes
+from ..silos.registry import silo_kind
 from .quality import (
     LIGGGHTS_CURVATURE_DEG,
     LIGGGHTS_MIN_MESH_EXTENT,
@@ -66,19 +66,10 @@ def silo_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outlet_z
     is cut from its ``container`` (``siloflow.geometry.container``); its pieces keep the user's
     triangles, so they are held to LIGGGHTS' own limits instead of siloflow's.
     """
-    min_angle, min_edge = MIN_ANGLE_DEG, MIN_EDGE
-    if silo.kind == "mesh":
-        meshes = container_meshes(container, band_bounds, sectors, (silo.outlet_offset, silo.outlet_offset_y),
-                                  outlet_z, outlet_radius)
-        min_angle, min_edge = LIGGGHTS_CURVATURE_DEG, LIGGGHTS_PRECISION
-    elif silo.kind == "planar":
-        meshes = slab_meshes(silo, band_bounds, outlet_z, outlet_radius)
-    elif silo.kind == "box":
-        meshes = box_meshes(silo, band_bounds, outlet_z, outlet_radius)
-    elif silo.kind in ("cylinder", "hopper"):
-        meshes = cylinder_meshes(silo, band_bounds, sectors, outlet_z, outlet_radius)
-    else:
-        raise NotImplementedError(f"no meshes for a silo of kind {silo.kind!r}")
+    kind = silo_kind(silo.kind)
+    meshes = kind.wall_meshes(silo, band_bounds, sectors, outlet_z, outlet_radius, container)
+    min_angle, min_edge = (LIGGGHTS_CURVATURE_DEG, LIGGGHTS_PRECISION) if kind.user_triangles else (MIN_ANGLE_DEG,
+                                                                                                    MIN_EDGE)
     if not sensors:
         meshes = merge_side_walls(meshes)
     for w in meshes:
@@ -210,7 +201,7 @@ def cylinder_meshes(silo: Silo, band_bounds: Sequence[float], sectors: int, outl
                                      lambda: graded_disc(inner, radius, z, n_ring))
 
     r_out = g.outlet_radius
-    if g.kind == "hopper":
+    if base > 0:                        # a hopper's cone, else a flat floor
         slant = math.hypot(R - r_out, base)
         n_ax = max(1, math.ceil(slant / h_facet))
         meshes.append(_wall("cone", "cone", lambda: _structured_or_graded(

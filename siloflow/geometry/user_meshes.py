@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..plan import Silo
+from ..silos.registry import silo_kind
 from .quality import LIGGGHTS_CURVATURE_DEG, as_written, min_angles
 from .wall_mesh import WallMesh
 
@@ -158,10 +159,7 @@ def check_inside(silo: Silo, tris: np.ndarray) -> None:
     inside its box. Raises ``MeshError``."""
     g = silo
     p = tris.reshape(-1, 3)
-    if g.kind in ("planar", "box"):
-        inside = (np.abs(p[:, 0]) <= g.half_width) & (np.abs(p[:, 1]) <= g.half_depth)
-    else:
-        inside = np.hypot(p[:, 0], p[:, 1]) <= g.radius
+    inside = silo_kind(g.kind).inside(g, p)
     inside &= (p[:, 2] >= 0.0) & (p[:, 2] <= g.top)
     if not inside.all():
         lo, hi = p.min(axis=0), p.max(axis=0)

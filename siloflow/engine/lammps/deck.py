@@ -50,6 +50,8 @@ from ...engines import ENGINE_FILES
 from ...geometry import write_stl
 from ...plan import FACES, WALL, RunPlan
 from ...run_folder import RESTART_FILE, DumpLayout, RunFolder
+from ...silos.base import resolve
+from ...silos.registry import silo_kind
 from .contact_law import CLASSIC_STYLE, classic_args, pair_coeff_args, wall_args
 
 DECK_NAME = "in.lammps"
@@ -175,69 +177,105 @@ def _n(x: float) -> str:
 
 
 def walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
-    """The plan's silo as LAMMPS region walls (see the module docstring); ``floor_dz``: the flat
-    floor's regions and the plate lowered by that much (m, negative down: ``fill.mobilise``)."""
+    """The plan's silo as LAMMPS region walls (see the module docstring), built by its kind's
+    ``lammps_walls`` (``siloflow.silos``); ``floor_dz``: the flat floor's regions and the plate
+    lowered by that much (m, negative down: ``fill.mobilise``)."""
+    kind = silo_kind(plan.geometry.kind)
+    if not kind.lammps_walls:
+        raise ValueError(f"LAMMPS has no region walls for a silo of kind {kind.name} (Engine.check refuses it)")
+    return resolve(kind.lammps_walls)(plan, floor_dz)
+
+
+def slab_walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
+    """A slab's walls (:func:`walls`): the side walls, the faces, the wedge's planes or a flat floor
+    either side of the slot, the slot's edges and the plate."""
     g = plan.geometry
     R, hh, top, ro = g.half_width, g.hopper_height, g.top, g.outlet_radius
-    d = 2 * plan.particle_radius
-    thick = 2 * d                                   # the plate's thickness, m
+    d, thick = _sizes(plan)
     out = []
-    if g.kind == "planar":
-        if floor_dz:
-            raise ValueError("a slab's floor does not move (fill.mobilise needs a flat-bottomed cylinder)")
-        half_y = g.half_depth
-        out.append(LammpsWall("side", [("side", "block", [_n(-R), _n(R), _n(-half_y - d), _n(half_y + d),
-                                                               _n(hh), _n(top), "open", "3", "open", "4",
-                                                               "open", "5", "open", "6"])]))
-        # the faces go on below the orifice to the box's floor: a falling grain stays in the slab
-        floor = plan.outlet.z - plan.opening.travel - 10 * d
-        if not g.periodic_depth:                      # periodic along y: no faces
-            out.append(LammpsWall("faces", [("faces", "block", [_n(-R - d), _n(R + d), _n(-half_y), _n(half_y),
-                                                                      _n(floor), _n(top), "open", "1", "open", "2",
-                                                                      "open", "5", "open", "6"])], partner=FACES))
-        ex = g.outlet_offset                          # the slot's centre at x = ex
-        if hh == 0:
-            # a flat floor: a block either side of the slot, grains outside; its top is the floor and
-            # its face at the slot the slot's edge (a block's outside has its edges: no rim needed)
-            for side, lo, hi in (("left", -R - d, ex - ro), ("right", ex + ro, R + d)):
-                out.append(LammpsWall("bottom", [(f"floor_{side}", "block", [
-                    _n(lo), _n(hi), _n(-half_y - d), _n(half_y + d), _n(-thick), _n(0.0), "side", "out"])]))
-        for side, sign in (("left", -1.0), ("right", 1.0)) if hh > 0 else ():
-            rid = f"hopper_{side}"
-            edge = ex + sign * ro                       # the slot's edge on this side
-            run = R - sign * ex - ro                    # from it to the side wall's foot, along x
-            length = math.hypot(run, hh)
-            nx, nz = hh / length, run / length          # the wall's normal into the silo: (-sign nx, 0, nz)
-            out.append(hopper_face(rid, (edge, 0.0), (-sign * nx, 0.0, nz)))
-        if hh > 0:
-            # the orifice's edges (a union keeps faces, not the edges where they meet): the two sides of a
-            # vanishingly thin block across the orifice, open above and below, touched from outside
-            out.append(LammpsWall("hopper", [("rim", "block", [_n(ex - ro), _n(ex + ro), _n(-half_y - d),
-                                                                   _n(half_y + d), _n(-RIM_THICKNESS * d), _n(0.0),
-                                                                   "open", "3", "open", "4", "open", "5", "open", "6",
-                                                                   "side", "out"])]))
-        out.append(LammpsWall("plate", [("plate", "block", [_n(ex - ro), _n(ex + ro), _n(-half_y - d), _n(half_y + d),
-                                                                  _n(-thick), _n(0.0), "side", "out"])], plate=True))
-        return out
-    if g.kind == "box":
-        if floor_dz:
-            raise ValueError("a box's floor does not move (fill.mobilise needs a flat-bottomed cylinder)")
-        return out + box_walls(g, d, thick)
-    out.append(LammpsWall("side", [("side", "cylinder", ["z", _n(0.0), _n(0.0), _n(R), _n(hh), _n(top),
-                                                                 "open", "1", "open", "2"])]))
-    ex = g.outlet_offset                            # the orifice's centre at (ex, 0)
-    if g.kind == "hopper":
-        if floor_dz:
-            raise ValueError("a hopper's outlet does not move (fill.mobilise needs a flat-bottomed cylinder)")
-        if ex:
-            raise ValueError("LAMMPS' cone region is a right cone: no eccentric hopper outlet (Engine.check refuses it)")
-        out.append(LammpsWall("hopper", [("cone", "cone", ["z", _n(0.0), _n(0.0), _n(ro), _n(R), _n(0.0),
-                                                                   _n(hh), "open", "1", "open", "2"])]))
-        out.append(rim("hopper", ex, 0.0, ro, d))
-    else:
-        out += round_hole(ex, 0.0, ro, top, d, floor_dz)
-    out.append(round_plate(ex, 0.0, ro, thick, floor_dz))
+    if floor_dz:
+        raise ValueError("a slab's floor does not move (fill.mobilise needs a flat-bottomed cylinder)")
+    half_y = g.half_depth
+    out.append(LammpsWall("side", [("side", "block", [_n(-R), _n(R), _n(-half_y - d), _n(half_y + d),
+                                                           _n(hh), _n(top), "open", "3", "open", "4",
+                                                           "open", "5", "open", "6"])]))
+    # the faces go on below the orifice to the box's floor: a falling grain stays in the slab
+    floor = plan.outlet.z - plan.opening.travel - 10 * d
+    if not g.periodic_depth:                      # periodic along y: no faces
+        out.append(LammpsWall("faces", [("faces", "block", [_n(-R - d), _n(R + d), _n(-half_y), _n(half_y),
+                                                                  _n(floor), _n(top), "open", "1", "open", "2",
+                                                                  "open", "5", "open", "6"])], partner=FACES))
+    ex = g.outlet_offset                          # the slot's centre at x = ex
+    if hh == 0:
+        # a flat floor: a block either side of the slot, grains outside; its top is the floor and
+        # its face at the slot the slot's edge (a block's outside has its edges: no rim needed)
+        for side, lo, hi in (("left", -R - d, ex - ro), ("right", ex + ro, R + d)):
+            out.append(LammpsWall("bottom", [(f"floor_{side}", "block", [
+                _n(lo), _n(hi), _n(-half_y - d), _n(half_y + d), _n(-thick), _n(0.0), "side", "out"])]))
+    for side, sign in (("left", -1.0), ("right", 1.0)) if hh > 0 else ():
+        rid = f"hopper_{side}"
+        edge = ex + sign * ro                       # the slot's edge on this side
+        run = R - sign * ex - ro                    # from it to the side wall's foot, along x
+        length = math.hypot(run, hh)
+        nx, nz = hh / length, run / length          # the wall's normal into the silo: (-sign nx, 0, nz)
+        out.append(hopper_face(rid, (edge, 0.0), (-sign * nx, 0.0, nz)))
+    if hh > 0:
+        # the orifice's edges (a union keeps faces, not the edges where they meet): the two sides of a
+        # vanishingly thin block across the orifice, open above and below, touched from outside
+        out.append(LammpsWall("hopper", [("rim", "block", [_n(ex - ro), _n(ex + ro), _n(-half_y - d),
+                                                               _n(half_y + d), _n(-RIM_THICKNESS * d), _n(0.0),
+                                                               "open", "3", "open", "4", "open", "5", "open", "6",
+                                                               "side", "out"])]))
+    out.append(LammpsWall("plate", [("plate", "block", [_n(ex - ro), _n(ex + ro), _n(-half_y - d), _n(half_y + d),
+                                                              _n(-thick), _n(0.0), "side", "out"])], plate=True))
     return out
+
+
+def _sizes(plan: RunPlan) -> tuple[float, float]:
+    """A grain diameter and the plate's thickness (two diameters), m."""
+    d = 2 * plan.particle_radius
+    return d, 2 * d
+
+
+def box_region_walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
+    """A box's walls (:func:`walls`, :func:`box_walls`); its floor does not move."""
+    if floor_dz:
+        raise ValueError("a box's floor does not move (fill.mobilise needs a flat-bottomed cylinder)")
+    return box_walls(plan.geometry, *_sizes(plan))
+
+
+def round_side(plan: RunPlan) -> LammpsWall:
+    """A round silo's side wall: a cylinder open at both ends from the hopper's top to the top."""
+    g = plan.geometry
+    return LammpsWall("side", [("side", "cylinder", ["z", _n(0.0), _n(0.0), _n(g.half_width), _n(g.hopper_height),
+                                                     _n(g.top), "open", "1", "open", "2"])])
+
+
+def cylinder_walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
+    """A cylinder's walls (:func:`walls`): the side wall, the floor with its round hole and edge at
+    (``outlet_offset``, 0), the plate; the floor and plate lowered by ``floor_dz`` (m)."""
+    g = plan.geometry
+    d, thick = _sizes(plan)
+    ex = g.outlet_offset                            # the orifice's centre at (ex, 0)
+    return ([round_side(plan)] + round_hole(ex, 0.0, g.outlet_radius, g.top, d, floor_dz)
+            + [round_plate(ex, 0.0, g.outlet_radius, thick, floor_dz)])
+
+
+def hopper_walls(plan: RunPlan, floor_dz: float = 0.0) -> list[LammpsWall]:
+    """A hopper's walls (:func:`walls`): the side wall, a right cone open at both ends from the outlet
+    to the wall, the outlet's edge and the plate; its outlet neither moves nor lies off the axis."""
+    g = plan.geometry
+    R, hh, ro = g.half_width, g.hopper_height, g.outlet_radius
+    d, thick = _sizes(plan)
+    ex = g.outlet_offset
+    if floor_dz:
+        raise ValueError("a hopper's outlet does not move (fill.mobilise needs a flat-bottomed cylinder)")
+    if ex:
+        raise ValueError("LAMMPS' cone region is a right cone: no eccentric hopper outlet (Engine.check refuses it)")
+    return [round_side(plan),
+            LammpsWall("hopper", [("cone", "cone", ["z", _n(0.0), _n(0.0), _n(ro), _n(R), _n(0.0),
+                                                    _n(hh), "open", "1", "open", "2"])]),
+            rim("hopper", ex, 0.0, ro, d), round_plate(ex, 0.0, ro, thick, floor_dz)]
 
 
 def box_walls(g, d: float, thick: float) -> list[LammpsWall]:

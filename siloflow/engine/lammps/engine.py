@@ -19,6 +19,7 @@ from ...engines import ENGINE_FILES
 from ...errors import ReadError, SetupError, SiloflowError
 from ...plan import RunPlan
 from ...run_folder import RESTART_FILE, write_status
+from ...silos.registry import silo_kind
 from ..base import Engine, Finished, Launched, ProgressCallback, SettledBed
 from . import deck as lammps_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, RESUME_LOG_NAME
@@ -56,20 +57,18 @@ class LammpsEngine(Engine):
         grains), clumps in a slab (rigid/small bodies cannot be held to a plane), an eccentric hopper
         (a cone region is a right cone)."""
         problems = []
-        if case.geometry.kind == "mesh":
+        kind = silo_kind(case.geometry.kind)
+        if kind.user_triangles:
             problems.append(("geometry.kind", "LAMMPS has no STL walls for grains (no mesh region), so it cannot "
                                               "run a silo from STL files: use engine.name: liggghts"))
         if case.inserts:
             problems.append(("inserts", "LAMMPS has no STL walls for grains (no mesh region): remove the "
                                         "inserts or use engine.name: liggghts"))
-        if case.particles.kind == "clumps" and case.geometry.kind == "planar":
+        if case.particles.kind == "clumps" and kind.slab:
             problems.append(("geometry.kind", "clumps in a slab must stay in its plane, and LAMMPS' fix "
                                               "rigid/small cannot hold a body's motion to a plane: use a cylinder "
                                               "or hopper, or engine.name: liggghts"))
-        if case.geometry.kind == "hopper" and case.geometry.outlet_offset:
-            problems.append(("geometry.outlet_offset", "LAMMPS' cone region is a right cone, so it has no "
-                                                       "oblique hopper for an eccentric outlet: set outlet_offset: "
-                                                       "0, or use engine.name: liggghts (mesh walls)"))
+        problems += kind.lammps_problems(case.geometry)
         if case.engine.ranks > (os.cpu_count() or 1):
             problems.append(("engine.ranks", f"{case.engine.ranks} ranks but this machine has {os.cpu_count()} "
                                              "cores: lower engine.ranks"))

@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 
 from ...plan import RunPlan
+from ...silos.registry import silo_kind
 
 #: the roles of the side walls' pieces in the plan (sensor bands and the unsensed rest)
 SIDE_ROLES = ("band", "wall")
@@ -47,17 +48,7 @@ def primitive_sides(plan: RunPlan) -> list[dict]:
     g = plan.geometry
     if not plan.engine.options.get("primitive_side_walls"):       # the case's engine.side_walls: meshes
         return []
-    if g.kind in ("cylinder", "hopper"):
-        return [{"fid": "side", "style": "zcylinder", "args": [g.radius, 0.0, 0.0], "sector": None}]
-    if g.kind == "planar":
-        a = g.half_width
-        return [{"fid": f"side_s{s:02d}", "style": "xplane", "args": [x], "sector": s}
-                for s, x in ((0, -a), (1, a))]
-    if g.kind == "box":
-        a, b = g.half_width, 0.5 * g.depth
-        return [{"fid": f"side_s{s:02d}", "style": style, "args": [p], "sector": s}
-                for s, style, p in ((0, "xplane", -a), (1, "xplane", a), (2, "yplane", -b), (3, "yplane", b))]
-    return []
+    return silo_kind(g.kind).primitive_sides(g)
 
 
 def on_primitive(plan: RunPlan, wall) -> bool:
