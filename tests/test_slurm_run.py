@@ -98,3 +98,21 @@ def test_liggghts_starts_its_ranks_with_the_jobs_launcher(tmp_path, monkeypatch)
     command = LiggghtsEngine(executable="/bin/sh").command(64)
     assert command[:3] == [str(srun), "--ntasks=64", "--cpus-per-task=1"] and "-np" not in command
     assert launch_ranks(str(srun), 8) == [str(srun), "--ntasks=8", "--cpus-per-task=1"]
+
+
+def test_a_run_slurm_restarted_on_another_node_is_abandoned_not_running(tmp_path, monkeypatch):
+    """A job requeued after a node failure finds its folder 'running' on the dead node: the status names
+    the Slurm job and its restart count, so the requeued start knows that run is over and resumes it."""
+    from siloflow.run_folder import run_state, write_status
+
+    monkeypatch.setenv("SLURM_JOB_ID", "4242")
+    monkeypatch.setenv("SLURM_RESTART_COUNT", "0")
+    write_status(tmp_path, "running")
+    status = json.loads((tmp_path / "status.json").read_text())
+    (tmp_path / "status.json").write_text(json.dumps({**status, "host": "node-017"}))
+    assert run_state(tmp_path)["state"] == "running"                # the same start: cannot be checked here
+    monkeypatch.setenv("SLURM_RESTART_COUNT", "1")
+    state = run_state(tmp_path)
+    assert state["state"] == "abandoned" and "Slurm restarted job 4242" in state["reason"]
+    monkeypatch.setenv("SLURM_JOB_ID", "9999")                      # another job: not ours to judge
+    assert run_state(tmp_path)["state"] == "running"
