@@ -501,6 +501,22 @@ def _shown(value) -> str:
 STATES = ("rendered", "running", "complete", "failed", "interrupted")
 
 
+def slurm_run() -> dict:
+    """The Slurm job this process runs in and how often Slurm has restarted it (``SLURM_JOB_ID``,
+    ``SLURM_RESTART_COUNT``); empty outside Slurm."""
+    job = os.environ.get("SLURM_JOB_ID", "")
+    restarts = os.environ.get("SLURM_RESTART_COUNT", "0")
+    return {"slurm_job": job, "slurm_restart": int(restarts) if restarts.isdigit() else 0} if job else {}
+
+
+def restarted_by_slurm(status: dict) -> bool:
+    """Whether the ``running`` status was written by an earlier start of the Slurm job this process runs
+    in (Slurm requeued it, after a node failure or a hard kill, perhaps onto another node): that start is over."""
+    now = slurm_run()
+    return bool(now and status.get("slurm_job") == now["slurm_job"]
+                and isinstance(status.get("slurm_restart"), int) and status["slurm_restart"] < now["slurm_restart"])
+
+
 def write_status(folder: Path, state: str, **extra) -> None:
     """Record the run state (``rendered``, ``running``, ``complete``, ``failed``, ``interrupted``).
 
@@ -509,7 +525,7 @@ def write_status(folder: Path, state: str, **extra) -> None:
     (its blocks are already allocated), so a failure can still be recorded."""
     if state == "running":
         extra = {"siloflow_pid": os.getpid(), "siloflow_start": process_start(os.getpid()),
-                 "host": socket.gethostname(), **extra}
+                 "host": socket.gethostname(), **slurm_run(), **extra}
     path = Path(folder) / STATUS_NAME
     data = {"state": state, "time": time.time(), **extra}
     try:
@@ -592,6 +608,10 @@ def run_state(folder: Path) -> dict:
                           "cannot be told"}
     status = read_status(folder)
     host = status.get("host")
+    if status["state"] == "running" and restarted_by_slurm(status):
+        return {**status, "state": "abandoned",
+                "reason": f"Slurm restarted job {status['slurm_job']} (on host {host}) before siloflow recorded "
+                          "how the run ended"}
     if status["state"] == "running" and host not in (None, socket.gethostname()):
         return {**status, "reason": f"on host {host}: its process cannot be checked from here"}
     if status["state"] == "running" and not process_alive(status.get("siloflow_pid"), status.get("siloflow_start")):

@@ -411,14 +411,16 @@ def _case_of(case) -> tuple[object, list, str]:
 
 
 def prepare_run(case, folder, force: bool = False, allow_long: bool = False, allow_large_output: bool = False,
-                profile: Optional[str] = None, executable: Optional[str] = None) -> PreparedRun:
+                profile: Optional[str] = None, executable: Optional[str] = None, ranks: Optional[int] = None,
+                runs_here: bool = True) -> PreparedRun:
     """Everything before the engine starts, as ``siloflow run`` does it: read ``case`` (a ``Case``, a
     dict of case fields or a case-file path, which is kept in the folder), apply the numerical
-    ``profile`` (reference, fast or custom; None: the case's), check it against its engine (binary
-    ``executable``, default the engine's own) and that engine's presence, derive the run plan,
-    refuse a run over the step cap (``allow_long``) or whose estimated output exceeds the free disk
-    (``allow_large_output``), and render the folder (``force``: replace one siloflow made).
-    Nothing is written when anything is refused."""
+    ``profile`` (reference, fast or custom; None: the case's) and ``ranks`` (None: the case's
+    ``engine.ranks``), check it against its engine (binary ``executable``, default the engine's own)
+    and, when it ``runs_here`` (not in a cluster job), that engine's presence and this machine's cores,
+    derive the run plan, refuse a run over the step cap (``allow_long``) or whose estimated output
+    exceeds the free disk (``allow_large_output``), and render the folder (``force``: replace one
+    siloflow made). Nothing is written when anything is refused."""
     from .derived import check_run_length, derive
     from .disk_estimate import check_disk_space
     from .engine import get_engine
@@ -429,9 +431,12 @@ def prepare_run(case, folder, force: bool = False, allow_long: bool = False, all
     if profile is not None:
         from .profiles import with_profile
         case, replaced = with_profile(case, profile)
+    if ranks is not None and ranks != case.engine.ranks:
+        case = case.with_changes({"engine.ranks": ranks})
     engine = get_engine(case.engine.name, executable=executable)
     check_case(case, engine)
-    engine.preflight(case.engine.ranks)         # engine and launcher present before anything is written
+    if runs_here:
+        engine.preflight(case.engine.ranks)     # engine and launcher present before anything is written
     try:
         plan = derive(case)
     except CaseError as exc:

@@ -1,14 +1,24 @@
-"""A sweep written as Slurm job arrays instead of run here (``siloflow sweep --slurm``): the fills
-(one task per fill group), then the other runs after them, in arrays of at most ``max_array_size``
-tasks, and the script that submits them (``submit.sh``)."""
+"""Runs written as Slurm batch scripts instead of run here.
+
+- One run over one or many nodes (``siloflow run CASE -o DIR --slurm``): the folder is rendered here and
+  ``DIR/job.sbatch`` runs it (``siloflow run --resume DIR``) as one MPI job over the allocation
+  (:class:`SlurmJob`, :func:`write_run_script`).
+- A sweep (``siloflow sweep --slurm``): the fills (one task per fill group), then the other runs after
+  them, in arrays of at most ``max_array_size`` tasks, and the script that submits them (``submit.sh``).
+"""
 from __future__ import annotations
 
 import math
+import re
 import shlex
+import sys
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
-from .errors import SetupError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from .atomic_files import write_text
+from .errors import CaseError, SetupError
 from .sweep_folder import check_cases, check_owned, open_record, save_record, write_cases, write_owned
 from .sweep_plan import StageProgress, Variant, variant_keys
 
@@ -150,3 +160,121 @@ def write_slurm(variants: list[Variant], groups: dict[str, list[Variant]], out: 
     submit = out / "submit.sh"
     submit.chmod(0o755)
     return submit
+
+
+# ------------------------------------------------------------------ one run over many nodes
+#: Slurm's --time forms: minutes, minutes:seconds, hours:minutes:seconds, days-hours,
+#: days-hours:minutes, days-hours:minutes:seconds
+SLURM_TIME = re.compile(r"^(\d+|\d+:\d{1,2}|\d+:\d{1,2}:\d{1,2}|\d+-\d{1,2}|\d+-\d{1,2}:\d{1,2}|"
+                        r"\d+-\d{1,2}:\d{1,2}:\d{1,2})$")
+#: a partition or account name as Slurm writes them (no spaces, no shell characters)
+SLURM_NAME = re.compile(r"^[A-Za-z0-9_.+-]{1,64}$")
+#: the one run's batch script, in its run folder
+RUN_SCRIPT = "job.sbatch"
+
+
+class SlurmJob(BaseModel):
+    """The allocation of one run's Slurm job: ``nodes`` x ``ntasks_per_node`` MPI ranks (one CPU each),
+    its wall-time limit, partition and account, the MPI launcher (``mpirun``: the site's Open MPI,
+    which takes its hosts from the allocation; ``srun``: Slurm's own), and how long before the limit
+    Slurm asks the run to stop (``grace_s``, s) so that it is marked interrupted and resumable."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    nodes: int = Field(1, ge=1, le=10000, description="nodes")
+    ntasks_per_node: int = Field(1, ge=1, le=1024, description="MPI ranks per node")
+    time: str = Field("24:00:00", description="wall-time limit (Slurm's --time)")
+    partition: Optional[str] = Field(None, description="partition (Slurm's --partition)")
+    account: Optional[str] = Field(None, description="account (Slurm's --account)")
+    launcher: Literal["mpirun", "srun"] = Field("mpirun", description="the MPI launcher")
+    grace_s: int = Field(300, ge=10, le=86400, description="s before the time limit at which the run is stopped")
+    requeue: bool = Field(False, description="requeue the job when the time limit stopped it")
+
+    @field_validator("time")
+    @classmethod
+    def _time(cls, v: str) -> str:
+        if not SLURM_TIME.match(v):
+            raise ValueError(f"{v!r} is not a Slurm time (minutes, HH:MM:SS or D-HH:MM:SS)")
+        return v
+
+    @field_validator("partition", "account")
+    @classmethod
+    def _name(cls, v: Optional[str]) -> Optional[str]:
+        if v is not None and not SLURM_NAME.match(v):
+            raise ValueError(f"{v!r}: letters, digits and _ . + - only")
+        return v
+
+    @property
+    def ranks(self) -> int:
+        """The run's MPI ranks: every task of every node."""
+        return self.nodes * self.ntasks_per_node
+
+
+def slurm_job(**options) -> SlurmJob:
+    """A :class:`SlurmJob` from the CLI's options; ``CaseError`` naming each option (``--nodes``...) that is wrong."""
+    try:
+        return SlurmJob(**options)
+    except ValidationError as exc:
+        raise CaseError([("--" + str(e["loc"][0]).replace("_", "-"), e["msg"]) for e in exc.errors()],
+                        "siloflow run --slurm") from None
+
+
+def sbatch_header(job: SlurmJob, name: str) -> list[str]:
+    """The ``#SBATCH`` lines of ``job`` for a job called ``name`` (made safe for Slurm)."""
+    lines = [f"#SBATCH --job-name={re.sub(r'[^A-Za-z0-9_.-]', '_', name)[:64] or 'siloflow'}",
+             f"#SBATCH --nodes={job.nodes}", f"#SBATCH --ntasks-per-node={job.ntasks_per_node}",
+             f"#SBATCH --ntasks={job.ranks}", "#SBATCH --cpus-per-task=1", f"#SBATCH --time={job.time}",
+             f"#SBATCH --signal=B:TERM@{job.grace_s}", "#SBATCH --output=slurm-%j.out", "#SBATCH --open-mode=append"]
+    lines += [f"#SBATCH --partition={job.partition}"] if job.partition else []
+    lines += [f"#SBATCH --account={job.account}"] if job.account else []
+    lines += ["#SBATCH --requeue"] if job.requeue else []
+    return lines
+
+
+def siloflow_here() -> list[str]:
+    """The command that starts this siloflow (its Python, absolute: on a cluster the environment that
+    rendered the folder sits on the shared file system the job sees)."""
+    return [sys.executable, "-m", "siloflow.cli"]
+
+
+def run_script(job: SlurmJob, folder: Path, name: str, engine: str, siloflow: Optional[list[str]] = None,
+               cache: Optional[Path] = None) -> str:
+    """The batch script that runs the rendered run folder ``folder`` (absolute) over ``job``'s
+    allocation: ``siloflow run --resume`` (``siloflow``: the command, default :func:`siloflow_here`)
+    in the background of the batch shell, which passes Slurm's stop signal on to it."""
+    q = shlex.quote
+    resume = " ".join([*map(q, siloflow or siloflow_here()), "run", "--resume", q(str(folder)), *(["--cache", q(str(cache))] if cache else [])])
+    launcher = "srun" if job.launcher == "srun" else "mpirun"
+    requeue = ('if [ -n "$stopping" ] && [ "$status" -eq 130 ]; then\n'
+               '    scontrol requeue "$SLURM_JOB_ID"          # the run resumes where it stopped\n'
+               'fi\n') if job.requeue else ""
+    return "\n".join([
+        "#!/bin/bash",
+        f"# siloflow run --slurm: the run {name} ({engine}) as one MPI job of {job.ranks} ranks,",
+        f"# {job.nodes} node(s) x {job.ntasks_per_node}. Its folder was rendered by siloflow: {folder}",
+        "# The folder must be on a file system every node sees (the ranks read its meshes and fill, and",
+        "# write its output there). Submit: cd to it and sbatch job.sbatch (siloflow prints the line).",
+        f"# {job.grace_s} s before the time limit Slurm sends SIGTERM (--signal): siloflow stops the engine",
+        "# and marks the run interrupted; submitting again resumes it (siloflow run --resume) from its last",
+        "# restart point" + (", and this job requeues itself." if job.requeue else "."),
+        *sbatch_header(job, name),
+        "set -uo pipefail",
+        "export COLUMNS=200",
+        f"export SILOFLOW_MPIRUN={launcher}       # the launcher of the engine's ranks (siloflow.engine.base)",
+        'stopping=""',
+        f"{resume} &",
+        "child=$!",
+        "trap 'stopping=yes; kill -TERM \"$child\" 2>/dev/null' TERM",
+        'wait "$child"; status=$?',
+        'if [ -n "$stopping" ]; then wait "$child"; status=$?; fi',
+        requeue + 'exit "$status"', ""])
+
+
+def write_run_script(job: SlurmJob, folder: Path, name: str, engine: str, siloflow: Optional[list[str]] = None,
+                     cache: Optional[Path] = None) -> tuple[Path, str]:
+    """Write ``folder/job.sbatch`` (:func:`run_script`, atomically) into a run folder siloflow just
+    rendered; return its path and the shell line that submits it."""
+    folder = Path(folder).absolute()
+    script = folder / RUN_SCRIPT
+    write_text(script, run_script(job, folder, name, engine, siloflow, Path(cache).absolute() if cache else None))
+    script.chmod(0o755)
+    return script, f"cd {shlex.quote(str(folder))} && sbatch {RUN_SCRIPT}"

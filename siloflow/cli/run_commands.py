@@ -15,8 +15,8 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from ..errors import SiloflowError
-from ..run_folder import RunFolder
+from ..errors import CaseError, SiloflowError
+from ..run_folder import RunFolder, record_products
 from .app import _fail, app, err, out, printable
 from .case_commands import ALLOW_LONG_HELP, FORCE_HELP, _warn, dust_note, profile_note
 
@@ -50,9 +50,30 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
                                                   "fill, or cache this run's"),
         profile: Optional[str] = typer.Option(None, "--profile", help="numerical profile for this run, over the "
                                               "case's: reference (the papers': dt = t_c/50, full stiffness), fast "
-                                              "(the accuracy benchmark's, with its error bounds) or custom")) -> None:
+                                              "(the accuracy benchmark's, with its error bounds) or custom"),
+        slurm: bool = typer.Option(False, "--slurm", help="render the folder and write its Slurm batch script "
+                                   "(DIR/job.sbatch: one MPI job over --nodes x --ntasks-per-node ranks) instead "
+                                   "of running here; prints the sbatch line"),
+        nodes: int = typer.Option(1, "--nodes", help="--slurm: nodes"),
+        ntasks_per_node: Optional[int] = typer.Option(None, "--ntasks-per-node", help="--slurm: MPI ranks per node "
+                                                      "(default: the case's engine.ranks spread over --nodes)"),
+        time_limit: str = typer.Option("24:00:00", "--time", help="--slurm: wall-time limit (minutes, HH:MM:SS, "
+                                       "D-HH:MM:SS)"),
+        partition: Optional[str] = typer.Option(None, "--partition", help="--slurm: partition"),
+        account: Optional[str] = typer.Option(None, "--account", help="--slurm: account"),
+        launcher: str = typer.Option("mpirun", "--launcher", help="--slurm: the engine's MPI launcher: mpirun (the "
+                                     "site's, over the allocation) or srun"),
+        requeue: bool = typer.Option(False, "--requeue", help="--slurm: the job requeues itself when its time "
+                                     "limit stops the run, which then resumes")) -> None:
     """Render, run the case's engine with a progress bar, check the run, and compute first results."""
     from ..runs import prepare_resume, prepare_run
+    if slurm:
+        if resume is not None or case_file is None or output is None:
+            _fail(SiloflowError("--slurm takes a case file and -o/--output (a job resumes a folder itself)"))
+        _write_slurm_run(case_file, output, force, allow_long, allow_large_output, profile, executable, cache,
+                         dict(nodes=nodes, ntasks_per_node=ntasks_per_node, time=time_limit, partition=partition,
+                              account=account, launcher=launcher, requeue=requeue))
+        return
     if resume is not None:
         if case_file is not None or output is not None:
             _fail(SiloflowError("--resume DIR takes no case file and no --output: the folder has both"))
@@ -77,6 +98,37 @@ def run(case_file: Optional[Path] = typer.Argument(None, help="YAML case file"),
     signal.signal(signal.SIGTERM, _interrupt)
     with prepared:                      # the folder's lock, held until the results are written
         _run_prepared(prepared, profile, cache, post_process)
+
+
+def _write_slurm_run(case_file: Path, output: Path, force: bool, allow_long: bool, allow_large_output: bool,
+                     profile: Optional[str], executable: Optional[str], cache: Optional[Path], options: dict) -> None:
+    """``siloflow run --slurm``: the folder rendered for ``nodes`` x ``ntasks_per_node`` ranks (default:
+    the case's ranks over the nodes), its batch script, and the line that submits it."""
+    import time
+
+    from ..case_file import load_case
+    from ..runs import prepare_run
+    from ..slurm import slurm_job, write_run_script
+    try:
+        if options["ntasks_per_node"] is None:
+            ranks = load_case(case_file).engine.ranks
+            if ranks % options["nodes"]:
+                raise CaseError([("--ntasks-per-node", f"the case's engine.ranks ({ranks}) do not split evenly over "
+                                                       f"--nodes {options['nodes']}: give --ntasks-per-node")],
+                                "siloflow run --slurm")
+            options = {**options, "ntasks_per_node": ranks // options["nodes"]}
+        job = slurm_job(**options)
+        with prepare_run(case_file, output, force=force, allow_long=allow_long, allow_large_output=allow_large_output,
+                         profile=profile, executable=executable, ranks=job.ranks, runs_here=False) as prepared:
+            since = time.time()
+            script, line = write_run_script(job, prepared.folder, prepared.case.name, prepared.case.engine.name,
+                                            cache=cache)
+            record_products(prepared.folder, prepared.folder, since)
+    except SiloflowError as exc:
+        _fail(exc)
+    out.print(f"rendered {prepared.folder} for {job.ranks} MPI ranks ({job.nodes} node(s) x {job.ntasks_per_node}); "
+              f"its batch script: {script}")
+    out.print(printable(f"submit it with: {line}"), markup=False, highlight=False)
 
 
 def _run_prepared(prepared, profile: Optional[str], cache: Optional[Path], post_process: bool) -> None:

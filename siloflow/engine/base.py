@@ -41,6 +41,11 @@ from .tables import FLOW_COLUMNS, neutral_flow, neutral_wall_forces, read_ave_ti
 ProgressCallback = Callable[[str, int, int], None]
 
 
+#: the environment variable naming the MPI launcher of every engine (default: mpirun; ``siloflow run --slurm``
+#: scripts set it to the launcher asked for)
+LAUNCHER_VARIABLE = "SILOFLOW_MPIRUN"
+
+
 @dataclass(frozen=True)
 class LaunchProfile:
     """How an engine is launched on this machine (never set by a case file): the binary (None:
@@ -165,6 +170,8 @@ class Engine(ABC):
         if profile.executable is None:
             profile = LaunchProfile(os.environ.get(self.executable_variable) or self.default_executable,
                                     profile.mpirun, profile.env)
+        if profile.mpirun == "mpirun" and os.environ.get(LAUNCHER_VARIABLE):    # a Slurm job's srun, a site's mpirun
+            profile = LaunchProfile(profile.executable, os.environ[LAUNCHER_VARIABLE], profile.env)
         self.profile = profile
 
     # ------------------------------------------------------------------ set-up (the engine's)

@@ -3,6 +3,7 @@ tie an engine's process to siloflow's life, stream its output into its screen fi
 the disk, and stop its process group."""
 from __future__ import annotations
 
+import functools
 import os
 import signal
 import subprocess
@@ -30,6 +31,43 @@ DISK_FIX = ("free space on that disk (or choose a run folder on another one) and
             "'siloflow run' estimates a run's output before it starts unless --allow-large-output is given")
 #: lines of an engine's output kept for its failure message
 TAIL_LINES = 25
+
+
+def mpi_slots() -> tuple[int, str]:
+    """How many MPI ranks this job may start, and where that number comes from: inside a Slurm
+    allocation its task count (``SLURM_NTASKS``, over every node of the job), else this machine's cores."""
+    tasks = os.environ.get("SLURM_NTASKS", "")
+    if tasks.isdigit() and int(tasks) > 0:
+        return int(tasks), f"this Slurm job has {tasks} tasks (SLURM_NTASKS)"
+    cores = os.cpu_count() or 1
+    return cores, f"this machine has {cores} cores"
+
+
+def check_ranks(ranks: int) -> None:
+    """``SetupError`` when ``ranks`` MPI ranks exceed what this job may start (:func:`mpi_slots`)."""
+    slots, why = mpi_slots()
+    if ranks > slots:
+        raise SetupError(f"engine.ranks = {ranks} but {why}: lower engine.ranks (or, on a cluster, submit the run "
+                         "with siloflow run --slurm)")
+
+
+def launch_ranks(launcher: str, ranks: int) -> list[str]:
+    """The launcher's words that start ``ranks`` MPI ranks: ``mpirun -np N`` (as root, Open MPI's needs
+    ``--allow-run-as-root``, which MPICH's refuses), or Slurm's ``srun --ntasks=N``."""
+    if Path(launcher).name == "srun":
+        return [launcher, f"--ntasks={ranks}", "--cpus-per-task=1"]
+    root = ["--allow-run-as-root"] if os.geteuid() == 0 and open_mpi(launcher) else []
+    return [launcher, *root, "-np", str(ranks)]
+
+
+@functools.lru_cache(maxsize=8)
+def open_mpi(launcher: str) -> bool:
+    """Whether ``launcher`` is Open MPI's (its ``--version`` says so); MPICH's hydra is not."""
+    try:
+        text = subprocess.run([launcher, "--version"], capture_output=True, text=True, timeout=10).stdout
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return "Open MPI" in text or "OpenRTE" in text
 
 
 def not_settled(ke_pe: float, plan: RunPlan) -> tuple[str, str, str]:

@@ -21,6 +21,7 @@ from ...plan import RunPlan
 from ...run_folder import RESTART_FILE, write_status
 from ...silos.registry import silo_kind
 from ..base import Engine, Finished, Launched, ProgressCallback, SettledBed
+from ..processes import check_ranks, launch_ranks
 from . import deck as lammps_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, LOG_NAME, RESUME_LOG_NAME
 from .driver import AFTER_RESTART, FLOW_FILE, STATE_NAME, WALL_FORCES_FILE, rows_up_to
@@ -69,13 +70,11 @@ class LammpsEngine(Engine):
                                               "rigid/small cannot hold a body's motion to a plane: use a cylinder "
                                               "or hopper, or engine.name: liggghts"))
         problems += kind.lammps_problems(case.geometry)
-        if case.engine.ranks > (os.cpu_count() or 1):
-            problems.append(("engine.ranks", f"{case.engine.ranks} ranks but this machine has {os.cpu_count()} "
-                                             "cores: lower engine.ranks"))
         return problems
 
     def preflight(self, ranks: int) -> None:
         load_lammps()
+        check_ranks(ranks)
         if ranks > 1:
             self._mpirun()
 
@@ -157,7 +156,7 @@ class LammpsEngine(Engine):
 
     def _run_ranks(self, folder: Path, ranks: int, progress, resume: bool):
         """Run the worker on ``ranks`` MPI ranks; (command, returncode, error, disk full)."""
-        command = [self._mpirun(), "-np", str(ranks), sys.executable, "-m", "siloflow.engine.lammps.worker",
+        command = [*launch_ranks(self._mpirun(), ranks), sys.executable, "-m", "siloflow.engine.lammps.worker",
                    str(folder.resolve())]
         if resume:
             command.append("--resume")

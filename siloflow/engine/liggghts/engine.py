@@ -21,6 +21,7 @@ from ...guard import RunGuard
 from ...plan import RunPlan
 from ...run_folder import RESTART_FILE
 from ..base import Engine, Finished, Launched, ProgressCallback, SettledBed
+from ..processes import check_ranks, launch_ranks
 from . import deck as liggghts_deck
 from .deck import ALLOWED_COMMANDS, DECK_NAME, RESUME_DECK_NAME
 from .encoding import encode
@@ -176,13 +177,8 @@ class LiggghtsEngine(Engine):
             base = [stdbuf, "-oL"] + base
         if ranks == 1:
             return base
-        if ranks > (os.cpu_count() or 1):
-            raise SetupError(f"engine.ranks = {ranks} but this machine has {os.cpu_count()} cores: "
-                             "lower engine.ranks")
-        launcher = [self._launcher(), "-np", str(ranks)]
-        if os.geteuid() == 0:
-            launcher.insert(1, "--allow-run-as-root")
-        return launcher + base
+        check_ranks(ranks)
+        return launch_ranks(self._launcher(), ranks) + base
 
     # ------------------------------------------------------------------ run
     def launch(self, folder: Path, plan: RunPlan, progress: Optional[ProgressCallback], resume: bool) -> Launched:
