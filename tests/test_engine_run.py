@@ -41,8 +41,10 @@ def test_outlet_counts_the_mass_that_left(small_run):
     initial = flow.mass_total[flow.step <= record.stage_steps["open"]].iloc[-1]
     end = flow.iloc[-1]
     m_p = initial / case.fill.count
-    # nothing is lost: what is present plus what was deleted at the outlet is what was inserted
-    assert end.mass_total + end.deleted_mass == pytest.approx(initial, rel=1e-6)
+    # nothing is lost: what is present plus what was deleted at the outlet is what was inserted, to the
+    # table's 6 significant digits (each value within 5e-6 of itself; one grain is 4e-4 of the bed);
+    # found 2e-6 apart on 8 Dec 2026
+    assert end.mass_total + end.deleted_mass == pytest.approx(initial, rel=1e-5)
     # the mass that left the silo (crossed z = 0) was counted at the outlet disc, except grains
     # still falling between the orifice and the disc
     left_silo = initial - end.mass_silo
